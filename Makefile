@@ -1,0 +1,24 @@
+# The project's entry points. See README.md.
+SHELL := /bin/bash
+ROOT := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
+PYTEST_ARGS ?=
+
+.PHONY: setup test demo bench clean distclean
+
+setup:
+	@bash $(ROOT)/scripts/setup.sh
+
+test: setup
+	@. $(ROOT)/scripts/env.sh && cd $(ROOT) && python -m pytest $(PYTEST_ARGS)
+
+demo: setup
+	@$(ROOT)/sslfr sim --out $(ROOT)/out/demo
+
+bench: setup
+	@. $(ROOT)/scripts/env.sh && cd $(ROOT) && for b in benchmarks/bench_*.py; do echo "== $$b"; python $$b || exit 1; done
+
+clean:
+	rm -rf $(ROOT)/ros_ws/build $(ROOT)/ros_ws/install $(ROOT)/ros_ws/log $(ROOT)/ros_ws/.setup-stamp
+
+distclean: clean
+	rm -rf $(ROOT)/.venv

@@ -1,0 +1,216 @@
+"""Shared pytest fixtures for the SSLFR tracker.
+
+Topic-level tests start the real node executables as processes (as ``ros2 run``
+would: ``ros_ws/install/<pkg>/lib/<pkg>/<exe>``) and talk to them from an rclpy
+node in the test process. Every test gets its own ``ROS_DOMAIN_ID`` (held with a
+file lock, so concurrent pytest runs on one machine never share a domain) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
+
+Fixtures
+--------
+ros_domain   int, the test's private domain id
+ros_env      dict, environment for node processes (domain, log dir, discovery range)
+launch       factory: ``launch(pkg, exe, *ros_args, params={...}, name=None)`` ->
+             :class:`NodeProcess` (stopped with SIGINT at teardown)
+ros          a :class:`RosHarness`: an rclpy context + node in the test's domain with
+             ``spin_until(predicate, timeout)``, ``collect(type, topic)``, ``call(...)``
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent
+INSTALL = ROOT / 'ros_ws' / 'install'
+_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
+
+
+def executable(package: str, exe: str) -> Path:
+    """Path ``ros2 run package exe`` would run."""
+    return INSTALL / package / 'lib' / package / exe
+
+
+def _acquire_domain() -> tuple[int, object]:
+    _LOCK_DIR.mkdir(exist_ok=True)
+    ids = list(range(1, 102))
+    random.shuffle(ids)
+    for i in ids:
+        fh = open(_LOCK_DIR / f'{i}.lock', 'w')  # noqa: SIM115 - held for the test
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return i, fh
+        except OSError:
+            fh.close()
+    raise RuntimeError('no free ROS_DOMAIN_ID in 1..101 (too many concurrent test runs)')
+
+
+@pytest.fixture
+def ros_domain():
+    dom, fh = _acquire_domain()
+    yield dom
+    fcntl.flock(fh, fcntl.LOCK_UN)
+    fh.close()
+
+
+@pytest.fixture
+def ros_env(ros_domain, tmp_path):
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(ros_domain)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_LOG_DIR'] = str(tmp_path / 'roslog')
+    env['PYTHONUNBUFFERED'] = '1'
+    env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    return env
+
+
+class NodeProcess:
+    """A node executable running as its own process, output captured to a file."""
+
+    def __init__(self, argv: list[str], env: dict, log_path: Path):
+        self.argv = argv
+        self.log_path = log_path
+        self._log = open(log_path, 'wb')  # noqa: SIM115 - closed in stop()
+        self.proc = subprocess.Popen(argv, env=env, stdout=self._log, stderr=subprocess.STDOUT,
+                                     start_new_session=True)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        """Everything the process printed so far."""
+        self._log.flush()
+        return self.log_path.read_text(errors='replace')
+
+    def wait_for_output(self, text: str, timeout: float = 15.0) -> bool:
+        """Wait until ``text`` appears in the output (or the process exits)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return True
+            if not self.running():
+                return text in self.output()
+            time.sleep(0.05)
+        return False
+
+    def signal(self, sig: int) -> None:
+        if self.running():
+            os.killpg(self.proc.pid, sig)
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """SIGINT, then SIGKILL after ``timeout``; return the exit code."""
+        if self.running():
+            try:
+                os.killpg(self.proc.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(5)
+        self._log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture
+def launch(ros_env, tmp_path):
+    """Start node executables; all are stopped at teardown."""
+    procs: list[NodeProcess] = []
+
+    def _launch(package: str, exe: str, *args: str, params: dict | None = None,
+                name: str | None = None, env: dict | None = None,
+                ros_args: list[str] | None = None) -> NodeProcess:
+        path = executable(package, exe)
+        if not path.exists():
+            pytest.fail(f'{path} is not installed: run make setup')
+        argv = [str(path), *args]
+        extra = list(ros_args or [])
+        for key, value in (params or {}).items():
+            if isinstance(value, bool):
+                value = 'true' if value else 'false'
+            elif isinstance(value, (list, tuple)):
+                value = '[' + ','.join(repr(v) if isinstance(v, str) else str(v) for v in value) + ']'
+            extra += ['-p', f'{key}:={value}']
+        if name:
+            extra += ['-r', f'__node:={name}']
+        if extra:
+            argv += ['--ros-args', *extra]
+        log = tmp_path / f'{name or exe}-{len(procs)}.log'
+        proc = NodeProcess(argv, {**ros_env, **(env or {})}, log)
+        procs.append(proc)
+        return proc
+
+    yield _launch
+    for proc in reversed(procs):
+        proc.stop()
+        if os.environ.get('SSLFR_TEST_SHOW_LOGS'):
+            sys.stderr.write(f'--- {proc.argv[0]}\n{proc.output()}\n')
+
+
+class RosHarness:
+    """An rclpy context and node living in the test's ROS domain."""
+
+    def __init__(self, domain: int):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(f'test_harness_{os.getpid()}', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
+
+    def spin_until(self, predicate, timeout: float = 10.0) -> bool:
+        """Spin until ``predicate()`` is true; return whether it became true."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return bool(predicate())
+
+    def collect(self, msg_type, topic: str, qos=10) -> list:
+        """Subscribe and append every message to the returned list."""
+        box: list = []
+        self.node.create_subscription(msg_type, topic, box.append, qos)
+        return box
+
+    def call(self, srv_type, name: str, request, timeout: float = 10.0):
+        """Call a service and return its response (fails the test on time-out)."""
+        client = self.node.create_client(srv_type, name)
+        if not self.spin_until(client.service_is_ready, timeout):
+            pytest.fail(f'service {name} not available within {timeout} s')
+        future = client.call_async(request)
+        if not self.spin_until(future.done, timeout):
+            pytest.fail(f'service {name} did not answer within {timeout} s')
+        return future.result()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def ros(ros_domain):
+    harness = RosHarness(ros_domain)
+    yield harness
+    harness.close()

@@ -1,0 +1,28 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'sslfr_bringup'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='SSLFR tracker maintainers',
+    maintainer_email='maintainers@sslfr-tracker.org',
+    description='SSLFR bringup: node set, launch, configs, CLI, recorder, replay, report',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'sslfr = sslfr_bringup.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,1 @@
+"""SSLFR tracker bringup: node set, CLI, recorder, replay and report."""

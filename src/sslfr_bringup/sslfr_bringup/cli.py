@@ -1,0 +1,72 @@
+"""The ``sslfr`` command-line tool: one dispatcher, one module per subcommand.
+
+Each subcommand lives in its own module exposing ``main(argv: list[str]) -> int``;
+this file only maps names to modules, so adding a subcommand is one line in
+:data:`SUBCOMMANDS`. Degrees appear only here, at the CLI/CSV edge; everything
+behind it works in SI units and radians (REP-103).
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+
+#: name -> (module, one-line help). The module must define ``main(argv) -> int``.
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    'plan': ('sslfr_planner.cli_plan', 'per-step day table (sun, incidence angles, axis setpoints) as CSV'),
+    'field': ('sslfr_planner.cli_field', 'LEPTEN mirror lines: exact model fitted with the common-drive law'),
+    'analyse': ('sslfr_planner.cli_analyse', 'optical power with tracking error, annual energy, EAR, LCOE, tilts'),
+    'up': ('sslfr_bringup.up', 'start the whole node set (real boards) as supervised processes'),
+    'sim': ('sslfr_bringup.sim', 'run the node set against simulated boards over a simulated day'),
+    'record': ('sslfr_bringup.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
+    'bag': ('sslfr_bringup.bag_cli', 'bag utilities: info, recover'),
+    'replay': ('sslfr_bringup.replay', 'replay a recorded bag with /clock'),
+    'report': ('sslfr_bringup.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
+    'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
+    'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, text) in SUBCOMMANDS.items():
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:  # parent package not installed
+            found = False
+        if found:
+            out[name] = (module, text)
+    return out
+
+
+def usage() -> str:
+    """Return the top-level help text listing the installed subcommands."""
+    lines = ['usage: sslfr SUBCOMMAND [ARGS...]   (sslfr SUBCOMMAND --help for details)', '',
+             'subcommands:']
+    for name, (_, text) in _available().items():
+        lines.append(f'  {name:<16}{text}')
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``argv[0]`` to its subcommand module; return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ('-h', '--help', 'help'):
+        print(usage())
+        return 0
+    name, rest = argv[0], argv[1:]
+    entry = _available().get(name)
+    if entry is None:
+        print(f'sslfr: unknown subcommand {name!r}\n\n{usage()}', file=sys.stderr)
+        return 2
+    module = importlib.import_module(entry[0])
+    try:
+        return int(module.main(rest) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

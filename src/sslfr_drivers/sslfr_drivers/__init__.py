@@ -1,0 +1,1 @@
+"""SSLFR drivers: board protocol and links, axis/sensor driver nodes, safety supervisor, simulated boards."""

@@ -1,0 +1,1 @@
+"""SSLFR planner: ephemeris (NREL SPA), tracker geometry, planner node, optical analysis."""
