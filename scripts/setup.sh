@@ -12,6 +12,13 @@ VENV="$ROOT/.venv"
 say() { printf 'setup: %s\n' "$*"; }
 die() { printf 'setup: ERROR: %s\n' "$*" >&2; exit 1; }
 
+# One set-up at a time per checkout (parallel `make test` runs share ros_ws/ and .venv/).
+if [ -z "${SSLFR_SETUP_LOCKED:-}" ] && command -v flock >/dev/null 2>&1; then
+  mkdir -p "$ROOT/ros_ws"
+  export SSLFR_SETUP_LOCKED=1
+  exec flock "$ROOT/ros_ws/.setup.lock" bash "$0" "$@"
+fi
+
 APT_ROS=""
 if [ -f /opt/ros/jazzy/setup.bash ] && [ -z "${SSLFR_FORCE_PYPI_ROS:-}" ]; then APT_ROS=1; fi
 
