@@ -1,0 +1,419 @@
+"""Pure decision core of the axis driver (no rclpy): calibration, trajectory store,
+soft and speed limits, stall / lost-step detection and the safety watchdog.
+
+Everything here works on plain numbers so it can be unit-tested on values:
+
+- angles are joint angles in radians (REP-103), the axis conventions of
+  docs/architecture.md (``mirrors`` = beta_0 = theta_t / 2, seed 000 eq. 11,
+  +pi/2 = sleeping position; ``mobile_structure`` = beta_M, ``secondary_reflector``
+  = beta_a);
+- motor positions are integer steps of the board's step counter;
+- trajectory times are float seconds since the Unix epoch (ROS time, UTC);
+- watchdog times are float seconds of a steady (monotonic) clock.
+
+The node (``axis_driver_node``) only converts messages to these numbers, calls the
+functions below and turns their verdicts into board commands.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Seed 000 section 3.4: stepper motors and drivers "with a step of 0.006 deg".
+SEED_STEP_ANGLE = math.radians(0.006)
+
+#: Mechanical joint ranges [rad] (seed 000 section 3.5.2: mirrors -45..+90 deg,
+#: mobile structure and secondary reflector 0..90 deg).
+AXIS_LIMITS = {
+    'mirrors': (-math.pi / 4, math.pi / 2),
+    'mobile_structure': (0.0, math.pi / 2),
+    'secondary_reflector': (0.0, math.pi / 2),
+}
+
+#: Stow (defocus) position per axis [rad]: mirrors go to the sleeping position
+#: +pi/2 (seed 000 section 3.5.2, "no dust is deposited on the mirrors"); the
+#: other two axes go back to their 0 rad rest position.
+STOW_POSITIONS = {'mirrors': math.pi / 2, 'mobile_structure': 0.0, 'secondary_reflector': 0.0}
+
+AXES = tuple(AXIS_LIMITS)
+
+
+# --------------------------------------------------------------------------- calibration
+@dataclass(frozen=True)
+class Calibration:
+    """Joint angle <-> motor step conversion.
+
+    ``theta = offset + sign * steps * step_angle / gear_ratio``
+
+    Parameters
+    ----------
+    step_angle : float
+        Motor shaft rotation per step [rad/step], > 0. Seed 000 section 3.4: 0.006 deg
+        (with ``gear_ratio`` 1 the seed's 0.006 deg is the joint resolution).
+    gear_ratio : float
+        Motor shaft angle per joint angle [-], > 0 (a 10:1 reducer is 10).
+    offset : float
+        Joint angle at step count 0 [rad] (where SET_ZERO / homing puts the counter).
+    invert : bool
+        True when positive steps turn the joint in the negative direction.
+    """
+
+    step_angle: float = SEED_STEP_ANGLE
+    gear_ratio: float = 1.0
+    offset: float = 0.0
+    invert: bool = False
+
+    def __post_init__(self):
+        for name in ('step_angle', 'gear_ratio'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be finite and > 0, got {value!r}')
+        if not math.isfinite(self.offset):
+            raise ValueError(f'offset must be finite, got {self.offset!r}')
+
+    @property
+    def joint_per_step(self) -> float:
+        """Joint rotation per motor step [rad/step] (signed by ``invert``)."""
+        return (-1.0 if self.invert else 1.0) * self.step_angle / self.gear_ratio
+
+    def steps(self, theta: float) -> int:
+        """Nearest step count for joint angle ``theta`` [rad] -> [steps]."""
+        return int(round((theta - self.offset) / self.joint_per_step))
+
+    def angle(self, steps: float) -> float:
+        """Joint angle [rad] for a step count [steps]."""
+        return self.offset + steps * self.joint_per_step
+
+    def step_rate(self, speed: float) -> float:
+        """Motor step rate [steps/s] (>= 0) for a joint speed [rad/s]."""
+        return abs(speed / self.joint_per_step)
+
+
+# --------------------------------------------------------------------------- limits
+@dataclass(frozen=True)
+class SoftLimits:
+    """Software joint limits ``lower <= theta <= upper`` [rad]."""
+
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
+            raise ValueError(f'soft limits need finite lower < upper, got {self.lower!r}..{self.upper!r}')
+
+    def contains(self, theta: float, tol: float = 1e-9) -> bool:
+        """True when ``theta`` [rad] is inside the limits (``tol`` [rad] of slack)."""
+        return self.lower - tol <= theta <= self.upper + tol
+
+    def clamp(self, theta: float) -> float:
+        """``theta`` [rad] clamped into the limits."""
+        return min(self.upper, max(self.lower, theta))
+
+
+def move_speed(current: float, target: float, horizon: float, max_speed: float,
+               min_speed: float) -> float:
+    """Speed [rad/s] to send with a MOVE_TO so the axis reaches ``target`` in ``horizon``.
+
+    ``v = clamp(|target - current| / horizon, min_speed, max_speed)``: commanding the
+    setpoint one control period ahead at this speed keeps the motor moving
+    continuously instead of stop-and-go, and never faster than ``max_speed``.
+
+    Parameters
+    ----------
+    current, target : float
+        Measured and target joint angles [rad].
+    horizon : float
+        Time to reach the target [s], > 0 (the control period).
+    max_speed, min_speed : float
+        Speed bounds [rad/s], 0 < min_speed <= max_speed.
+    """
+    if horizon <= 0:
+        return max_speed
+    return min(max_speed, max(min_speed, abs(target - current) / horizon))
+
+
+# --------------------------------------------------------------------------- trajectory
+class TrajectoryRejected(ValueError):
+    """A trajectory was refused; ``str(exc)`` is the reason to log."""
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One joint's trajectory: absolute times [s, Unix epoch] and positions [rad].
+
+    ``velocities`` [rad/s] is optional; when given, :meth:`sample` uses cubic
+    Hermite interpolation between points, otherwise linear.
+    """
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+
+    @property
+    def start(self) -> float:
+        return float(self.times[0])
+
+    @property
+    def end(self) -> float:
+        return float(self.times[-1])
+
+    def sample(self, t: float) -> tuple[float, float]:
+        """Setpoint ``(position [rad], velocity [rad/s])`` at time ``t`` [s].
+
+        Before the first point the first position is held, after the last point the
+        last position is held (velocity 0): trajectory starvation holds position.
+        """
+        ts, ps = self.times, self.positions
+        if t <= ts[0]:
+            return float(ps[0]), 0.0
+        if t >= ts[-1]:
+            return float(ps[-1]), 0.0
+        i = int(np.searchsorted(ts, t, side='right')) - 1
+        t0, t1 = ts[i], ts[i + 1]
+        h = t1 - t0
+        s = (t - t0) / h
+        p0, p1 = ps[i], ps[i + 1]
+        if self.velocities is None:
+            return float(p0 + s * (p1 - p0)), float((p1 - p0) / h)
+        m0, m1 = self.velocities[i] * h, self.velocities[i + 1] * h
+        s2, s3 = s * s, s * s * s
+        pos = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0
+               + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * m1)
+        dpos = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * m0
+                + (-6 * s2 + 6 * s) * p1 + (3 * s2 - 2 * s) * m1) / h
+        return float(pos), float(dpos)
+
+
+def validate_trajectory(times, positions, velocities, now: float, limits: SoftLimits) -> Trajectory:
+    """Check one joint's points and return a :class:`Trajectory`.
+
+    Refused (``TrajectoryRejected`` with the reason) when: no points; any time or
+    position (or velocity) is NaN/inf; times not strictly increasing; a position
+    outside the soft limits; every point is in the past (``times[-1] < now``).
+
+    Parameters
+    ----------
+    times : array_like
+        Absolute point times [s since the Unix epoch].
+    positions : array_like
+        Joint positions [rad].
+    velocities : array_like or None
+        Joint velocities [rad/s], same length as positions, or None / empty.
+    now : float
+        Current ROS time [s since the Unix epoch].
+    limits : SoftLimits
+        The axis soft limits [rad].
+    """
+    t = np.asarray(times, dtype=np.float64)
+    p = np.asarray(positions, dtype=np.float64)
+    if t.size == 0:
+        raise TrajectoryRejected('no points')
+    if p.shape != t.shape:
+        raise TrajectoryRejected(f'{p.size} positions for {t.size} points')
+    if not np.all(np.isfinite(t)):
+        raise TrajectoryRejected('non-finite point time')
+    bad = np.flatnonzero(~np.isfinite(p))
+    if bad.size:
+        raise TrajectoryRejected(f'non-finite position at point {int(bad[0])}')
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        raise TrajectoryRejected('point times not strictly increasing')
+    out = np.flatnonzero((p < limits.lower - 1e-9) | (p > limits.upper + 1e-9))
+    if out.size:
+        k = int(out[0])
+        raise TrajectoryRejected(
+            f'point {k} position {p[k]:.6f} rad outside soft limits '
+            f'[{limits.lower:.6f}, {limits.upper:.6f}] rad')
+    if t[-1] < now:
+        raise TrajectoryRejected(f'past-only trajectory: last point {now - t[-1]:.3f} s before now')
+    v = None
+    if velocities is not None and len(velocities) > 0:
+        v = np.asarray(velocities, dtype=np.float64)
+        if v.shape != t.shape:
+            raise TrajectoryRejected(f'{v.size} velocities for {t.size} points')
+        if not np.all(np.isfinite(v)):
+            raise TrajectoryRejected('non-finite velocity')
+    return Trajectory(t, p, v)
+
+
+class TrajectoryStore:
+    """Holds the last good trajectory; refused ones leave it untouched."""
+
+    def __init__(self) -> None:
+        self.current: Trajectory | None = None
+        self.accepted = 0
+        self.rejected = 0
+        self.last_reason = ''
+
+    def offer(self, times, positions, velocities, now: float, limits: SoftLimits) -> str | None:
+        """Validate and keep a trajectory; return None when accepted, else the reason."""
+        try:
+            traj = validate_trajectory(times, positions, velocities, now, limits)
+        except TrajectoryRejected as exc:
+            self.rejected += 1
+            self.last_reason = str(exc)
+            return self.last_reason
+        self.current = traj
+        self.accepted += 1
+        return None
+
+    def clear(self) -> None:
+        self.current = None
+
+    def setpoint(self, t: float) -> tuple[float, float, str] | None:
+        """``(position [rad], velocity [rad/s], status)`` at ``t`` [s], or None.
+
+        status: ``'waiting'`` (before the first point: first position held),
+        ``'following'``, ``'starved'`` (past the last point: last position held).
+        """
+        if self.current is None:
+            return None
+        pos, vel = self.current.sample(t)
+        if t < self.current.start:
+            return pos, 0.0, 'waiting'
+        if t > self.current.end:
+            return pos, 0.0, 'starved'
+        return pos, vel, 'following'
+
+
+# --------------------------------------------------------------------------- safety
+class SafetyVerdict(enum.Enum):
+    FOLLOW = 'follow'
+    STOW = 'stow'
+    STOP = 'stop'
+
+
+# SafetyState levels (sslfr_interfaces/msg/SafetyState.msg)
+LEVEL_OK, LEVEL_WARN, LEVEL_STOW, LEVEL_ESTOP = 0, 1, 2, 3
+
+
+@dataclass
+class SafetyWatch:
+    """Watchdog on ``safety/state`` on the steady clock.
+
+    A message refreshes the watchdog only when its ``sequence`` differs from the
+    previous one (a stuck publisher repeating itself is not a heartbeat).
+
+    Parameters
+    ----------
+    axis : str
+        This driver's axis name (matched against ``stopped_axes``).
+    timeout : float
+        Maximum steady-clock age of the last fresh message [s] (1.0 by the spec).
+    """
+
+    axis: str
+    timeout: float = 1.0
+    last_rx: float | None = None
+    last_sequence: int | None = None
+    level: int = LEVEL_OK
+    stow_required: bool = False
+    stopped_axes: tuple = ()
+    reasons: tuple = ()
+
+    def receive(self, now_steady: float, level: int, stow_required: bool, stopped_axes,
+                sequence: int, reasons=()) -> bool:
+        """Record a SafetyState; return True when it was fresh (new sequence)."""
+        fresh = sequence != self.last_sequence
+        self.level, self.stow_required = int(level), bool(stow_required)
+        self.stopped_axes, self.reasons = tuple(stopped_axes), tuple(reasons)
+        if fresh:
+            self.last_rx = now_steady
+            self.last_sequence = sequence
+        return fresh
+
+    def verdict(self, now_steady: float) -> tuple[SafetyVerdict, str]:
+        """``(verdict, reason)`` for the current steady time [s].
+
+        STOP when no fresh message for > ``timeout`` (or never), when the level is
+        ESTOP, or when this axis is in ``stopped_axes``; STOW when ``stow_required``
+        or level STOW; FOLLOW otherwise.
+        """
+        if self.last_rx is None:
+            return SafetyVerdict.STOP, 'no safety/state received yet'
+        age = now_steady - self.last_rx
+        if age > self.timeout:
+            return SafetyVerdict.STOP, f'safety/state silent for {age:.2f} s > {self.timeout:.2f} s'
+        if self.level == LEVEL_ESTOP:
+            return SafetyVerdict.STOP, 'safety ESTOP: ' + '; '.join(self.reasons)
+        if self.axis in self.stopped_axes:
+            return SafetyVerdict.STOP, f'safety stops axis {self.axis}: ' + '; '.join(self.reasons)
+        if self.stow_required or self.level == LEVEL_STOW:
+            return SafetyVerdict.STOW, 'safety requires stow: ' + '; '.join(self.reasons)
+        return SafetyVerdict.FOLLOW, ''
+
+
+# --------------------------------------------------------------------------- stall
+@dataclass
+class StallDetector:
+    """Stall and lost-step detection from board STATUS samples.
+
+    Two checks:
+
+    1. *stall*: the step counter moved by more than ``min_motion`` [rad] of joint
+       angle within the last ``window`` [s] while the position sensor moved by less
+       than a quarter of that (commanded motion with no sensor motion); and, for
+       boards without a sensor, a MOVE_TO pending (target != position) with no step
+       change for ``window`` while the board is not moving.
+    2. *lost steps*: ``|angle(steps) - sensor| > tolerance`` [rad].
+
+    Parameters
+    ----------
+    tolerance : float
+        Allowed step-count vs sensor disagreement [rad] (> sensor noise).
+    window : float
+        Stall observation window [s] (steady clock).
+    min_motion : float
+        Commanded motion that must show on the sensor [rad] (> sensor noise).
+    """
+
+    tolerance: float
+    window: float = 1.0
+    min_motion: float = 0.01
+    _hist: list = field(default_factory=list)
+    _pending_since: float | None = None
+
+    def reset(self) -> None:
+        self._hist.clear()
+        self._pending_since = None
+
+    def update(self, now: float, step_angle: float, sensor: float | None, moving: bool,
+               target_pending: bool) -> str | None:
+        """Feed one sample; return a fault reason or None.
+
+        Parameters
+        ----------
+        now : float
+            Steady time [s].
+        step_angle : float
+            Joint angle from the step counter [rad].
+        sensor : float or None
+            Joint angle from the position sensor [rad], None when the board has none.
+        moving : bool
+            Board reports the motor moving.
+        target_pending : bool
+            A MOVE_TO target differs from the current step count by more than one step.
+        """
+        if sensor is not None:
+            if abs(step_angle - sensor) > self.tolerance:
+                return (f'lost steps: step count says {step_angle:.5f} rad, sensor '
+                        f'{sensor:.5f} rad (|diff| > {self.tolerance:.5f} rad)')
+            self._hist.append((now, step_angle, sensor))
+            while self._hist and now - self._hist[0][0] > self.window:
+                self._hist.pop(0)
+            if len(self._hist) >= 2 and now - self._hist[0][0] >= 0.8 * self.window:
+                d_steps = abs(self._hist[-1][1] - self._hist[0][1])
+                d_sensor = abs(self._hist[-1][2] - self._hist[0][2])
+                if d_steps > self.min_motion and d_sensor < 0.25 * d_steps:
+                    return (f'stall: motor stepped {d_steps:.5f} rad in {self.window:.1f} s '
+                            f'but the sensor moved {d_sensor:.5f} rad')
+        if target_pending and not moving:
+            if self._pending_since is None:
+                self._pending_since = now
+            elif now - self._pending_since > self.window:
+                return f'stall: move pending for {now - self._pending_since:.1f} s but the motor is not moving'
+        else:
+            self._pending_since = None
+        return None

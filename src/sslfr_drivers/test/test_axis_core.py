@@ -1,0 +1,163 @@
+"""Unit tests of the axis driver's pure core (numbers in, numbers out)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sslfr_drivers.axis_core import (
+    AXIS_LIMITS, SEED_STEP_ANGLE, Calibration, SafetyVerdict, SafetyWatch, SoftLimits,
+    StallDetector, TrajectoryStore, move_speed, validate_trajectory, TrajectoryRejected,
+)
+
+MIRRORS = SoftLimits(*AXIS_LIMITS['mirrors'])
+
+
+def test_seed_step_is_0_006_degrees():
+    cal = Calibration()
+    assert math.degrees(cal.joint_per_step) == pytest.approx(0.006)
+    # seed 000 section 3.5.2: -45 .. +90 deg is 22500 steps
+    assert cal.steps(math.pi / 2) - cal.steps(-math.pi / 4) == 22500
+
+
+@given(theta=st.floats(-3, 3), ratio=st.floats(0.1, 100), offset=st.floats(-1, 1),
+       invert=st.booleans())
+def test_steps_round_trip_within_half_a_step(theta, ratio, offset, invert):
+    cal = Calibration(SEED_STEP_ANGLE, ratio, offset, invert)
+    back = cal.angle(cal.steps(theta))
+    assert abs(back - theta) <= abs(cal.joint_per_step) / 2 + 1e-12
+
+
+def test_gear_ratio_and_invert():
+    cal = Calibration(math.radians(1.8), 10.0, 0.1, True)
+    assert cal.steps(0.1 + math.radians(0.18)) == -1
+    assert cal.step_rate(math.radians(1.8)) == pytest.approx(10.0)
+
+
+@pytest.mark.parametrize('kw', [dict(step_angle=0.0), dict(gear_ratio=-1.0),
+                                dict(step_angle=float('nan')), dict(offset=float('inf'))])
+def test_bad_calibration_refused(kw):
+    with pytest.raises(ValueError):
+        Calibration(**kw)
+
+
+def test_soft_limits():
+    assert MIRRORS.contains(math.pi / 2) and not MIRRORS.contains(math.pi / 2 + 1e-6)
+    assert MIRRORS.clamp(-1.0) == -math.pi / 4
+    with pytest.raises(ValueError):
+        SoftLimits(1.0, 0.0)
+
+
+def test_move_speed_is_bounded():
+    assert move_speed(0.0, 0.01, 0.1, 0.05, 0.001) == pytest.approx(0.05)
+    assert move_speed(0.0, 0.001, 0.1, 0.05, 0.001) == pytest.approx(0.01)
+    assert move_speed(0.0, 0.0, 0.1, 0.05, 0.001) == pytest.approx(0.001)
+
+
+def test_trajectory_refusals_keep_last_good():
+    store = TrajectoryStore()
+    now = 1_700_000_000.0
+    assert store.offer([now, now + 10], [0.0, 0.1], None, now, MIRRORS) is None
+    good = store.current
+    for times, pos, vel, word in [
+        ([now, now + 1], [0.0, float('nan')], None, 'non-finite'),
+        ([now, now + 1], [0.0, 2.0], None, 'outside soft limits'),
+        ([now - 10, now - 1], [0.0, 0.1], None, 'past-only'),
+        ([now, now], [0.0, 0.1], None, 'strictly increasing'),
+        ([], [], None, 'no points'),
+        ([now, now + 1], [0.0, 0.1], [0.0, float('inf')], 'velocity'),
+    ]:
+        reason = store.offer(times, pos, vel, now, MIRRORS)
+        assert reason is not None and word in reason
+        assert store.current is good
+    assert store.rejected == 6 and store.accepted == 1
+
+
+def test_setpoint_interpolates_and_holds_on_starvation():
+    store = TrajectoryStore()
+    now = 100.0
+    store.offer([110.0, 120.0], [0.0, 0.2], None, now, MIRRORS)
+    assert store.setpoint(105.0) == (0.0, 0.0, 'waiting')
+    pos, vel, st_ = store.setpoint(115.0)
+    assert st_ == 'following' and pos == pytest.approx(0.1) and vel == pytest.approx(0.02)
+    assert store.setpoint(200.0) == (0.2, 0.0, 'starved')
+
+
+@settings(max_examples=50)
+@given(a=st.floats(-0.5, 0.5), w=st.floats(0.001, 0.01))
+def test_hermite_interpolation_of_a_sine_is_accurate(a, w):
+    t = np.linspace(0, 600, 61)
+    traj = validate_trajectory(t, a * np.sin(w * t), a * w * np.cos(w * t), 0.0, SoftLimits(-1, 1))
+    tt = np.linspace(0, 600, 997)
+    err = max(abs(traj.sample(x)[0] - a * math.sin(w * x)) for x in tt)
+    # Hermite error <= h^4 max|f''''| / 384 with h = 10 s
+    assert err <= 10 ** 4 * abs(a) * w ** 4 / 384 + 1e-12
+
+
+def test_validate_raises_declared_error():
+    with pytest.raises(TrajectoryRejected):
+        validate_trajectory([1.0], [0.0, 1.0], None, 0.0, MIRRORS)
+
+
+def test_safety_watch_timeout_on_steady_clock():
+    w = SafetyWatch('mirrors', 1.0)
+    assert w.verdict(0.0)[0] is SafetyVerdict.STOP          # never heard
+    w.receive(10.0, 0, False, [], 1)
+    assert w.verdict(10.9)[0] is SafetyVerdict.FOLLOW
+    v, reason = w.verdict(11.01)
+    assert v is SafetyVerdict.STOP and 'silent' in reason
+    # the same sequence again is not a heartbeat
+    assert not w.receive(11.5, 0, False, [], 1)
+    assert w.verdict(11.5)[0] is SafetyVerdict.STOP
+    assert w.receive(11.6, 0, False, [], 2)
+    assert w.verdict(11.6)[0] is SafetyVerdict.FOLLOW
+
+
+@pytest.mark.parametrize('level,stow,stopped,expect', [
+    (3, False, [], SafetyVerdict.STOP),
+    (3, True, [], SafetyVerdict.STOP),
+    (1, False, ['mirrors'], SafetyVerdict.STOP),
+    (1, False, ['mobile_structure'], SafetyVerdict.FOLLOW),
+    (2, True, [], SafetyVerdict.STOW),
+    (0, True, [], SafetyVerdict.STOW),
+    (1, False, [], SafetyVerdict.FOLLOW),
+])
+def test_safety_levels(level, stow, stopped, expect):
+    w = SafetyWatch('mirrors')
+    w.receive(0.0, level, stow, stopped, 7, ['x'])
+    assert w.verdict(0.1)[0] is expect
+
+
+def test_lost_steps_detected():
+    d = StallDetector(tolerance=0.005)
+    assert d.update(0.0, 0.100, 0.102, False, False) is None
+    reason = d.update(0.1, 0.100, 0.110, False, False)
+    assert reason and 'lost steps' in reason
+
+
+def test_stall_motor_steps_but_sensor_still():
+    d = StallDetector(tolerance=1.0, window=1.0, min_motion=0.01)
+    out = None
+    for k in range(12):
+        out = d.update(k * 0.1, 0.005 * k, 0.0, True, True) or out
+    assert out and 'stall' in out
+
+
+def test_no_stall_when_sensor_follows_with_noise():
+    rng = np.random.default_rng(1)
+    d = StallDetector(tolerance=0.003, window=1.0, min_motion=0.01)
+    for k in range(100):
+        s = 0.005 * k
+        assert d.update(k * 0.1, s, s + rng.normal(0, 0.0005), True, True) is None
+
+
+def test_stall_without_sensor_pending_move_not_moving():
+    d = StallDetector(tolerance=0.01, window=1.0)
+    assert d.update(0.0, 0.0, None, False, True) is None
+    assert d.update(0.5, 0.0, None, False, True) is None
+    assert 'pending' in d.update(1.2, 0.0, None, False, True)
+    d.reset()
+    assert d.update(2.0, 0.0, None, True, True) is None
