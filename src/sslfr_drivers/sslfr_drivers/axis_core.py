@@ -417,3 +417,238 @@ class StallDetector:
         else:
             self._pending_since = None
         return None
+
+
+# --------------------------------------------------------------------------- supervisor
+@dataclass(frozen=True)
+class BoardState:
+    """What the driver knows of the board from its last STATUS (docs/protocol.md).
+
+    steps, target : step counter and board target [steps]; moving, homed, homing :
+    status flags; sensor : joint angle from the board's sensor [rad] or None;
+    limit_bits, fault_bits : as reported.
+    """
+
+    steps: int
+    target: int
+    moving: bool
+    homed: bool
+    homing: bool
+    sensor: float | None
+    limit_bits: int = 0
+    fault_bits: int = 0
+
+
+@dataclass(frozen=True)
+class Action:
+    """One board command decided by :class:`AxisSupervisor`.
+
+    kind : 'none' | 'stop' | 'home' | 'set_zero' | 'move'
+    steps : MOVE_TO target or SET_ZERO / HOME position [steps]
+    speed : MOVE_TO / HOME step rate [steps/s] (HOME: signed, + increases steps)
+    """
+
+    kind: str = 'none'
+    steps: int = 0
+    speed: float = 0.0
+
+
+HOME_SWITCHES = {'low': 0, 'high': 1, 'sleep': 2}   # messages.Switch indices
+
+
+@dataclass
+class AxisConfig:
+    """Validated tuning of one axis (the node's parameters, in SI units).
+
+    Attributes
+    ----------
+    axis : str
+        mirrors | mobile_structure | secondary_reflector.
+    calibration : Calibration
+    limits : SoftLimits
+        Soft limits [rad].
+    max_speed, min_speed : float
+        Joint speed bounds of a MOVE_TO [rad/s].
+    lead : float
+        How far ahead of now the setpoint is commanded [s] (one control period).
+    stow_position : float
+        Defocus / sleeping position for STOW [rad].
+    home_switch : str
+        'low' | 'high' | 'sleep': the limit switch HOME drives toward.
+    home_position : float
+        Joint angle at which that switch closes [rad].
+    home_speed : float
+        |speed| of a homing move [rad/s].
+    use_sensor : bool
+        Re-establish a lost position from the board's position sensor (SET_ZERO)
+        instead of a homing move, and report the sensor as the measured angle.
+    auto_home : bool
+        Home by itself when the board lost its position (else wait for the home service).
+    """
+
+    axis: str
+    calibration: Calibration
+    limits: SoftLimits
+    max_speed: float
+    min_speed: float
+    lead: float
+    stow_position: float
+    home_switch: str
+    home_position: float
+    home_speed: float
+    use_sensor: bool = True
+    auto_home: bool = True
+
+
+class AxisSupervisor:
+    """Per-tick decision of the axis driver: board state + inputs -> one board command.
+
+    Inputs kept here: the trajectory store, the safety watchdog, the operator mode
+    (from tracker/phase), a jog target, a latched driver fault. :meth:`tick` is
+    called at the control rate with ROS time (trajectory) and steady time (watchdogs).
+
+    Priority (first match wins): inactive -> stop if moving; latched fault -> stop;
+    safety STOP (missing heartbeat, ESTOP, axis listed) -> stop; homing in progress ->
+    wait; position lost -> SET_ZERO from the sensor or HOME; stall / lost steps ->
+    latch fault and stop; safety STOW -> stow position; maintenance -> jog target or
+    hold; manual -> hold; trajectory -> setpoint(now + lead); none -> hold.
+    """
+
+    def __init__(self, cfg: AxisConfig, safety_timeout: float = 1.0,
+                 stall: StallDetector | None = None):
+        self.cfg = cfg
+        self.store = TrajectoryStore()
+        self.safety = SafetyWatch(cfg.axis, safety_timeout)
+        self.stall = stall or StallDetector(tolerance=0.005, window=1.0, min_motion=0.01)
+        self.mode = 'auto'          # auto | manual | maintenance | stow (from tracker/phase)
+        self.jog_target: float | None = None
+        self.fault: str | None = None
+        self.home_requested = False
+        self.state = 'unconfigured'
+        self.reason = ''
+        self.commanded: float = float('nan')     # last joint angle commanded [rad]
+        self.setpoint: float = float('nan')      # trajectory setpoint for now [rad]
+        self._cmd_steps: int | None = None       # last MOVE_TO target [steps]
+        self._cmd_speed: float = 0.0
+
+    # -- helpers ------------------------------------------------------------
+    def measured(self, board: BoardState) -> float:
+        """Measured joint angle [rad]: sensor when present and used, else steps."""
+        if self.cfg.use_sensor and board.sensor is not None:
+            return board.sensor
+        return self.cfg.calibration.angle(board.steps)
+
+    def clear_fault(self) -> None:
+        self.fault = None
+        self.stall.reset()
+
+    def position_lost(self) -> None:
+        """The board reset / reconnected without its reference: forget commands."""
+        self._cmd_steps = None
+        self.stall.reset()
+
+    def _stop(self, board: BoardState, state: str, reason: str) -> Action:
+        self.state, self.reason = state, reason
+        pending = self._cmd_steps is not None
+        self._cmd_steps = None
+        if board.moving or pending or board.homing:
+            return Action('stop')
+        return Action()
+
+    def _home_action(self, board: BoardState) -> Action:
+        cfg, cal = self.cfg, self.cfg.calibration
+        if cfg.use_sensor and board.sensor is not None:
+            self.state, self.reason = 'homing', 'position lost: re-established from the position sensor'
+            return Action('set_zero', cal.steps(board.sensor))
+        direction = -1.0 if cfg.home_switch == 'low' else 1.0   # joint direction toward the switch
+        rate = cal.step_rate(cfg.home_speed) * direction * (1.0 if cal.joint_per_step > 0 else -1.0)
+        self.state, self.reason = 'homing', f'homing toward the {cfg.home_switch} switch'
+        return Action('home', cal.steps(cfg.home_position), rate)
+
+    def _move(self, board: BoardState, target: float, state: str, reason: str = '') -> Action:
+        cfg, cal = self.cfg, self.cfg.calibration
+        target = cfg.limits.clamp(target)
+        steps = cal.steps(target)
+        self.state, self.reason = state, reason
+        self.commanded = cal.angle(steps)
+        speed = move_speed(self.measured(board), target, cfg.lead, cfg.max_speed, cfg.min_speed)
+        rate = max(1.0, cal.step_rate(speed))
+        if steps == board.steps and not board.moving:
+            self._cmd_steps = None
+            return Action()
+        if (self._cmd_steps == steps and board.target == steps and board.moving):
+            return Action()          # already going there
+        self._cmd_steps, self._cmd_speed = steps, rate
+        return Action('move', steps, rate)
+
+    # -- the decision -----------------------------------------------------------
+    def tick(self, now_ros: float, now_steady: float, board: BoardState | None,
+             active: bool) -> Action:
+        """Decide the next board command.
+
+        Parameters
+        ----------
+        now_ros : float
+            ROS time [s since the Unix epoch] (trajectory time base).
+        now_steady : float
+            Steady clock [s] (safety watchdog, stall windows).
+        board : BoardState or None
+            Last STATUS, None when the link is down (nothing can be sent then).
+        active : bool
+            Lifecycle state is active (following allowed).
+        """
+        sp = self.store.setpoint(now_ros)
+        self.setpoint = sp[0] if sp is not None else float('nan')
+        if board is None:
+            self.state, self.reason = 'link_down', 'no answer from the board'
+            self._cmd_steps = None
+            return Action()
+        if not active:
+            return self._stop(board, 'inactive', 'lifecycle state is not active')
+        if self.fault:
+            return self._stop(board, 'fault', self.fault)
+        verdict, why = self.safety.verdict(now_steady)
+        if verdict is SafetyVerdict.STOP:
+            return self._stop(board, 'stopped', why)
+        if board.homing:
+            self.state, self.reason = 'homing', 'homing in progress'
+            self._cmd_steps = None
+            return Action()
+        if not board.homed:
+            self._cmd_steps = None
+            if self.cfg.auto_home or self.home_requested or (self.cfg.use_sensor and board.sensor is not None):
+                self.home_requested = False
+                return self._home_action(board)
+            self.state, self.reason = 'fault', 'position lost: call the home service'
+            return Action()
+        if self.home_requested:
+            self.home_requested = False
+            return self._home_action(board)
+        pending = self._cmd_steps is not None and abs(self._cmd_steps - board.steps) > 1
+        cal = self.cfg.calibration
+        problem = self.stall.update(now_steady, cal.angle(board.steps),
+                                    board.sensor if self.cfg.use_sensor else None,
+                                    board.moving, pending)
+        if problem:
+            self.fault = problem
+            return self._stop(board, 'fault', problem)
+        if verdict is SafetyVerdict.STOW or self.mode == 'stow':
+            return self._move(board, self.cfg.stow_position, 'stowing', why or 'stow mode')
+        if self.mode == 'maintenance':
+            if self.jog_target is not None:
+                return self._move(board, self.jog_target, 'jogging', 'maintenance jog')
+            return self._hold(board, 'maintenance: automatic motion off')
+        if self.mode == 'manual':
+            return self._hold(board, 'manual mode: holding')
+        if sp is None:
+            return self._hold(board, 'no trajectory yet')
+        if sp[2] == 'starved':
+            return self._move(board, sp[0], 'holding', 'trajectory starved: holding its last position')
+        ahead = self.store.setpoint(now_ros + self.cfg.lead)
+        return self._move(board, ahead[0], 'following' if sp[2] == 'following' else 'waiting')
+
+    def _hold(self, board: BoardState, reason: str) -> Action:
+        """Hold: finish nothing new; stop if the board is still moving."""
+        self.state, self.reason = 'holding', reason
+        self._cmd_steps = None
+        return Action('stop') if board.moving else Action()

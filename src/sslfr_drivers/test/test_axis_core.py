@@ -161,3 +161,79 @@ def test_stall_without_sensor_pending_move_not_moving():
     assert 'pending' in d.update(1.2, 0.0, None, False, True)
     d.reset()
     assert d.update(2.0, 0.0, None, True, True) is None
+
+
+# ----------------------------------------------------------------- supervisor
+from sslfr_drivers.axis_core import Action, AxisConfig, AxisSupervisor, BoardState  # noqa: E402
+
+
+def _sup(use_sensor=True, auto_home=True):
+    cfg = AxisConfig('mirrors', Calibration(), MIRRORS, max_speed=0.05, min_speed=0.0005,
+                     lead=0.05, stow_position=math.pi / 2, home_switch='sleep',
+                     home_position=math.pi / 2, home_speed=0.02, use_sensor=use_sensor,
+                     auto_home=auto_home)
+    sup = AxisSupervisor(cfg)
+    sup.safety.receive(0.0, 0, False, [], 1)
+    return sup
+
+
+def _board(steps=0, moving=False, homed=True, sensor=0.0, target=None):
+    return BoardState(steps, steps if target is None else target, moving, homed, False, sensor)
+
+
+def test_supervisor_follows_setpoint_ahead_by_lead():
+    sup = _sup()
+    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    act = sup.tick(150.0, 0.5, _board(), True)
+    cal = Calibration()
+    assert act.kind == 'move' and act.steps == cal.steps(0.05 + 0.001 * 0.05)
+    assert sup.state == 'following'
+    assert act.speed <= cal.step_rate(0.05) + 1e-9
+
+
+def test_supervisor_never_moves_when_position_lost():
+    sup = _sup(use_sensor=False)
+    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    act = sup.tick(150.0, 0.5, _board(homed=False, sensor=None), True)
+    assert act.kind == 'home' and act.speed > 0 and act.steps == Calibration().steps(math.pi / 2)
+    sup2 = _sup(use_sensor=True)
+    sup2.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    act = sup2.tick(150.0, 0.5, _board(steps=5, homed=False, sensor=0.0123), True)
+    assert act == Action('set_zero', Calibration().steps(0.0123))
+    sup3 = _sup(use_sensor=False, auto_home=False)
+    sup3.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    assert sup3.tick(150.0, 0.5, _board(homed=False, sensor=None), True).kind == 'none'
+    assert sup3.state == 'fault'
+
+
+def test_supervisor_stops_on_safety_silence_and_stows():
+    sup = _sup()
+    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    assert sup.tick(150.0, 0.9, _board(), True).kind == 'move'
+    assert sup.tick(150.1, 1.05, _board(moving=True, steps=3, sensor=3 * Calibration().joint_per_step), True).kind == 'stop'
+    assert sup.state == 'stopped'
+    sup.safety.receive(1.1, 2, True, [], 2)
+    act = sup.tick(150.2, 1.2, _board(), True)
+    assert act.kind == 'move' and act.steps == Calibration().steps(math.pi / 2) and sup.state == 'stowing'
+
+
+def test_supervisor_inactive_stops_and_stall_latches():
+    sup = _sup()
+    assert sup.tick(0.0, 0.1, _board(moving=True), False).kind == 'stop'
+    sup.store.offer([0.0, 100.0], [0.0, 0.5], None, 0.0, MIRRORS)
+    sup.safety.timeout = 1e9
+    kinds = []
+    for k in range(15):   # motor steps, sensor stuck at 0
+        steps = 100 * k
+        kinds.append(sup.tick(10.0 + 0.1 * k, 0.1 * k, _board(steps=steps, moving=True, sensor=0.0), True).kind)
+    assert 'stop' in kinds and sup.state == 'fault' and 'lost steps' in sup.fault
+    assert sup.tick(20.0, 5.0, _board(steps=1500, sensor=0.0), True).kind == 'none'
+    assert sup.state == 'fault'
+
+
+def test_supervisor_starvation_holds_last_point():
+    sup = _sup()
+    sup.store.offer([100.0, 110.0], [0.0, 0.01], None, 100.0, MIRRORS)
+    cal = Calibration()
+    act = sup.tick(500.0, 0.5, _board(steps=cal.steps(0.01), sensor=0.01), True)
+    assert act.kind == 'none' and sup.state == 'holding'
