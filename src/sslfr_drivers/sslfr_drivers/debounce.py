@@ -1,0 +1,95 @@
+"""Time-based debouncing of the five limit switches (pure Python, no rclpy).
+
+Seed 000 section 3.5.1: five limit switches mark the initial, last and sleeping
+positions of the mirrors and the two longitudinal positions. The board samples them
+as a 5-bit mask; :class:`SwitchDebouncer` accepts a new state for a switch only once
+the raw input has held it for ``hold_time`` seconds, and remembers when each switch
+last changed.
+
+Bit order of the mask (also the board message's bit order)::
+
+    bit 0 initial, 1 last, 2 sleeping, 3 longitudinal_1, 4 longitudinal_2
+
+Times are float seconds in the caller's clock (the node uses ROS time).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+SWITCH_NAMES = ('initial', 'last', 'sleeping', 'longitudinal_1', 'longitudinal_2')
+
+
+@dataclass
+class SwitchState:
+    """Debounced state of one switch.
+
+    Attributes
+    ----------
+    closed : bool
+        Debounced state (True = switch closed / actuated).
+    changed : float
+        Time the raw input first showed the current debounced state [s]; the time of
+        the first sample for a switch that never changed.
+    """
+
+    closed: bool
+    changed: float
+
+
+class SwitchDebouncer:
+    """Debounce a stream of 5-bit switch masks.
+
+    Parameters
+    ----------
+    hold_time : float
+        A raw change must persist this long before it is accepted [s], >= 0.
+    names : tuple of str
+        Switch names in bit order.
+    """
+
+    def __init__(self, hold_time: float = 0.03, names: tuple = SWITCH_NAMES):
+        if not (hold_time >= 0.0) or not math.isfinite(hold_time):
+            raise ValueError(f'hold_time must be a finite value >= 0 s, got {hold_time!r}')
+        self.hold_time = float(hold_time)
+        self.names = tuple(names)
+        self.states: dict[str, SwitchState] | None = None
+        self._pending: dict[str, float | None] = {n: None for n in self.names}
+        self.bounces = 0  #: raw changes that reverted before hold_time
+
+    def update(self, mask: int, t: float) -> list[str]:
+        """Feed one raw sample; return the names whose debounced state changed.
+
+        Parameters
+        ----------
+        mask : int
+            Raw switch bits (bit i = ``names[i]`` closed).
+        t : float
+            Sample time [s]; samples must come in non-decreasing time order.
+        """
+        raw = {n: bool(mask >> i & 1) for i, n in enumerate(self.names)}
+        if self.states is None:
+            self.states = {n: SwitchState(raw[n], t) for n in self.names}
+            return []
+        changed = []
+        for n in self.names:
+            st = self.states[n]
+            if raw[n] == st.closed:
+                if self._pending[n] is not None:
+                    self.bounces += 1
+                self._pending[n] = None
+                continue
+            if self._pending[n] is None:
+                self._pending[n] = t
+            if t - self._pending[n] >= self.hold_time:
+                st.closed = raw[n]
+                st.changed = self._pending[n]
+                self._pending[n] = None
+                changed.append(n)
+        return changed
+
+    def mask(self) -> int:
+        """Debounced states as a bit mask (0 before the first sample)."""
+        if self.states is None:
+            return 0
+        return sum(1 << i for i, n in enumerate(self.names) if self.states[n].closed)
