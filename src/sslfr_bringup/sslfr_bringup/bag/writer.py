@@ -1,0 +1,330 @@
+"""Crash-safe rosbag2-layout MCAP bag writer (pure Python, no rclpy).
+
+A bag is a directory ``<name>/`` holding ``<name>_0.mcap``, ``<name>_1.mcap`` ...
+and ``metadata.yaml`` (written when a file is closed and at the end). Each file has
+profile ``ros2``, one ``ros2msg`` schema per type (full text with dependencies, see
+:mod:`.schema`), one ``cdr`` channel per topic with the ``offered_qos_profiles`` and
+``topic_type_hash`` metadata keys rosbag2 writes, and a ``rosbag2`` metadata record.
+
+Crash safety: messages are grouped in chunks with CRC-32 of their uncompressed data.
+A chunk is closed, written and (optionally) fsync'ed when it reaches ``chunk_size``
+bytes or when its first message is ``chunk_duration_s`` old on the monotonic clock,
+checked on every write and by :meth:`BagWriter.poll` (call it from a timer). A
+SIGKILL or power cut therefore loses at most ``chunk_duration_s`` plus the poll
+period; :func:`sslfr_bringup.bag.recover.recover_bag` rebuilds the rest.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from mcap.writer import CompressionType, Writer
+
+from .metadata import BagError, BagMetadata, FileInfo, TopicInfo, write_metadata
+from .policy import SplitPolicy
+from .qos import dump_profiles
+from .schema import DefinitionCache, normalize_type
+
+LIBRARY = 'sslfr_bringup bag writer (mcap-python)'
+_COMPRESSION = {'none': CompressionType.NONE, '': CompressionType.NONE,
+                'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}
+
+
+@dataclass
+class _Topic:
+    info: TopicInfo
+    schema_text: str
+
+
+class McapFile:
+    """One open ``.mcap`` file of a bag (ros2 profile, chunked, CRCs on)."""
+
+    def __init__(self, path: Path, *, chunk_size: int, compression: str, fsync: bool,
+                 monotonic: Callable[[], float]):
+        self.path = path
+        self._fh = open(path, 'xb')  # noqa: SIM115 - closed in finish()/abort()
+        self._writer = Writer(self._fh, chunk_size=chunk_size,
+                              compression=_COMPRESSION[compression], enable_crcs=True)
+        self._writer.start(profile='ros2', library=LIBRARY)
+        self._fsync = fsync
+        self._monotonic = monotonic
+        self._schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        self.info = FileInfo(path=path.name)
+        self._end_ns: int | None = None
+        self._pending_since: float | None = None
+
+    def add_topic(self, topic: _Topic) -> None:
+        """Register the schema (once per type) and the channel of a topic."""
+        if topic.info.name in self.channels:
+            return
+        typ = topic.info.type
+        if typ not in self._schemas:
+            self._schemas[typ] = self._writer.register_schema(
+                name=typ, encoding='ros2msg', data=topic.schema_text.encode('utf-8'))
+        self.channels[topic.info.name] = self._writer.register_channel(
+            topic=topic.info.name, message_encoding=topic.info.serialization_format,
+            schema_id=self._schemas[typ],
+            metadata={'offered_qos_profiles': dump_profiles(topic.info.offered_qos_profiles),
+                      'topic_type_hash': topic.info.type_description_hash})
+
+    def write(self, channel_id: int, data: bytes, log_ns: int, publish_ns: int, sequence: int):
+        """Append one message (goes into the open chunk)."""
+        if self._pending_since is None:
+            self._pending_since = self._monotonic()
+        self._writer.add_message(channel_id=channel_id, log_time=log_ns, data=data,
+                                 publish_time=publish_ns, sequence=sequence & 0xFFFFFFFF)
+        info = self.info
+        if info.message_count == 0:
+            info.starting_time_ns = log_ns
+            self._end_ns = log_ns
+        else:
+            if log_ns < info.starting_time_ns:
+                info.starting_time_ns = log_ns
+            if log_ns > self._end_ns:
+                self._end_ns = log_ns
+        info.message_count += 1
+        info.duration_ns = self._end_ns - info.starting_time_ns
+
+    def chunk_age(self) -> float:
+        """Seconds since the oldest message not yet written out (0 when none)."""
+        return 0.0 if self._pending_since is None else self._monotonic() - self._pending_since
+
+    def flush(self) -> None:
+        """Close the open chunk, write it and flush to the OS (fsync if enabled)."""
+        self._writer.flush()
+        if self._fsync:
+            os.fsync(self._fh.fileno())
+        self._pending_since = None
+
+    def size(self) -> int:
+        """Bytes written to the file so far (excluding the open chunk)."""
+        return self._fh.tell()
+
+    def finish(self, meta: BagMetadata | None) -> None:
+        """Write the ``rosbag2`` metadata record, summary, footer; close the file."""
+        if meta is not None:
+            self._writer.add_metadata('rosbag2', {'serialized_metadata': meta.serialized_for_mcap(),
+                                                  'ROS_DISTRO': meta.ros_distro})
+        self._writer.finish()
+        self._fh.flush()
+        if self._fsync:
+            os.fsync(self._fh.fileno())
+        self._fh.close()
+
+    def abort(self) -> None:
+        """Close without summary (as a crash would leave it)."""
+        try:
+            self._fh.close()
+        except OSError:
+            pass
+
+
+@dataclass
+class WriterOptions:
+    """Tuning of :class:`BagWriter`.
+
+    Parameters
+    ----------
+    chunk_size : int
+        Close a chunk at this uncompressed size [bytes].
+    chunk_duration_s : float
+        Close a chunk once its oldest message is this old [s, monotonic clock].
+    compression : {'zstd', 'lz4', 'none'}
+        MCAP chunk compression.
+    fsync : bool
+        fsync after every chunk (power-cut safety; costs one disk sync per chunk).
+    split : SplitPolicy
+        When to start a new file inside the bag.
+    """
+
+    chunk_size: int = 1024 * 1024
+    chunk_duration_s: float = 2.0
+    compression: str = 'zstd'
+    fsync: bool = True
+    split: SplitPolicy = field(default_factory=SplitPolicy)
+
+    def __post_init__(self):
+        if self.compression not in _COMPRESSION:
+            raise ValueError(f'compression must be one of zstd, lz4, none (got {self.compression!r})')
+        if self.chunk_size <= 0 or self.chunk_duration_s <= 0:
+            raise ValueError('chunk_size and chunk_duration_s must be > 0')
+
+
+class BagWriter:
+    """Write a rosbag2-layout MCAP bag directory.
+
+    Parameters
+    ----------
+    directory : path
+        The bag directory; created if missing. When it already holds a bag and
+        ``resume`` is true, that bag is recovered if needed and continued with new
+        files (one bag per day survives recorder restarts); otherwise it must not exist.
+    options : WriterOptions
+    definitions : DefinitionCache, optional
+        Where ``.msg`` texts come from (default: the ament index).
+    resume : bool
+    monotonic : callable
+        Monotonic clock [s] for the chunk-duration bound (injectable for tests).
+    """
+
+    def __init__(self, directory: str | os.PathLike, options: WriterOptions | None = None, *,
+                 definitions: DefinitionCache | None = None, resume: bool = False,
+                 monotonic: Callable[[], float] = time.monotonic,
+                 custom_data: dict[str, str] | None = None):
+        self.directory = Path(directory)
+        self.options = options or WriterOptions()
+        self.definitions = definitions or DefinitionCache()
+        self._monotonic = monotonic
+        self._lock = threading.RLock()
+        self._topics: dict[str, _Topic] = {}
+        self.meta = BagMetadata(custom_data=dict(custom_data or {}))
+        self._file: McapFile | None = None
+        self._next_index = 0
+        self.closed = False
+        if self.directory.exists() and any(self.directory.iterdir()):
+            if not resume:
+                raise BagError(f'{self.directory} already exists and is not empty')
+            self._resume()
+        self.directory.mkdir(parents=True, exist_ok=True)
+
+    # -- set-up -----------------------------------------------------------------------
+    def _resume(self) -> None:
+        from .recover import recover_bag  # local import: recover uses this module
+        report = recover_bag(self.directory)
+        self.meta = report.metadata
+        for name, info in self.meta.topics.items():
+            schema_text = report.schemas.get(info.type) or self._schema_text(info.type)
+            self._topics[name] = _Topic(info, schema_text)
+        self._next_index = len(self.meta.files)
+
+    def _schema_text(self, type_name: str) -> str:
+        return self.definitions.full_text(type_name)
+
+    def add_topic(self, name: str, type_name: str, qos_profiles: list[dict] | None = None, *,
+                  type_hash: str | None = None, schema_text: str | None = None,
+                  serialization_format: str = 'cdr') -> None:
+        """Declare a topic (idempotent). The schema comes from the ament index unless given.
+
+        Raises
+        ------
+        DefinitionNotFoundError
+            When no ``.msg`` definition exists for the type (and none is given).
+        """
+        type_name = normalize_type(type_name)
+        with self._lock:
+            if name in self._topics:
+                return
+            text = schema_text if schema_text is not None else self._schema_text(type_name)
+            info = TopicInfo(name=name, type=type_name, serialization_format=serialization_format,
+                             offered_qos_profiles=list(qos_profiles or []),
+                             type_description_hash=(type_hash if type_hash is not None
+                                                    else self.definitions.type_hash(type_name)))
+            topic = _Topic(info, text)
+            self._topics[name] = topic
+            self.meta.topics[name] = info
+            if self._file is not None:
+                self._file.add_topic(topic)
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Declared topics with their message counts."""
+        return {k: v.info for k, v in self._topics.items()}
+
+    # -- writing ----------------------------------------------------------------------
+    def _open_file(self) -> McapFile:
+        path = self.directory / f'{self.directory.name}_{self._next_index}.mcap'
+        self._next_index += 1
+        f = McapFile(path, chunk_size=self.options.chunk_size, compression=self.options.compression,
+                     fsync=self.options.fsync, monotonic=self._monotonic)
+        for topic in self._topics.values():
+            f.add_topic(topic)
+        self.meta.files.append(f.info)
+        return f
+
+    def _close_file(self) -> None:
+        if self._file is None:
+            return
+        f, self._file = self._file, None
+        f.finish(self.meta)
+        write_metadata(self.directory, self.meta, fsync=self.options.fsync)
+
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None,
+              sequence: int = 0) -> None:
+        """Record one serialized (CDR) message of a declared topic.
+
+        Parameters
+        ----------
+        topic : str
+        data : bytes
+            The serialized message, stored as is.
+        log_time_ns : int
+            Receive time [ns since the Unix epoch] (rosbag2 ``recv_timestamp``).
+        publish_time_ns : int, optional
+            Publisher's send time [ns] (defaults to ``log_time_ns``).
+        sequence : int
+            Publisher sequence number (stored modulo 2**32).
+        """
+        with self._lock:
+            if self.closed:
+                raise BagError('bag writer is closed')
+            entry = self._topics.get(topic)
+            if entry is None:
+                raise KeyError(f'topic {topic!r} was not declared with add_topic()')
+            f = self._file
+            if f is not None and f.info.message_count and self.options.split.should_split(
+                    f.size(), f.info.starting_time_ns, log_time_ns):
+                self._close_file()
+                f = None
+            if f is None:
+                f = self._file = self._open_file()
+            f.write(f.channels[topic], data, int(log_time_ns),
+                    int(log_time_ns if publish_time_ns is None else publish_time_ns), sequence)
+            entry.info.message_count += 1
+            if f.chunk_age() >= self.options.chunk_duration_s:
+                f.flush()
+
+    def poll(self) -> None:
+        """Write out the open chunk if it is older than ``chunk_duration_s`` (timer hook)."""
+        with self._lock:
+            f = self._file
+            if f is not None and f.chunk_age() >= self.options.chunk_duration_s:
+                f.flush()
+
+    def flush(self) -> None:
+        """Write out the open chunk now."""
+        with self._lock:
+            if self._file is not None:
+                self._file.flush()
+
+    def split(self) -> None:
+        """Close the current file now; the next message opens a new one."""
+        with self._lock:
+            self._close_file()
+
+    def close(self) -> BagMetadata:
+        """Finish the open file and write ``metadata.yaml``; return the metadata."""
+        with self._lock:
+            if not self.closed:
+                self._close_file()
+                write_metadata(self.directory, self.meta, fsync=self.options.fsync)
+                self.closed = True
+            return self.meta
+
+    def abort(self) -> None:
+        """Stop without finishing the file (simulates a crash; for tests)."""
+        with self._lock:
+            if self._file is not None:
+                self._file.abort()
+                self._file = None
+            self.closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
