@@ -1,0 +1,365 @@
+"""The node set of the tracker: load ``config/nodeset.yaml`` and turn it into process
+command lines (``./sslfr up``, ``./sslfr sim``) or launch entries (tracker.launch.py).
+
+Pure Python (PyYAML only, no rclpy), so the launch file on a Pi, the supervisor here
+and the unit tests all read the same description the same way.
+
+Vocabulary
+----------
+node     one ROS node process (:class:`NodeSpec`): executable, name, role parameters,
+         lifecycle or not, start order and stop group.
+board    a device a node talks to (:class:`BoardSpec`): its udev name on the Pi and the
+         simulated board process that replaces it in ``./sslfr sim``.
+config   the site's ROS params file (``almeria_sslfr.yaml`` ...): node tuning and the
+         shared ``site.*`` keys. Looked up in this package's config directory when
+         given by bare name.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+#: Parameter that receives a board's serial port (pyserial URL or device path).
+PORT_PARAM = 'port'
+NODESET_FILE = 'nodeset.yaml'
+
+
+class NodeSetError(ValueError):
+    """The node-set description or a site config is invalid (message says where)."""
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A board: stable device name on the Pi and its simulated replacement."""
+
+    name: str
+    device: str
+    sim_package: str | None = None
+    sim_executable: str | None = None
+    sim_args: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node process of the set."""
+
+    name: str
+    package: str
+    executable: str
+    lifecycle: bool = False
+    critical: bool = False
+    start: int = 0
+    stop: int = 1
+    board: str | None = None
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    remaps: Mapping[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class NodeSet:
+    """The whole description (see config/nodeset.yaml for the meaning of each key)."""
+
+    nodes: tuple[NodeSpec, ...]
+    boards: Mapping[str, BoardSpec]
+    config: str = 'almeria_sslfr.yaml'
+    domain_id: int = 42
+    discovery_range: str = 'LOCALHOST'
+    namespace: str = ''
+    restart_backoff: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)
+    stable_after: float = 60.0
+    stop_timeout: float = 5.0
+    sim: Mapping[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    def node(self, name: str) -> NodeSpec:
+        """Return the node called ``name`` (KeyError with the known names)."""
+        for n in self.nodes:
+            if n.name == name:
+                return n
+        raise KeyError(f'no node {name!r} in the node set (known: {", ".join(n.name for n in self.nodes)})')
+
+    def start_order(self) -> list[NodeSpec]:
+        """Nodes in start order (stable within one ``start`` value)."""
+        return sorted(self.nodes, key=lambda n: n.start)
+
+    def stop_groups(self) -> list[list[NodeSpec]]:
+        """Nodes grouped for an ordered stop: group 0 (the axes) first."""
+        groups: dict[int, list[NodeSpec]] = {}
+        for n in self.nodes:
+            groups.setdefault(n.stop, []).append(n)
+        return [groups[k] for k in sorted(groups)]
+
+    def lifecycle_nodes(self) -> list[NodeSpec]:
+        return [n for n in self.nodes if n.lifecycle]
+
+    def only(self, names: Iterable[str]) -> 'NodeSet':
+        """A copy restricted to ``names`` (unknown names raise KeyError)."""
+        keep = set(names)
+        for name in keep:
+            self.node(name)
+        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name in keep)})
+
+    def without(self, names: Iterable[str]) -> 'NodeSet':
+        drop = set(names)
+        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name not in drop)})
+
+
+# ---------------------------------------------------------------------------------
+# locating files
+
+def config_dir() -> Path:
+    """This package's config directory: the source tree when present (a developer
+    checkout or a --symlink-install build), else the installed share directory."""
+    here = Path(__file__).resolve().parent.parent / 'config'
+    if (here / NODESET_FILE).is_file():
+        return here
+    try:  # an installed (non-symlink) build on a Pi
+        from ament_index_python.packages import get_package_share_directory
+        return Path(get_package_share_directory('sslfr_bringup')) / 'config'
+    except Exception:  # noqa: BLE001 - fall back to the source location
+        return here
+
+
+def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr.yaml') -> Path:
+    """Return the params file for ``name``: a path as given when it exists, else a
+    file of that name (``.yaml`` optional) in :func:`config_dir`."""
+    name = str(name) if name else default
+    p = Path(name).expanduser()
+    if p.is_file():
+        return p.resolve()
+    for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
+        if cand.is_file():
+            return cand
+    known = ', '.join(sorted(f.name for f in config_dir().glob('*.yaml') if f.name != NODESET_FILE))
+    raise NodeSetError(f'config {name!r} not found (as a path or in {config_dir()}; known: {known})')
+
+
+# ---------------------------------------------------------------------------------
+# loading
+
+def _as_tuple_str(value, where: str) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise NodeSetError(f'{where}: expected a list, got {value!r}')
+    return tuple(str(v) for v in value)
+
+
+def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
+    """Validate and convert the YAML document ``data`` into a :class:`NodeSet`."""
+    if not isinstance(data, Mapping):
+        raise NodeSetError('node set: top level must be a mapping')
+    boards: dict[str, BoardSpec] = {}
+    for bname, b in (data.get('boards') or {}).items():
+        if not isinstance(b, Mapping) or 'device' not in b:
+            raise NodeSetError(f'boards.{bname}: needs a device')
+        sim = b.get('sim') or {}
+        boards[str(bname)] = BoardSpec(
+            name=str(bname), device=str(b['device']),
+            sim_package=sim.get('package'), sim_executable=sim.get('executable'),
+            sim_args=_as_tuple_str(sim.get('args'), f'boards.{bname}.sim.args'))
+    nodes: list[NodeSpec] = []
+    seen: set[str] = set()
+    for i, n in enumerate(data.get('nodes') or []):
+        where = f'nodes[{i}]'
+        if not isinstance(n, Mapping):
+            raise NodeSetError(f'{where}: must be a mapping')
+        for key in ('name', 'package', 'executable'):
+            if not n.get(key):
+                raise NodeSetError(f'{where}: missing {key}')
+        name = str(n['name'])
+        if name in seen:
+            raise NodeSetError(f'{where}: duplicate node name {name!r}')
+        seen.add(name)
+        board = n.get('board')
+        if board is not None and board not in boards:
+            raise NodeSetError(f'{where} ({name}): unknown board {board!r}')
+        params = dict(n.get('parameters') or {})
+        remaps = {str(k): str(v) for k, v in (n.get('remaps') or {}).items()}
+        try:
+            start, stop = int(n.get('start', 0)), int(n.get('stop', 1))
+        except (TypeError, ValueError) as exc:
+            raise NodeSetError(f'{where} ({name}): start/stop must be integers') from exc
+        nodes.append(NodeSpec(name=name, package=str(n['package']), executable=str(n['executable']),
+                              lifecycle=bool(n.get('lifecycle', False)),
+                              critical=bool(n.get('critical', False)), start=start, stop=stop,
+                              board=board, parameters=params, remaps=remaps))
+    if not nodes:
+        raise NodeSetError('node set: no nodes')
+    d = data.get('defaults') or {}
+    domain_id = int(d.get('domain_id', 42))
+    if not 0 < domain_id <= 232:
+        raise NodeSetError(f'defaults.domain_id {domain_id} outside 1..232 (0 is every robot\'s default)')
+    backoff = tuple(float(x) for x in d.get('restart_backoff', (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)))
+    if not backoff or any(x <= 0 for x in backoff):
+        raise NodeSetError('defaults.restart_backoff must be positive seconds')
+    return NodeSet(nodes=tuple(nodes), boards=boards, config=str(d.get('config', 'almeria_sslfr.yaml')),
+                   domain_id=domain_id, discovery_range=str(d.get('discovery_range', 'LOCALHOST')),
+                   namespace=str(d.get('namespace') or ''), restart_backoff=backoff,
+                   stable_after=float(d.get('stable_after', 60.0)),
+                   stop_timeout=float(d.get('stop_timeout', 5.0)),
+                   sim=dict(data.get('sim') or {}), path=path)
+
+
+def load(path: str | os.PathLike | None = None) -> NodeSet:
+    """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
+    p = Path(path) if path else config_dir() / NODESET_FILE
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise NodeSetError(f'cannot read node set {p}: {exc}') from exc
+    except yaml.YAMLError as exc:
+        raise NodeSetError(f'{p}: invalid YAML: {exc}') from exc
+    return parse(data, p)
+
+
+def read_params(path: str | os.PathLike) -> dict:
+    """Read a ROS params file; raise :class:`NodeSetError` with the reason if invalid."""
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except OSError as exc:
+        raise NodeSetError(f'cannot read config {path}: {exc}') from exc
+    except yaml.YAMLError as exc:
+        raise NodeSetError(f'{path}: invalid YAML: {exc}') from exc
+    if not isinstance(data, dict):
+        raise NodeSetError(f'{path}: a params file is a mapping of node names')
+    for key, section in data.items():
+        if not isinstance(section, dict) or 'ros__parameters' not in section:
+            raise NodeSetError(f'{path}: section {key!r} has no ros__parameters')
+    return data
+
+
+def node_params(params: Mapping[str, Any], node: str, namespace: str = '') -> dict:
+    """The parameters a params file gives node ``node``: the ``/**`` section overlaid
+    by the node's own section (``name``, ``/name`` or ``/ns/name``), as rcl does."""
+    out: dict = {}
+    full = f'{namespace.rstrip("/")}/{node}' if namespace else f'/{node}'
+    for key in ('/**', '**', node, full, full.lstrip('/')):
+        section = params.get(key)
+        if isinstance(section, Mapping):
+            out.update(_flatten(section.get('ros__parameters') or {}))
+    return out
+
+
+def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f'{prefix}{k}'
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, key + '.'))
+        else:
+            out[key] = v
+    return out
+
+
+# ---------------------------------------------------------------------------------
+# what to run
+
+def format_param(value: Any) -> str:
+    """Format ``value`` for ``-p name:=value`` (YAML syntax, as rcl parses it)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, (list, tuple)):
+        return '[' + ','.join(format_param(v) if not isinstance(v, str) else repr(v) for v in value) + ']'
+    return str(value)
+
+
+def node_port(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = None,
+              sim_ports: Mapping[str, str] | None = None) -> str | None:
+    """The ``port`` to hand ``node`` on the command line, or None.
+
+    Simulation: the simulated board's pty path always. Real boards: the board's udev
+    device, unless the site config already sets ``port`` for this node (the config wins).
+    """
+    if node.board is None:
+        return None
+    if sim_ports is not None:
+        return sim_ports.get(node.board)
+    if params is not None and PORT_PARAM in node_params(params, node.name, ns.namespace):
+        return None
+    return ns.boards[node.board].device
+
+
+def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
+             params: Mapping[str, Any] | None = None, sim_ports: Mapping[str, str] | None = None,
+             use_sim_time: bool = False, namespace: str | None = None,
+             extra: Mapping[str, Any] | None = None, log_level: str | None = None) -> list[str]:
+    """The ``--ros-args ...`` part of ``node``'s command line.
+
+    Order matters (later wins in rcl): params file, role parameters, port,
+    ``use_sim_time``, ``extra``.
+    """
+    nsp = ns.namespace if namespace is None else namespace
+    args = ['--ros-args', '-r', f'__node:={node.name}']
+    if nsp:
+        args += ['-r', f'__ns:={nsp}']
+    args += ['--params-file', str(config)]
+    for key, value in node.parameters.items():
+        args += ['-p', f'{key}:={format_param(value)}']
+    port = node_port(ns, node, params, sim_ports)
+    if port:
+        args += ['-p', f'{PORT_PARAM}:={port}']
+    if use_sim_time:
+        args += ['-p', 'use_sim_time:=true']
+    for key, value in (extra or {}).items():
+        args += ['-p', f'{key}:={format_param(value)}']
+    for src, dst in node.remaps.items():
+        args += ['-r', f'{src}:={dst}']
+    if log_level:
+        args += ['--log-level', log_level]
+    return args
+
+
+def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | None = None,
+                   params: Mapping[str, Any] | None = None) -> list[dict]:
+    """What tracker.launch.py turns into ``launch_ros`` actions, in start order.
+
+    Each entry: package, executable, name, namespace, parameters (a list: the params
+    file path, then a dict of role parameters and port), remappings (list of pairs),
+    lifecycle (bool), critical (bool).
+    """
+    if params is None:
+        params = read_params(config)
+    nsp = ns.namespace if namespace is None else namespace
+    out = []
+    for node in ns.start_order():
+        overrides = dict(node.parameters)
+        port = node_port(ns, node, params)
+        if port:
+            overrides[PORT_PARAM] = port
+        out.append({'package': node.package, 'executable': node.executable, 'name': node.name,
+                    'namespace': nsp, 'parameters': [str(config), overrides] if overrides else [str(config)],
+                    'remappings': list(node.remaps.items()), 'lifecycle': node.lifecycle,
+                    'critical': node.critical})
+    return out
+
+
+def sim_board_argv(board: BoardSpec, exe_path: str | os.PathLike, values: Mapping[str, Any]) -> list[str]:
+    """Command line of ``board``'s simulator with ``{placeholders}`` filled from ``values``."""
+    if not board.sim_executable:
+        raise NodeSetError(f'board {board.name!r} has no simulator')
+    try:
+        return [str(exe_path), *(a.format(**values) for a in board.sim_args)]
+    except KeyError as exc:
+        raise NodeSetError(f'board {board.name!r}: unknown placeholder {exc} in sim args') from exc
+
+
+def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
+                    domain_id: int | None = None) -> dict[str, str]:
+    """Environment for the node processes: the node set's domain and discovery range
+    unless the caller's environment (or ``domain_id``) sets them."""
+    env = dict(os.environ if base is None else base)
+    if domain_id is not None:
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+    else:
+        env.setdefault('ROS_DOMAIN_ID', str(ns.domain_id))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', ns.discovery_range)
+    env.setdefault('PYTHONUNBUFFERED', '1')
+    env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    return env

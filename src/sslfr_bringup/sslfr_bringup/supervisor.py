@@ -1,0 +1,464 @@
+"""Process supervisor of the node set (used by ``./sslfr up`` and ``./sslfr sim``).
+
+Every node runs as its own process (its own session, so a terminal's Ctrl-C reaches
+only the supervisor, which then stops the set in order). The supervisor
+
+- starts the programs in the node set's start order;
+- restarts a program that exits with backoff (``restart_backoff`` seconds, the index
+  advancing with each consecutive failure and reset once a program stayed up
+  ``stable_after`` seconds); the restart of a *critical* program (the safety
+  supervisor) is reported loudly: a banner on stderr at journal priority ``err`` and
+  an ERROR status on ``diagnostics``;
+- drives lifecycle programs (the axis drivers) to ``active`` after every (re)start,
+  retrying with backoff when a transition fails (e.g. a board not reachable);
+- on :meth:`Supervisor.stop` stops the set in stop groups within ``stop_timeout``
+  seconds: the axes first (lifecycle ``deactivate``, then SIGINT), then the rest,
+  the recorder last; whatever is still alive at the end is killed.
+
+The ROS side (lifecycle calls, diagnostics, the simulation's /clock) lives in one
+thread (:class:`RosSide`) that owns the rclpy context; the process bookkeeping is
+plain Python in the caller's thread. All waits are on ``time.monotonic``.
+"""
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, TextIO
+
+
+@dataclass
+class Program:
+    """A supervised process."""
+
+    name: str
+    argv: list[str]
+    start: int = 0
+    stop: int = 1
+    critical: bool = False
+    lifecycle: bool = False
+    restart: bool = True
+    kind: str = 'node'            # 'node' or 'board' (simulated board)
+    # runtime state
+    proc: subprocess.Popen | None = None
+    started_at: float = 0.0
+    failures: int = 0             # consecutive failures (backoff index)
+    restarts: int = 0             # total restarts
+    next_start: float | None = None
+    held: bool = False            # killed on purpose (fault injection): no restart
+    lifecycle_state: str = ''     # '', 'activating', 'active', 'failed'
+    lifecycle_retry: float | None = None
+    last_exit: int | None = None
+    log_file: object = None
+    history: list = field(default_factory=list)   # (monotonic, event, detail)
+
+    @property
+    def pid(self) -> int | None:
+        return None if self.proc is None else self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+
+def _journal_prefix(priority: int) -> str:
+    """sd-daemon priority prefix when stderr goes to the journal (systemd)."""
+    return f'<{priority}>' if os.environ.get('JOURNAL_STREAM') else ''
+
+
+class Supervisor:
+    """Start, watch, restart and stop a set of :class:`Program` (see module doc)."""
+
+    def __init__(self, programs: list[Program], env: dict, *, backoff=(1.0, 2.0, 4.0, 8.0, 16.0, 30.0),
+                 stable_after: float = 60.0, stop_timeout: float = 5.0, log_dir: Path | None = None,
+                 out: TextIO | None = None, ros: 'RosSide | None' = None):
+        names = [p.name for p in programs]
+        if len(set(names)) != len(names):
+            raise ValueError(f'duplicate program names: {names}')
+        self.programs = {p.name: p for p in sorted(programs, key=lambda p: p.start)}
+        self.env = env
+        self.backoff = tuple(backoff)
+        self.stable_after = stable_after
+        self.stop_timeout = stop_timeout
+        self.log_dir = Path(log_dir) if log_dir else None
+        self.out = out or sys.stderr
+        self.ros = ros
+        self.stopping = False
+        self.events: list[tuple[float, str, str, str]] = []   # (mono, program, event, detail)
+
+    # ------------------------------------------------------------------ reporting
+    def say(self, text: str, priority: int = 6) -> None:
+        self.out.write(f'{_journal_prefix(priority)}[sslfr up] {text}\n')
+        self.out.flush()
+
+    def _event(self, p: Program, event: str, detail: str = '') -> None:
+        now = time.monotonic()
+        self.events.append((now, p.name, event, detail))
+        p.history.append((now, event, detail))
+        if self.ros is not None:
+            self.ros.note(p.name, event, detail, p.critical)
+
+    # ------------------------------------------------------------------ processes
+    def _spawn(self, p: Program) -> None:
+        stdout = None
+        if self.log_dir is not None:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            if p.log_file is None:
+                p.log_file = open(self.log_dir / f'{p.name}.log', 'ab')  # noqa: SIM115 - closed in close()
+            stdout = p.log_file
+        try:
+            p.proc = subprocess.Popen(p.argv, env=self.env, stdout=stdout, stderr=subprocess.STDOUT if stdout else None,
+                                      stdin=subprocess.DEVNULL, start_new_session=True)
+        except OSError as exc:
+            p.proc = None
+            p.failures += 1
+            p.next_start = time.monotonic() + self._delay(p)
+            self.say(f'{p.name}: cannot start {p.argv[0]}: {exc}; retry in {self._delay(p):.0f} s', 3)
+            self._event(p, 'spawn-failed', str(exc))
+            return
+        p.started_at = time.monotonic()
+        p.next_start = None
+        p.lifecycle_state = ''
+        p.lifecycle_retry = None
+        self._event(p, 'started', f'pid {p.proc.pid}')
+        if p.lifecycle:
+            self._activate(p)
+
+    def _delay(self, p: Program) -> float:
+        return self.backoff[min(max(p.failures - 1, 0), len(self.backoff) - 1)]
+
+    def start(self) -> None:
+        """Start every program in start order."""
+        for p in self.programs.values():
+            self._spawn(p)
+        self.say('started ' + ', '.join(f'{p.name}[{p.pid}]' for p in self.programs.values()))
+
+    def _activate(self, p: Program) -> None:
+        if self.ros is None:
+            return
+        p.lifecycle_state = 'activating'
+        self.ros.request_active(p.name)
+
+    def step(self) -> None:
+        """One supervision pass: reap exits, schedule/perform restarts, lifecycle."""
+        now = time.monotonic()
+        if self.ros is not None:
+            for name, ok, msg in self.ros.results():
+                p = self.programs.get(name)
+                if p is None or not p.alive():
+                    continue
+                if ok:
+                    p.lifecycle_state = 'active'
+                    self._event(p, 'active', msg)
+                    self.say(f'{p.name}: lifecycle active')
+                else:
+                    p.lifecycle_state = 'failed'
+                    p.lifecycle_retry = now + 3.0
+                    self._event(p, 'activate-failed', msg)
+                    self.say(f'{p.name}: could not be activated ({msg}); retrying in 3 s', 4)
+        for p in self.programs.values():
+            if self.stopping:
+                return
+            if p.proc is not None and p.proc.poll() is not None and p.next_start is None and not p.held:
+                code = p.proc.returncode
+                p.last_exit = code
+                up_for = now - p.started_at
+                if up_for >= self.stable_after:
+                    p.failures = 0
+                p.failures += 1
+                p.lifecycle_state = ''
+                self._event(p, 'exited', f'code {code} after {up_for:.1f} s')
+                if not p.restart:
+                    p.next_start = float('inf')
+                    self.say(f'{p.name} exited (code {code}); not restarted', 3)
+                    continue
+                delay = self._delay(p)
+                p.next_start = now + delay
+                if p.critical:
+                    self.say('*' * 72, 2)
+                    self.say(f'*** CRITICAL: {p.name} DIED (exit code {code}, up {up_for:.1f} s). '
+                             f'Restart #{p.restarts + 1} in {delay:.0f} s. Until it is back the axis '
+                             f'drivers see no safety heartbeat and stow/hold.', 2)
+                    self.say('*' * 72, 2)
+                else:
+                    self.say(f'{p.name} exited (code {code}, up {up_for:.1f} s); restart in {delay:.0f} s', 4)
+            if p.next_start is not None and now >= p.next_start and not p.held:
+                p.restarts += 1
+                self._event(p, 'restart', f'#{p.restarts}')
+                self._spawn(p)
+                level = 2 if p.critical else 5
+                self.say(f'{p.name} restarted (#{p.restarts}, pid {p.pid})', level)
+            if (p.lifecycle and p.alive() and p.lifecycle_state == 'failed'
+                    and p.lifecycle_retry is not None and now >= p.lifecycle_retry):
+                self._activate(p)
+
+    # ------------------------------------------------------------------ fault injection
+    def kill(self, name: str, hold: bool = True) -> None:
+        """SIGKILL program ``name`` (a fault); with ``hold`` it stays down until
+        :meth:`release`, otherwise the normal restart policy applies."""
+        p = self.programs[name]
+        p.held = hold
+        if p.alive():
+            os.killpg(p.proc.pid, signal.SIGKILL)
+            p.proc.wait(5)
+        self._event(p, 'killed', 'fault injection')
+        self.say(f'{name} killed (fault injection){"; held down" if hold else ""}', 4)
+
+    def release(self, name: str) -> None:
+        """Let a held program start again now."""
+        p = self.programs[name]
+        if p.held:
+            p.held = False
+            p.failures = 0
+            p.next_start = time.monotonic()
+
+    # ------------------------------------------------------------------ stop
+    def stop(self) -> float:
+        """Ordered stop (axes first, recorder last) within ``stop_timeout``; return the
+        wall time it took [s]."""
+        self.stopping = True
+        t0 = time.monotonic()
+        deadline = t0 + self.stop_timeout - 0.4
+        groups: dict[int, list[Program]] = {}
+        for p in self.programs.values():
+            groups.setdefault(p.stop, []).append(p)
+        order = sorted(groups)
+        for i, g in enumerate(order):
+            progs = [p for p in groups[g] if p.alive()]
+            lifecycle = [p.name for p in progs if p.lifecycle and p.lifecycle_state == 'active']
+            if lifecycle and self.ros is not None:
+                # stop the motors through the drivers' own deactivate (bounded wait)
+                self.ros.deactivate(lifecycle, timeout=min(1.0, max(0.1, deadline - time.monotonic() - 1.5)))
+            for p in progs:
+                try:
+                    os.killpg(p.proc.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+            # the first groups get a share, the last one what is left
+            left = len(order) - i
+            group_deadline = time.monotonic() + max(0.2, (deadline - time.monotonic()) / left * (1.5 if left > 1 else 1))
+            group_deadline = min(group_deadline, deadline)
+            while time.monotonic() < group_deadline and any(p.alive() for p in progs):
+                time.sleep(0.02)
+            for p in progs:
+                if p.alive():
+                    self.say(f'{p.name} did not stop on SIGINT in time: SIGTERM', 4)
+                    try:
+                        os.killpg(p.proc.pid, signal.SIGTERM)
+                    except ProcessLookupError:
+                        pass
+        end = t0 + self.stop_timeout - 0.1
+        while time.monotonic() < end and any(p.alive() for p in self.programs.values()):
+            time.sleep(0.02)
+        for p in self.programs.values():
+            if p.alive():
+                self.say(f'{p.name} still running: SIGKILL', 3)
+                try:
+                    os.killpg(p.proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                p.proc.wait(2)
+        took = time.monotonic() - t0
+        for p in self.programs.values():
+            if p.proc is not None:
+                self._event(p, 'stopped', f'code {p.proc.returncode}')
+        self.say(f'stopped in {took:.2f} s (axes first)')
+        self.close()
+        return took
+
+    def close(self) -> None:
+        for p in self.programs.values():
+            if p.log_file is not None:
+                p.log_file.close()
+                p.log_file = None
+
+    def pids(self) -> list[int]:
+        return [p.pid for p in self.programs.values() if p.alive()]
+
+    def run(self, until: Callable[[], bool] | None = None, tick: Callable[[], None] | None = None,
+            period: float = 0.05) -> None:
+        """Supervise until a stop signal (SIGINT/SIGTERM) or ``until()`` is true; then
+        stop in order. ``tick()`` is called every pass (the simulation's fault timer)."""
+        stop_flag = threading.Event()
+
+        def _handler(signum, frame):  # noqa: ARG001
+            stop_flag.set()
+
+        old = {s: signal.signal(s, _handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            self.start()
+            while not stop_flag.is_set():
+                self.step()
+                if tick is not None:
+                    tick()
+                if until is not None and until():
+                    break
+                stop_flag.wait(period)
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+            if not self.stopping:
+                self.stop()
+
+
+# ---------------------------------------------------------------------------------
+class RosSide(threading.Thread):
+    """The supervisor's rclpy side, in one thread owning its own context.
+
+    - lifecycle: walks requested nodes to ``active`` (results via :meth:`results`),
+      deactivates the axes at stop;
+    - ``diagnostics``: one DiagnosticStatus per supervised process at 1 Hz, ERROR after
+      a critical program's restart (so the monitoring laptop sees it too);
+    - optional ``/clock`` (simulation): ``clock_fn()`` -> sim time [s since epoch],
+      published every ``1/clock_rate`` wall seconds on a steady timer.
+    """
+
+    def __init__(self, domain_id: int, namespace: str = '', clock_fn: Callable[[], float] | None = None,
+                 clock_rate: float = 20.0, node_name: str = 'sslfr_supervisor'):
+        super().__init__(daemon=True, name='ros-side')
+        self.domain_id = domain_id
+        self.namespace = namespace
+        self.node_name = node_name
+        self.clock_fn = clock_fn
+        self.clock_rate = clock_rate
+        self._jobs: queue.Queue = queue.Queue()
+        self._results: queue.Queue = queue.Queue()
+        self._notes: queue.Queue = queue.Queue()
+        self._stop = threading.Event()
+        self.ready = threading.Event()
+        self.error: BaseException | None = None
+        self.clock_published = 0
+
+    # called from the supervisor thread
+    def request_active(self, name: str) -> None:
+        self._jobs.put(('active', name))
+
+    def results(self) -> list[tuple[str, bool, str]]:
+        out = []
+        while True:
+            try:
+                out.append(self._results.get_nowait())
+            except queue.Empty:
+                return out
+
+    def note(self, name: str, event: str, detail: str, critical: bool) -> None:
+        self._notes.put((name, event, detail, critical))
+
+    def deactivate(self, names: list[str], timeout: float) -> None:
+        done = threading.Event()
+        self._jobs.put(('deactivate', (names, timeout, done)))
+        done.wait(timeout + 0.5)
+
+    def shutdown(self) -> None:
+        self._stop.set()
+        self.join(5)
+
+    # the thread
+    def run(self) -> None:  # noqa: C901 - one loop owning every rclpy object
+        try:
+            import rclpy
+            from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+            from lifecycle_msgs.msg import Transition
+            from lifecycle_msgs.srv import ChangeState
+            from rclpy.clock import Clock, ClockType
+            from rclpy.executors import SingleThreadedExecutor
+            from sslfr_drivers.lifecycle_util import bring_to
+
+            ctx = rclpy.Context()
+            rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
+            node = rclpy.create_node(self.node_name, namespace=self.namespace or None, context=ctx)
+            executor = SingleThreadedExecutor(context=ctx)
+            executor.add_node(node)
+            steady = Clock(clock_type=ClockType.STEADY_TIME)
+        except BaseException as exc:  # noqa: BLE001 - reported to the supervisor
+            self.error = exc
+            self.ready.set()
+            return
+        status: dict[str, dict] = {}
+        clients: dict = {}
+        diag_pub = node.create_publisher(DiagnosticArray, 'diagnostics', 10)
+
+        def publish_diag():
+            while True:
+                try:
+                    name, event, detail, critical = self._notes.get_nowait()
+                except queue.Empty:
+                    break
+                s = status.setdefault(name, {'restarts': 0, 'critical': critical, 'event': '', 'detail': ''})
+                s['event'], s['detail'] = event, detail
+                if event == 'restart':
+                    s['restarts'] += 1
+            arr = DiagnosticArray()
+            arr.header.stamp = node.get_clock().now().to_msg()
+            for name, s in sorted(status.items()):
+                level = DiagnosticStatus.OK
+                if s['event'] in ('exited', 'killed', 'spawn-failed', 'activate-failed'):
+                    level = DiagnosticStatus.ERROR if s['critical'] else DiagnosticStatus.WARN
+                elif s['restarts'] and s['critical']:
+                    level = DiagnosticStatus.ERROR
+                elif s['restarts']:
+                    level = DiagnosticStatus.WARN
+                msg = f"{s['event']} {s['detail']}".strip()
+                if s['restarts'] and s['critical']:
+                    msg = f"CRITICAL process restarted {s['restarts']}x; last: {msg}"
+                arr.status.append(DiagnosticStatus(
+                    level=level, name=f'sslfr_supervisor: {name}', message=msg, hardware_id='process',
+                    values=[KeyValue(key='restarts', value=str(s['restarts'])),
+                            KeyValue(key='critical', value=str(s['critical']).lower())]))
+            diag_pub.publish(arr)
+
+        node.create_timer(1.0, publish_diag, clock=steady)
+        if self.clock_fn is not None:
+            from rosgraph_msgs.msg import Clock as ClockMsg
+            from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+            clock_pub = node.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+            def publish_clock():
+                t = self.clock_fn()
+                msg = ClockMsg()
+                sec = int(t // 1)
+                msg.clock.sec, msg.clock.nanosec = sec, int(round((t - sec) * 1e9)) % 1_000_000_000
+                clock_pub.publish(msg)
+                self.clock_published += 1
+
+            node.create_timer(1.0 / self.clock_rate, publish_clock, clock=steady)
+        self.ready.set()
+        try:
+            while not self._stop.is_set():
+                try:
+                    kind, arg = self._jobs.get_nowait()
+                except queue.Empty:
+                    executor.spin_once(timeout_sec=0.02)
+                    continue
+                if kind == 'active':
+                    if arg not in clients:  # kept for a quick deactivate at stop
+                        clients[arg] = node.create_client(ChangeState, f'{arg}/change_state')
+                    ok, msg = bring_to(node, arg, 'active', timeout=20.0, executor=executor)
+                    self._results.put((arg, ok, msg))
+                elif kind == 'deactivate':
+                    names, timeout, done = arg
+                    deadline = time.monotonic() + timeout
+                    futures = []
+                    for name in names:
+                        client = clients.get(name)
+                        if client is None:
+                            client = clients[name] = node.create_client(ChangeState, f'{name}/change_state')
+                        if client.service_is_ready():
+                            req = ChangeState.Request()
+                            req.transition.id = Transition.TRANSITION_DEACTIVATE
+                            futures.append(client.call_async(req))
+                    while futures and time.monotonic() < deadline and not all(f.done() for f in futures):
+                        executor.spin_once(timeout_sec=0.02)
+                    done.set()
+        except BaseException as exc:  # noqa: BLE001
+            self.error = exc
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=ctx)

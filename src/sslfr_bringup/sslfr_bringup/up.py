@@ -1,0 +1,131 @@
+"""``sslfr up``: start the whole node set on real boards as supervised processes.
+
+Reads the one node-set description (config/nodeset.yaml) and a site config (ROS
+params file; default ``almeria_sslfr.yaml``), starts every node as its own process
+(recorder, safety, gps, absorber_board, irradiance, planner, the three axis drivers),
+drives the axis drivers' lifecycle to ``active``, restarts a crashed node with backoff
+(a restart of the safety supervisor is reported loudly) and, on SIGINT/SIGTERM, stops
+the axes first, then the rest, within 5 s. This is what the systemd unit runs.
+
+Networking: ``ROS_DOMAIN_ID`` defaults to the node set's (42, never 0) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE`` to LOCALHOST; docs/deploy.md says how to open the
+graph to a monitoring laptop.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import sys
+from pathlib import Path
+
+from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_bringup.supervisor import Program, RosSide, Supervisor
+
+
+def find_executable(package: str, exe: str) -> Path | None:
+    """Where ``ros2 run package exe`` looks: ``<prefix>/lib/<package>/<exe>``."""
+    candidates = []
+    root = os.environ.get('SSLFR_ROOT')
+    if root:
+        candidates.append(Path(root) / 'ros_ws' / 'install' / package / 'lib' / package / exe)
+    try:
+        from ament_index_python.packages import get_package_prefix
+        candidates.append(Path(get_package_prefix(package)) / 'lib' / package / exe)
+    except Exception:  # noqa: BLE001 - package not installed: no candidate
+        pass
+    for c in candidates:
+        if c.is_file() and os.access(c, os.X_OK):
+            return c
+    return None
+
+
+def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, sim_ports: dict | None = None,
+                   use_sim_time: bool = False, extra: dict | None = None,
+                   namespace: str | None = None, finder=find_executable) -> tuple[list[Program], list[str]]:
+    """Programs for every node of ``ns`` whose executable is installed, and the list
+    of missing ``package/executable`` (reported, never replaced by anything else)."""
+    params = nodeset_mod.read_params(config)
+    programs, missing = [], []
+    for node in ns.start_order():
+        exe = finder(node.package, node.executable)
+        if exe is None:
+            missing.append(f'{node.name} ({node.package}/{node.executable})')
+            continue
+        argv = [str(exe), *nodeset_mod.ros_args(ns, node, config, params=params, sim_ports=sim_ports,
+                                                use_sim_time=use_sim_time, namespace=namespace,
+                                                extra=(extra or {}).get(node.name))]
+        programs.append(Program(name=node.name, argv=argv, start=node.start, stop=node.stop,
+                                critical=node.critical, lifecycle=node.lifecycle))
+    return programs, missing
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='sslfr up', description=__doc__.split('\n\n')[0],
+                                epilog='Stop with Ctrl-C or SIGTERM: axes first, then the rest (<= 5 s).')
+    p.add_argument('--config', default=None,
+                   help='site params file: a path or a name in sslfr_bringup/config (default: almeria_sslfr.yaml)')
+    p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
+    p.add_argument('--domain-id', type=int, default=None,
+                   help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else the node set\'s, 42)')
+    p.add_argument('--namespace', default=None, help='namespace of the whole tracker, e.g. /sslfr1')
+    p.add_argument('--only', default='', help='comma-separated node names to run (default: all)')
+    p.add_argument('--skip', default='', help='comma-separated node names not to run')
+    p.add_argument('--log-dir', default=None, help='write each node\'s output to DIR/<node>.log '
+                                                   '(default: inherit stdout, i.e. the journal under systemd)')
+    p.add_argument('--print', action='store_true', dest='print_only',
+                   help='print the command lines and exit (nothing is started)')
+    return p
+
+
+def select(ns: nodeset_mod.NodeSet, only: str, skip: str) -> nodeset_mod.NodeSet:
+    if only:
+        ns = ns.only([s for s in only.split(',') if s])
+    if skip:
+        names = [s for s in skip.split(',') if s]
+        for n in names:
+            ns.node(n)
+        ns = ns.without(names)
+    return ns
+
+
+def main(argv: list[str]) -> int:
+    args = parser().parse_args(argv)
+    try:
+        ns = nodeset_mod.load(args.nodeset)
+        ns = select(ns, args.only, args.skip)
+        config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        programs, missing = build_programs(ns, config, namespace=args.namespace)
+    except (nodeset_mod.NodeSetError, KeyError) as exc:
+        print(f'sslfr up: {exc}', file=sys.stderr)
+        return 2
+    env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
+    domain = int(env['ROS_DOMAIN_ID'])
+    print(f'sslfr up: config {config}, ROS_DOMAIN_ID={domain}, '
+          f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}', file=sys.stderr)
+    for m in missing:
+        print(f'sslfr up: MISSING executable, node not started: {m} (run make setup?)', file=sys.stderr)
+    if args.print_only:
+        for prog in programs:
+            print(f'{prog.name}: ' + ' '.join(shlex.quote(a) for a in prog.argv))
+        return 0 if not missing else 1
+    if not programs:
+        print('sslfr up: nothing to run', file=sys.stderr)
+        return 1
+    ros = RosSide(domain, namespace=args.namespace or ns.namespace)
+    ros.start()
+    ros.ready.wait(30)
+    if ros.error is not None:
+        print(f'sslfr up: ROS side failed: {ros.error}', file=sys.stderr)
+        return 1
+    sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
+                     stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None, ros=ros)
+    try:
+        sup.run()
+    finally:
+        ros.shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,177 @@
+"""Bringup, pure parts: the node-set description, its loader, the launch file's
+reading of it, `sslfr up --print`, the systemd unit."""
+from __future__ import annotations
+
+import importlib.util
+import os
+import py_compile
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import ROOT
+
+sys.path.insert(0, str(ROOT / 'src/sslfr_bringup'))
+from sslfr_bringup import nodeset, service, up  # noqa: E402
+
+LAUNCH = ROOT / 'src/sslfr_bringup/launch/tracker.launch.py'
+AXES = ('mirrors_driver', 'mobile_structure_driver', 'secondary_reflector_driver')
+
+
+@pytest.fixture
+def site(tmp_path):
+    p = tmp_path / 'site.yaml'
+    p.write_text(yaml.safe_dump({
+        '/**': {'ros__parameters': {'site': {'latitude_deg': 36.835, 'longitude_deg': -2.402, 'elevation': 22.0}}},
+        'gps': {'ros__parameters': {'port': '/dev/ttyAMA0', 'baudrate': 9600}},
+        'planner': {'ros__parameters': {'longitudinal_law': 'continuous'}},
+    }))
+    return p
+
+
+def test_default_node_set_is_the_tracker():
+    ns = nodeset.load()
+    names = [n.name for n in ns.nodes]
+    assert sorted(names) == sorted(['gps', 'planner', *AXES, 'absorber_board', 'irradiance', 'safety', 'recorder'])
+    assert [n.name for n in ns.lifecycle_nodes()] == list(AXES)
+    assert {n.parameters['axis'] for n in ns.lifecycle_nodes()} == {'mirrors', 'mobile_structure', 'secondary_reflector'}
+    groups = ns.stop_groups()
+    assert [n.name for n in groups[0]] == list(AXES), 'axes are stopped first'
+    assert [n.name for n in groups[-1]] == ['recorder'], 'the recorder records the stop'
+    order = [n.name for n in ns.start_order()]
+    assert order[0] == 'recorder' and order.index('safety') < order.index('mirrors_driver')
+    assert ns.node('safety').critical
+    assert 0 < ns.domain_id and ns.discovery_range == 'LOCALHOST'
+    for node in ns.nodes:
+        if node.board:
+            board = ns.boards[node.board]
+            assert board.device.startswith('/dev/sslfr/') and board.sim_executable
+
+
+def test_ros_args_order_port_precedence_and_sim_time(site):
+    ns = nodeset.load()
+    params = nodeset.read_params(site)
+    gps = nodeset.ros_args(ns, ns.node('gps'), site, params=params)
+    assert 'port:=' not in ' '.join(gps), 'the site config sets the gps port: it wins'
+    m = nodeset.ros_args(ns, ns.node('mirrors_driver'), site, params=params, use_sim_time=True,
+                         extra={'home_on_activate': False})
+    assert m[:3] == ['--ros-args', '-r', '__node:=mirrors_driver']
+    i = m.index('--params-file')
+    assert m[i + 1] == str(site)
+    joined = ' '.join(m)
+    assert '-p axis:=mirrors -p port:=/dev/sslfr/mirrors -p use_sim_time:=true -p home_on_activate:=false' in joined
+    assert i < m.index('axis:=mirrors'), 'role parameters after the params file (later wins in rcl)'
+    sim = nodeset.ros_args(ns, ns.node('gps'), site, params=params, sim_ports={'gps': '/tmp/x/gps.pty'})
+    assert 'port:=/tmp/x/gps.pty' in sim, 'in simulation the pty always wins'
+    ns2 = nodeset.ros_args(ns, ns.node('planner'), site, params=params, namespace='/sslfr1')
+    assert '__ns:=/sslfr1' in ns2
+
+
+def test_node_params_overlays_wildcard_and_node_section(site):
+    params = nodeset.read_params(site)
+    gps = nodeset.node_params(params, 'gps')
+    assert gps['site.latitude_deg'] == 36.835 and gps['port'] == '/dev/ttyAMA0'
+    assert 'port' not in nodeset.node_params(params, 'planner')
+
+
+@pytest.mark.parametrize('doc,needle', [
+    ({'nodes': []}, 'no nodes'),
+    ({'nodes': [{'name': 'a', 'package': 'p'}]}, 'missing executable'),
+    ({'nodes': [{'name': 'a', 'package': 'p', 'executable': 'e', 'board': 'nope'}]}, 'unknown board'),
+    ({'nodes': [{'name': 'a', 'package': 'p', 'executable': 'e'}] * 2}, 'duplicate'),
+    ({'defaults': {'domain_id': 0}, 'nodes': [{'name': 'a', 'package': 'p', 'executable': 'e'}]}, 'domain_id'),
+    ([1, 2], 'mapping'),
+])
+def test_invalid_node_sets_are_refused_with_the_reason(doc, needle):
+    with pytest.raises(nodeset.NodeSetError, match=needle):
+        nodeset.parse(doc)
+
+
+def test_bad_params_file_refused(tmp_path):
+    p = tmp_path / 'bad.yaml'
+    p.write_text('planner: {foo: 1}\n')
+    with pytest.raises(nodeset.NodeSetError, match='ros__parameters'):
+        nodeset.read_params(p)
+    p.write_text('a: [\n')
+    with pytest.raises(nodeset.NodeSetError, match='invalid YAML'):
+        nodeset.read_params(p)
+    with pytest.raises(nodeset.NodeSetError, match='not found'):
+        nodeset.resolve_config('no_such_site')
+
+
+def test_launch_file_compiles_and_reads_the_description(site):
+    py_compile.compile(str(LAUNCH), doraise=True)
+    spec = importlib.util.spec_from_file_location('tracker_launch', LAUNCH)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)   # must not import `launch` at module level (not installable here)
+    entries = mod._entries(str(site), '/sslfr1')
+    assert [e['name'] for e in entries] == [n.name for n in nodeset.load().start_order()]
+    by = {e['name']: e for e in entries}
+    assert by['mirrors_driver']['lifecycle'] and not by['planner']['lifecycle']
+    assert by['mirrors_driver']['parameters'] == [str(site), {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors'}]
+    assert by['gps']['parameters'] == [str(site)]
+    assert all(e['namespace'] == '/sslfr1' for e in entries)
+    with pytest.raises(ImportError):
+        mod.generate_launch_description()   # needs ROS launch (on the Pi)
+
+
+def test_sim_board_argv_fills_placeholders():
+    board = nodeset.BoardSpec('mirrors', '/dev/sslfr/mirrors', 'sslfr_drivers', 'sim_axis_board',
+                              ('--axis', '{axis}', '--link', '{pty}'))
+    assert nodeset.sim_board_argv(board, '/x/sim', {'axis': 'mirrors', 'pty': '/r/m.pty'}) == \
+        ['/x/sim', '--axis', 'mirrors', '--link', '/r/m.pty']
+    with pytest.raises(nodeset.NodeSetError, match='placeholder'):
+        nodeset.sim_board_argv(board, '/x/sim', {'axis': 'mirrors'})
+
+
+def test_build_programs_reports_missing_executables_and_never_fakes_them(site, tmp_path):
+    ns = nodeset.load()
+    fake_bin = tmp_path / 'bin'
+    fake_bin.mkdir()
+
+    def finder(pkg, exe):   # only the planner "is installed"
+        return Path('/opt/x/planner') if exe == 'planner' else None
+    programs, missing = up.build_programs(ns, site, finder=finder)
+    assert [p.name for p in programs] == ['planner']
+    assert len(missing) == len(ns.nodes) - 1 and any('mirrors_driver (sslfr_drivers/axis_driver)' in m for m in missing)
+
+
+def test_environment_defaults_non_zero_domain_and_localhost():
+    ns = nodeset.load()
+    env = nodeset.ros_environment(ns, base={})
+    assert env['ROS_DOMAIN_ID'] == str(ns.domain_id) != '0'
+    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'})['ROS_DOMAIN_ID'] == '7'
+    assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'}, domain_id=9)['ROS_DOMAIN_ID'] == '9'
+
+
+def test_systemd_unit(tmp_path):
+    text = service.render_unit(root=Path('/home/pi/sslfr'), config='/home/pi/sslfr/site.yaml', user='pi',
+                               domain_id=42, discovery_range='LOCALHOST')
+    assert 'ExecStart=/home/pi/sslfr/sslfr up --config /home/pi/sslfr/site.yaml' in text
+    for line in ('Restart=on-failure', 'KillMode=mixed', 'SupplementaryGroups=dialout', 'User=pi',
+                 'Environment=ROS_DOMAIN_ID=42', 'Environment=ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST',
+                 'StandardOutput=journal', 'WantedBy=multi-user.target'):
+        assert line in text.splitlines(), line
+    open_text = service.render_unit(root=Path('/r'), config='c', user='u', domain_id=7,
+                                    discovery_range='SUBNET', peers='192.168.1.20')
+    assert 'Environment=ROS_STATIC_PEERS=192.168.1.20' in open_text
+
+
+def test_install_service_dry_run_prints_and_writes_unit(tmp_path, site):
+    env = dict(os.environ)
+    out = subprocess.run([str(ROOT / 'sslfr'), 'install-service', '--dry-run', '--user', 'pi', '--config', str(site)],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 0, out.stderr
+    assert '[Service]' in out.stdout and 'User=pi' in out.stdout and f'--config {site}' in out.stdout
+    bad = subprocess.run([str(ROOT / 'sslfr'), 'install-service', '--dry-run', '--config', 'no_such_site'],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert bad.returncode == 2 and 'not found' in bad.stderr
+    res = subprocess.run([str(ROOT / 'sslfr'), 'install-service', '--unit-dir', str(tmp_path), '--no-enable',
+                          '--config', str(site)],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / service.UNIT_NAME).read_text().startswith('# sslfr-tracker.service')
