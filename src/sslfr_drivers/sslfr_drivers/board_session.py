@@ -1,0 +1,203 @@
+"""The axis driver's view of one axis board (no rclpy): a thin adapter over
+:class:`sslfr_drivers.link.BoardLink` that speaks in :mod:`axis_core` terms.
+
+- :meth:`AxisBoardSession.open` starts the link, waits for INFO and refuses a board
+  speaking another protocol version or that is not an axis board
+  (:class:`BoardRefused`, message says why);
+- :meth:`poll` reads STATUS (one try, short time-out) into a
+  :class:`~sslfr_drivers.axis_core.BoardState`, or None while the link is not UP
+  (down, reconnecting, re-reading INFO/STATUS after a board reset);
+- :meth:`command` executes an :class:`~sslfr_drivers.axis_core.Action`
+  (MOVE_TO / STOP / HOME / SET_ZERO) and returns ``(ok, detail)``;
+- :meth:`take_reset` / :meth:`take_reconnect` report (once) that the board reset or
+  the port was reopened since the last call, so the driver forgets its commands.
+
+The link's own heartbeat (PING when idle for ``heartbeat`` s) keeps the board's 1 s
+watchdog quiet even when the driver is inactive; STATUS polls count as traffic too.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from . import messages as m
+from .axis_core import Action, BoardState, Calibration
+from .link import BoardLink, LinkError, LinkState, NackError
+from .protocol import ProtocolError
+from .transport import make_transport
+
+# AxisStatus.LINK_* values (sslfr_interfaces/msg/AxisStatus.msg)
+LINK_DOWN, LINK_CONNECTING, LINK_UP, LINK_FAULT = 0, 1, 2, 3
+
+
+class BoardRefused(RuntimeError):
+    """The board answers but must not be driven (protocol version, board kind)."""
+
+
+def board_state(status: m.Status) -> BoardState:
+    """Convert a STATUS message into the core's :class:`BoardState`.
+
+    ``sensor`` is the sensor angle [rad] when the board flags HAS_SENSOR and the
+    value is finite, else None.
+    """
+    has = bool(status.flags & m.StatusFlags.HAS_SENSOR) and math.isfinite(status.sensor_angle)
+    return BoardState(int(status.position), int(status.target), status.moving, status.homed,
+                      status.homing, float(status.sensor_angle) if has else None,
+                      int(status.limit_bits), int(status.fault_bits))
+
+
+class AxisBoardSession:
+    """One axis board reached on ``port`` (see module docstring).
+
+    Parameters
+    ----------
+    port : str
+        pyserial URL / device, or ``xbee:<uart>?addr=<hex>`` (transport.make_transport).
+    baudrate : int
+        [bit/s].
+    request_timeout : float
+        Answer time-out per try [s].
+    link_timeout : float
+        Silence after which the link is declared silent and re-read [s].
+    heartbeat : float
+        PING when nothing was sent for this long [s] (< the board's 1 s watchdog).
+    """
+
+    def __init__(self, port: str, baudrate: int = 115200, request_timeout: float = 0.25,
+                 link_timeout: float = 1.0, heartbeat: float = 0.25):
+        self.port = port
+        self.request_timeout = request_timeout
+        self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
+                              retries=2, heartbeat=heartbeat, silence=link_timeout,
+                              backoff_min=0.1, backoff_max=2.0)
+        self.board_info = ''
+        self.last_status: m.Status | None = None
+        self.poll_failures = 0
+        self._seen_resets = 0
+        self._seen_reconnects = 0
+
+    # ------------------------------------------------------------------ open / close
+    def open(self, wait: float = 3.0) -> str:
+        """Start the link and wait up to ``wait`` [s] for INFO; return the board text.
+
+        Raises
+        ------
+        BoardRefused
+            Another protocol version, or not an axis board.
+        ConnectionError
+            No answer (port missing, board silent).
+        """
+        self.link.start()
+        deadline = time.monotonic() + wait
+        while time.monotonic() < deadline:
+            if self.link.state in (LinkState.UP, LinkState.REFUSED):
+                break
+            time.sleep(0.02)
+        state = self.link.state
+        if state == LinkState.REFUSED:
+            why = str(self.link.version_error or self.link.last_error)
+            self.link.stop()
+            raise BoardRefused(why)
+        if state != LinkState.UP or self.link.info is None:
+            why = self.link.last_error or f'link {state.value}'
+            self.link.stop()
+            raise ConnectionError(f'no INFO from the board within {wait:.1f} s ({why})')
+        info = self.link.info
+        if info.board_kind != m.BoardKind.AXIS_STEPPER:
+            self.link.stop()
+            try:
+                kind = m.BoardKind(info.board_kind).name
+            except ValueError:
+                kind = f'kind {info.board_kind}'
+            raise BoardRefused(f'board {info.name_str!r} on {self.port} is a {kind} board, not an axis board')
+        self.board_info = (f'{info.name_str} fw {info.firmware} protocol {info.protocol} '
+                           f'id {info.board_id:08x}')
+        self._seen_resets = self.link.resets
+        self._seen_reconnects = self.link.reconnects
+        return self.board_info
+
+    def close(self) -> None:
+        self.link.stop()
+
+    # ------------------------------------------------------------------ state
+    def poll(self, now: float | None = None) -> BoardState | None:
+        """STATUS now (one try), or None when the link is not UP or did not answer."""
+        if self.link.state != LinkState.UP:
+            return None
+        try:
+            status = self.link.request(m.GetStatus(), retries=0)
+        except (LinkError, ProtocolError):
+            self.poll_failures += 1
+            return None
+        self.last_status = status
+        return board_state(status)
+
+    def take_reset(self) -> bool:
+        """True once after each board reset detected by the link (BOOT, uptime, seq)."""
+        if self.link.resets != self._seen_resets:
+            self._seen_resets = self.link.resets
+            return True
+        return False
+
+    def take_reconnect(self) -> bool:
+        """True once after each reopening of the port."""
+        if self.link.reconnects != self._seen_reconnects:
+            self._seen_reconnects = self.link.reconnects
+            return True
+        return False
+
+    def link_state(self) -> int:
+        """AxisStatus.LINK_* for the current link state."""
+        st = self.link.state
+        if st == LinkState.UP:
+            return LINK_UP
+        if st == LinkState.REFUSED:
+            return LINK_FAULT
+        if st in (LinkState.CONNECTING, LinkState.SILENT):
+            return LINK_CONNECTING
+        return LINK_DOWN
+
+    def frames_lost(self) -> int:
+        return int(self.link.frames_lost)
+
+    def frames_bad(self) -> int:
+        fr = self.link.framer
+        return int(fr.crc_errors + fr.length_errors + self.link.decode_errors)
+
+    def counters(self) -> dict[str, int]:
+        c = dict(self.link.counters())
+        c['status_poll_failures'] = self.poll_failures
+        c['link_state'] = self.link.state.value
+        return c
+
+    def velocity(self, cal: Calibration) -> float:
+        """Joint velocity [rad/s] from the last STATUS speed [steps/s]."""
+        if self.last_status is None or not math.isfinite(self.last_status.speed):
+            return 0.0
+        return self.last_status.speed * cal.joint_per_step
+
+    # ------------------------------------------------------------------ commands
+    def command(self, act: Action) -> tuple[bool, str]:
+        """Execute one action; ``(True, '')`` when ACKed, else ``(False, reason)``.
+
+        A NACK's reason is the :class:`messages.ErrorCode` name (e.g. ``NOT_HOMED``).
+        """
+        try:
+            if act.kind == 'move':
+                self.link.move_to(act.steps, max(1.0, abs(act.speed)))
+            elif act.kind == 'stop':
+                self.link.stop_motor()
+            elif act.kind == 'home':
+                self.link.home(m.Switch(act.switch), act.speed, act.steps)
+            elif act.kind == 'set_zero':
+                self.link.set_zero(act.steps)
+            else:
+                return True, ''
+        except NackError as exc:
+            try:
+                return False, m.ErrorCode(exc.code).name
+            except ValueError:
+                return False, str(exc)
+        except (LinkError, ProtocolError) as exc:
+            return False, str(exc) or type(exc).__name__
+        return True, ''
