@@ -356,7 +356,7 @@ class NmeaStream:
                 utc -= math.copysign(86400.0, utc - self._last_rmc_utc)
         status = _QUALITY_STATUS.get(quality, STATUS_NO_FIX)
         if (status == STATUS_NO_FIX or not math.isfinite(lat) or not math.isfinite(lon)
-                or not math.isfinite(hdop) or self._nav_mode == 1):
+                or not math.isfinite(hdop)):
             self.counters.fixes += 1
             self.counters.no_fix += 1
             return FixRecord(received, utc, STATUS_NO_FIX, SERVICE_GPS, math.nan, math.nan,
