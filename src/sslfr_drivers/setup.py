@@ -18,6 +18,9 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'axis_driver = sslfr_drivers.axis_driver_node:main',
+            'lifecycle_ctl = sslfr_drivers.lifecycle_util:main',
+            'safety = sslfr_drivers.safety_node:main',
         ],
     },
 )

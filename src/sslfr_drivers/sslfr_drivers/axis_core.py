@@ -420,6 +420,9 @@ class StallDetector:
 
 
 # --------------------------------------------------------------------------- supervisor
+HOME_SWITCHES = {'low': 0, 'high': 1, 'sleep': 2}   # messages.Switch indices
+
+
 @dataclass(frozen=True)
 class BoardState:
     """What the driver knows of the board from its last STATUS (docs/protocol.md).
@@ -446,14 +449,13 @@ class Action:
     kind : 'none' | 'stop' | 'home' | 'set_zero' | 'move'
     steps : MOVE_TO target or SET_ZERO / HOME position [steps]
     speed : MOVE_TO / HOME step rate [steps/s] (HOME: signed, + increases steps)
+    switch : HOME limit switch index (``HOME_SWITCHES``: low 0, high 1, sleep 2)
     """
 
     kind: str = 'none'
     steps: int = 0
     speed: float = 0.0
-
-
-HOME_SWITCHES = {'low': 0, 'high': 1, 'sleep': 2}   # messages.Switch indices
+    switch: int = 0
 
 
 @dataclass
@@ -563,7 +565,7 @@ class AxisSupervisor:
         direction = -1.0 if cfg.home_switch == 'low' else 1.0   # joint direction toward the switch
         rate = cal.step_rate(cfg.home_speed) * direction * (1.0 if cal.joint_per_step > 0 else -1.0)
         self.state, self.reason = 'homing', f'homing toward the {cfg.home_switch} switch'
-        return Action('home', cal.steps(cfg.home_position), rate)
+        return Action('home', cal.steps(cfg.home_position), rate, HOME_SWITCHES[cfg.home_switch])
 
     def _move(self, board: BoardState, target: float, state: str, reason: str = '') -> Action:
         cfg, cal = self.cfg, self.cfg.calibration
