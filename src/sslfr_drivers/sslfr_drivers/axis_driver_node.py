@@ -235,8 +235,10 @@ class AxisDriver(rclpy.lifecycle.Node):
                 self.get_logger().error(f'configure refused: {exc}')
                 return TransitionCallbackReturn.FAILURE
             except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
-                self.last_error = f'cannot reach the board on {self.port}: {exc}'
-                self.get_logger().error(f'configure failed: {self.last_error}')
+                error = f'cannot reach the board on {self.port}: {exc}'
+                if error != self.last_error:      # autostart retries: log changes only
+                    self.get_logger().error(f'configure failed: {error}')
+                self.last_error = error
                 return TransitionCallbackReturn.FAILURE
             self.session = session
             self.sup.position_lost()

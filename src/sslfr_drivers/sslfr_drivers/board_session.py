@@ -92,6 +92,8 @@ class AxisBoardSession:
         while time.monotonic() < deadline:
             if self.link.state in (LinkState.UP, LinkState.REFUSED):
                 break
+            if self.link.state == LinkState.DOWN and self.link.last_error.startswith('cannot open'):
+                break       # the port does not open: no point waiting
             time.sleep(0.02)
         state = self.link.state
         if state == LinkState.REFUSED:
@@ -101,7 +103,7 @@ class AxisBoardSession:
         if state != LinkState.UP or self.link.info is None:
             why = self.link.last_error or f'link {state.value}'
             self.link.stop()
-            raise ConnectionError(f'no INFO from the board within {wait:.1f} s ({why})')
+            raise ConnectionError(f'no INFO from the board ({why})')
         info = self.link.info
         if info.board_kind != m.BoardKind.AXIS_STEPPER:
             self.link.stop()
