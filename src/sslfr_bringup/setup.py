@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'sslfr = sslfr_bringup.cli:main',
+            'recorder = sslfr_bringup.recorder_node:main',
         ],
     },
 )
