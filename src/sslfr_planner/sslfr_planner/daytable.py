@@ -1,0 +1,243 @@
+"""Per-instant tracker table: sun, incidence angles, phase and axis commands.
+
+:func:`evaluate` gives, for any array of UTC instants, the sun (SPA fast path), the
+projection angles, the day-cycle phase of seed 000 section 4 and what each axis is
+commanded to in that phase; :func:`plan_day` is the same on a whole UTC day grid
+(the seed's per-second "database", section 4.1). Pure numpy, deterministic: an
+instant gets the same numbers whatever batch it is evaluated in (the SPA nodes and
+the sunrise/sunset search grid are aligned on absolute multiples of 600 s).
+
+Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
+
+* TRACKING (2): the sun is up (e_0 above h0, :mod:`events`). mirrors = beta_0 =
+  theta_t/2 (seed 000 eq. 13), mobile_structure / secondary_reflector = the
+  collector's longitudinal law (:mod:`laws`), all clipped to the mechanical ranges.
+  With ``collector.tracking_step`` > 0 the commands are those of the middle of the
+  current step interval (kept inside [sunrise, sunset]): seed 003's 15-min steps.
+* PRE_DAWN (1): less than ``pre_dawn_lead`` before the next sunrise: the initial
+  position, i.e. the TRACKING commands at the sunrise instant (seed 000 section 4.2).
+* STOWING (3): less than ``stow_duration`` after the last sunset: mirrors to the
+  sleeping position (section 4.4); longitudinal axes as at NIGHT.
+* NIGHT (0): mirrors sleeping (+pi/2); the longitudinal axes at their rest position
+  under the 'continuous' law, at their (fixed / day's) value under the other laws.
+
+If a night is shorter than pre_dawn_lead + stow_duration, PRE_DAWN wins.
+Polar day: TRACKING all day; polar night: NIGHT all day.
+"""
+from __future__ import annotations
+
+import datetime
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import laws, spa
+from .collector import Collector
+from .events import SCAN_STEP, SunEvents, crossings, events_around, local_mean_noon, solar_transit
+from .site import Site
+
+NIGHT, PRE_DAWN, TRACKING, STOWING = 0, 1, 2, 3
+PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
+               6: 'MAINTENANCE'}
+
+
+@dataclass
+class DayTable:
+    """Per-instant table (numpy arrays of equal length, one element per instant).
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        UTC instants [s since the Unix epoch].
+    phase : numpy.ndarray of uint8
+        TrackerPhase code (NIGHT=0, PRE_DAWN=1, TRACKING=2, STOWING=3).
+    zenith, azimuth : numpy.ndarray
+        Topocentric sun zenith (with refraction) and azimuth clockwise from north [rad].
+    transversal, longitudinal : numpy.ndarray
+        theta_t (afternoon +) and theta_l (+p, south end +) [rad].
+    mirrors, mobile_structure, secondary_reflector : numpy.ndarray
+        Commanded axis angles beta_0, beta_M, beta_a [rad].
+    events : SunEvents
+        Events of the solar day of the table (plan_day) or of the middle instant.
+    """
+    t: np.ndarray
+    phase: np.ndarray
+    zenith: np.ndarray
+    azimuth: np.ndarray
+    transversal: np.ndarray
+    longitudinal: np.ndarray
+    mirrors: np.ndarray
+    mobile_structure: np.ndarray
+    secondary_reflector: np.ndarray
+    events: SunEvents
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+def _local_day_index(t, site: Site):
+    """Integer local-mean-solar date of each instant (days since the epoch)."""
+    return np.floor((np.asarray(t, dtype=float) + math.degrees(site.longitude) * 240.0) / 86400.0)
+
+
+def _declination_at_noons(t, site: Site, collector: Collector):
+    """Declination at the solar noon of each instant's local date [rad] ('daily' law)."""
+    days = _local_day_index(t, site)
+    uniq, inv = np.unique(days, return_inverse=True)
+    decl = np.empty(uniq.size)
+    for n, d in enumerate(uniq):
+        anchor = d * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0
+        noon = solar_transit(anchor, site)
+        dt = spa.delta_t_model(noon) if site.delta_t is None else site.delta_t
+        decl[n] = math.radians(float(spa.geocentric(spa.julian_day(np.array([noon])), dt)['delta'][0]))
+    return decl[inv.reshape(-1)]
+
+
+def _commands(zenith, longitudinal, transversal, t, site: Site, c: Collector):
+    """TRACKING commands (beta_0, beta_M, beta_a) [rad] from the sun at instants t."""
+    mirrors = np.clip(transversal / 2.0, c.mirror_min, c.mirror_max)
+    bm, ba = _longitudinal(zenith, longitudinal, t, site, c)
+    return mirrors, bm, ba
+
+
+def _longitudinal(zenith, longitudinal, t, site: Site, c: Collector):
+    n = np.shape(t)
+    if c.law == 'continuous':
+        bm, ba = laws.continuous(zenith, longitudinal)
+    elif c.law == 'optimum_fixed':
+        m, a = laws.optimum_fixed(site.latitude, c.azimuth)
+        bm, ba = np.full(n, m), np.full(n, a)
+    elif c.law == 'horizontal':
+        bm, ba = np.zeros(n), np.zeros(n)
+    else:  # daily
+        bm, ba = laws.daily(site.latitude, _declination_at_noons(t, site, c), c.azimuth)
+    return np.clip(bm, -c.tilt_max, c.tilt_max), np.clip(ba, -c.tilt_max, c.tilt_max)
+
+
+def _resting(t, site: Site, c: Collector):
+    """Longitudinal commands at NIGHT / STOWING [rad]."""
+    if c.law == 'continuous':
+        return np.full(np.shape(t), c.structure_rest), np.full(np.shape(t), c.reflector_rest)
+    return _longitudinal(np.zeros(np.shape(t)), np.ones(np.shape(t)), t, site, c)
+
+
+def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = None) -> DayTable:
+    """The per-instant table at UTC instants ``t`` (module docstring for the phases).
+
+    Parameters
+    ----------
+    t : array_like
+        UTC instants [s since the Unix epoch], any order, any spacing.
+    site : Site
+    collector : Collector
+    events : SunEvents, optional
+        Stored in the result as its ``events`` (e.g. the planner's events of the
+        day); computed for the local date of the middle instant if None. The phases
+        are always derived from the sunrise/sunset crossings around the instants
+        themselves (same algorithm as :func:`events.sun_events`), so they are
+        right across midnight and day boundaries.
+
+    Returns
+    -------
+    DayTable
+    """
+    t = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
+    if t.size == 0:
+        raise ValueError('evaluate needs at least one instant')
+    if not np.all(np.isfinite(t)):
+        raise ValueError('instants must be finite numbers of seconds')
+    c = collector
+    lo = float(t.min()) - max(c.stow_duration, c.tracking_step) - 2 * SCAN_STEP
+    hi = float(t.max()) + max(c.pre_dawn_lead, c.tracking_step) + 2 * SCAN_STEP
+    dense = (hi - lo) / spa.NODE_STEP <= 2 * t.size + 300
+    grid = spa.GeocentricGrid(lo, hi, site.delta_t) if dense else None
+    sun = spa.sun_position(t, site, collector_azimuth=c.azimuth, grid=grid)
+
+    # --- day cycle from the crossings around the instants
+    if dense:
+        ct, rising, up0 = crossings(lo, hi, site, grid)
+        n_before = np.searchsorted(ct, t, side='right')
+        up = up0 ^ (n_before % 2 == 1)
+    else:  # sparse instants over a long span: crossings instant by instant (slower, exact)
+        return _evaluate_sparse(t, site, c, events)
+    phase = np.full(t.size, NIGHT, dtype=np.uint8)
+    phase[up] = TRACKING
+    nxt = np.minimum(n_before, ct.size - 1)
+    prv = np.maximum(n_before - 1, 0)
+    has_next = (n_before < ct.size) & ~up
+    has_prev = (n_before > 0) & ~up
+    if ct.size:
+        next_rise = np.where(has_next & rising[nxt], ct[nxt], np.inf)
+        prev_set = np.where(has_prev & ~rising[prv], ct[prv], -np.inf)
+    else:
+        next_rise = np.full(t.size, np.inf)
+        prev_set = np.full(t.size, -np.inf)
+    stowing = ~up & (t - prev_set < c.stow_duration)
+    pre_dawn = ~up & (next_rise - t <= c.pre_dawn_lead) & (c.pre_dawn_lead > 0)
+    phase[stowing] = STOWING
+    phase[pre_dawn] = PRE_DAWN
+
+    # --- commands
+    mirrors = np.full(t.size, c.sleeping)
+    bm, ba = _resting(t, site, c)
+    track_idx = np.nonzero(up)[0]
+    if track_idx.size:
+        if c.tracking_step > 0:
+            tt = t[track_idx]
+            sample = np.floor(tt / c.tracking_step) * c.tracking_step + c.tracking_step / 2.0
+            k = np.searchsorted(ct, tt, side='right')
+            rise_before = np.where(k > 0, ct[np.maximum(k - 1, 0)], -np.inf)
+            set_after = np.where(k < ct.size, ct[np.minimum(k, ct.size - 1)], np.inf)
+            sample = np.clip(sample, rise_before, set_after)
+            us, inv = np.unique(sample, return_inverse=True)
+            s_sun = spa.sun_position(us, site, collector_azimuth=c.azimuth, grid=grid)
+            m, b1, b2 = _commands(s_sun.zenith, s_sun.longitudinal, s_sun.transversal, us, site, c)
+            inv = inv.reshape(-1)
+            mirrors[track_idx], bm[track_idx], ba[track_idx] = m[inv], b1[inv], b2[inv]
+        else:
+            m, b1, b2 = _commands(sun.zenith[track_idx], sun.longitudinal[track_idx],
+                                  sun.transversal[track_idx], t[track_idx], site, c)
+            mirrors[track_idx], bm[track_idx], ba[track_idx] = m, b1, b2
+    pd_idx = np.nonzero(pre_dawn)[0]
+    if pd_idx.size:
+        rises, inv = np.unique(next_rise[pd_idx], return_inverse=True)
+        r_sun = spa.sun_position(rises, site, collector_azimuth=c.azimuth, grid=grid)
+        m, b1, b2 = _commands(r_sun.zenith, r_sun.longitudinal, r_sun.transversal, rises, site, c)
+        inv = inv.reshape(-1)
+        mirrors[pd_idx], bm[pd_idx], ba[pd_idx] = m[inv], b1[inv], b2[inv]
+
+    if events is None:
+        mid = float(np.median(t))
+        day = _local_day_index(mid, site)
+        noon = solar_transit(float(day) * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0, site)
+        events = events_around(noon, site)
+    return DayTable(t, phase, sun.zenith, sun.azimuth, sun.transversal, sun.longitudinal,
+                    mirrors, bm, ba, events)
+
+
+def _evaluate_sparse(t, site: Site, c: Collector, events):
+    """evaluate() for instants spread over a long span: one dense evaluation per instant."""
+    parts = [evaluate(np.array([x]), site, c, events) for x in t]
+    cat = {name: np.concatenate([getattr(p, name) for p in parts])
+           for name in ('t', 'phase', 'zenith', 'azimuth', 'transversal', 'longitudinal', 'mirrors',
+                        'mobile_structure', 'secondary_reflector')}
+    return DayTable(events=parts[len(parts) // 2].events, **cat)
+
+
+def day_grid(day: datetime.date, step: float = 1.0) -> np.ndarray:
+    """Instants of the UTC day [00:00, 24:00) of ``day`` every ``step`` seconds [s]."""
+    if not (isinstance(step, (int, float)) and math.isfinite(step) and 0 < step <= 86400):
+        raise ValueError(f'step must be in (0, 86400] s, got {step!r}')
+    start = datetime.datetime(day.year, day.month, day.day, tzinfo=datetime.timezone.utc).timestamp()
+    n = int(math.ceil(86400.0 / step - 1e-9))
+    return start + np.arange(n) * float(step)
+
+
+def plan_day(day: datetime.date, site: Site, collector: Collector, step: float = 1.0) -> DayTable:
+    """The whole UTC day of ``day`` every ``step`` seconds: ``evaluate(day_grid(day, step))``.
+
+    ``events`` of the result are those of ``day`` (:func:`events.sun_events`).
+    """
+    from .events import sun_events
+    return evaluate(day_grid(day, step), site, collector, sun_events(day, site))
