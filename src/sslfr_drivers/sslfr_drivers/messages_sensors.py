@@ -1,0 +1,99 @@
+"""Sensor-board messages of the SSLFR board protocol (pure Python, no rclpy).
+
+Registered in the ranges :mod:`sslfr_drivers.messages` reserves for sensor boards
+(0x40-0x5F host -> board, 0xC0-0xDF board -> host). Importing this module registers
+them. Wire layout little-endian; documented in docs/protocol.md, "Sensor boards".
+
+Sensor boards stream their samples unsolicited (no request needed) and answer the
+common requests PING, GET_INFO (INFO.board_kind = BoardKind.GPS / ABSORBER /
+IRRADIANCE) and RESET; GET_STATUS is NACKed with UNKNOWN_TYPE (no axis status).
+``board_ms`` is the board's millisecond tick (mod 2**32) when the sample was taken.
+
+=====  ======================  ================================================
+code   message                 payload
+=====  ======================  ================================================
+0xC0   NmeaChunk               1..88 bytes of the receiver's NMEA stream, as is
+0xC1   ThermocoupleSample      u32 board_ms, u16 inlet word, u16 outlet word
+                               (raw MAX6675 words: D2 = open thermocouple)
+0xC2   SwitchSample            u32 board_ms, u8 raw switch bits (bit 0 initial,
+                               1 last, 2 sleeping, 3 longitudinal_1,
+                               4 longitudinal_2; 1 = closed), u8 reserved 0
+0xC3   AlsSample               u32 board_ms, u16 ALS count, u8 ALS_GAIN code,
+                               u8 ALS_IT code (VEML7700 register codes)
+=====  ======================  ================================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from .messages import SENSOR_REPLY_RANGE, Message, register
+from .protocol import MAX_PAYLOAD, PayloadError
+
+
+@register
+@dataclass(frozen=True)
+class NmeaChunk(Message):
+    """A piece of the GPS receiver's NMEA byte stream (sentences may be split across
+    chunks; the host reassembles them with :class:`sslfr_drivers.nmea.NmeaStream`)."""
+
+    TYPE: ClassVar[int] = 0xC0
+    data: bytes = b''
+
+    def pack(self) -> bytes:
+        if not 1 <= len(self.data) <= MAX_PAYLOAD:
+            raise PayloadError(f'NmeaChunk: {len(self.data)} bytes (1..{MAX_PAYLOAD})')
+        return bytes(self.data)
+
+    @classmethod
+    def unpack(cls, payload: bytes):
+        if not 1 <= len(payload) <= MAX_PAYLOAD:
+            raise PayloadError(f'NmeaChunk: {len(payload)} bytes (1..{MAX_PAYLOAD})')
+        return cls(bytes(payload))
+
+
+@register
+@dataclass(frozen=True)
+class ThermocoupleSample(Message):
+    """Raw MAX6675 words of the inlet and outlet thermocouples (decode with
+    :func:`sslfr_drivers.max6675.decode`)."""
+
+    TYPE: ClassVar[int] = 0xC1
+    FORMAT: ClassVar[str] = 'IHH'
+    board_ms: int
+    inlet: int
+    outlet: int
+
+
+@register
+@dataclass(frozen=True)
+class SwitchSample(Message):
+    """Raw (not debounced) limit switch bits, sent periodically and on every change."""
+
+    TYPE: ClassVar[int] = 0xC2
+    FORMAT: ClassVar[str] = 'IBB'
+    board_ms: int
+    bits: int
+    reserved: int = 0
+
+    def validate(self):
+        if self.bits > 0x1F:
+            raise PayloadError(f'SwitchSample: bits {self.bits:#x} use more than 5 switches')
+
+
+@register
+@dataclass(frozen=True)
+class AlsSample(Message):
+    """VEML7700 raw ALS count with the gain and integration-time codes it was taken
+    with (decode with :func:`sslfr_drivers.veml7700.decode`)."""
+
+    TYPE: ClassVar[int] = 0xC3
+    FORMAT: ClassVar[str] = 'IHBB'
+    board_ms: int
+    count: int
+    gain_code: int
+    it_code: int
+
+
+assert all(c.TYPE in SENSOR_REPLY_RANGE for c in (NmeaChunk, ThermocoupleSample, SwitchSample,
+                                                    AlsSample))
