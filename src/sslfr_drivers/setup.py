@@ -21,6 +21,7 @@ setup(
             'axis_driver = sslfr_drivers.axis_driver_node:main',
             'lifecycle_ctl = sslfr_drivers.lifecycle_util:main',
             'safety = sslfr_drivers.safety_node:main',
+            'sim_board = sslfr_drivers.sim.runner:main',
         ],
     },
 )

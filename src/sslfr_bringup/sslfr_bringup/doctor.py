@@ -12,7 +12,8 @@ from pathlib import Path
 #: cleanly on SIGINT. Kept in one place; tests/test_foundation.py checks every one.
 EXECUTABLES: dict[str, dict[str, str]] = {
     'sslfr_bringup': {'sslfr': 'cli', 'recorder': 'node'},
-    'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node'},
+    'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node',
+                      'sim_board': 'cli'},
 }
 
 

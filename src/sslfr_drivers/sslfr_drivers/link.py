@@ -1,0 +1,545 @@
+"""BoardLink: request/response over one board's transport, with a reader thread.
+
+Pure Python (no rclpy). A node creates one :class:`BoardLink` per board, calls
+:meth:`BoardLink.start` and then uses :meth:`submit` (returns a
+``concurrent.futures.Future``, never blocks) or :meth:`request` (blocks up to
+``timeout * (retries + 1)``). A background thread reads the transport, feeds the
+:class:`~sslfr_drivers.protocol.Framer`, matches answers to requests, retries
+unanswered requests with the SAME sequence number (the board answers a duplicated
+request from its cache and does not execute it twice), sends heartbeats, and
+reopens a lost port with exponential back-off. After every (re)connection, after a
+silence and after a detected board reset it re-reads INFO and STATUS before the link
+is ``UP`` again; listeners are told (a reset board has lost its position: STATUS
+shows HOMED cleared and FaultBits.RESET).
+
+States (:class:`LinkState`): ``down`` (port closed/unopenable), ``connecting``
+(port open, INFO not read yet), ``up``, ``silent`` (port open but the board stopped
+answering), ``refused`` (board speaks another protocol version).
+"""
+from __future__ import annotations
+
+import enum
+import logging
+import threading
+import time
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import dataclass
+from typing import Callable
+
+from . import messages as m
+from .protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, ProtocolError,
+                       ProtocolVersionError, SequenceCounter, SequenceTracker, encode_frame)
+from .transport import TransmitError, Transport, TransportError
+
+_log = logging.getLogger(__name__)
+
+
+class LinkError(Exception):
+    """Base of the errors a request can end with."""
+
+
+class LinkTimeout(LinkError, TimeoutError):
+    """No answer after all retries."""
+
+
+class LinkDown(LinkError):
+    """The port is closed or was lost while the request was pending."""
+
+
+class NackError(LinkError):
+    """The board refused the request. ``code`` is a :class:`messages.ErrorCode`."""
+
+    def __init__(self, request_type: int, code: int):
+        try:
+            name = m.ErrorCode(code).name
+        except ValueError:
+            name = f'code {code}'
+        req = m.registry().get(request_type)
+        super().__init__(f'board refused {req.__name__ if req else hex(request_type)}: {name}')
+        self.request_type = request_type
+        self.code = code
+
+
+class LinkState(str, enum.Enum):
+    DOWN = 'down'
+    CONNECTING = 'connecting'
+    UP = 'up'
+    SILENT = 'silent'
+    REFUSED = 'refused'
+
+
+@dataclass
+class _Pending:
+    seq: int
+    msg: m.Message
+    data: bytes
+    future: Future
+    timeout: float
+    retries_left: int
+    deadline: float
+
+
+class BoardLink:
+    """One board: requests, answers, counters, heartbeat, reconnect.
+
+    Parameters
+    ----------
+    transport : Transport
+        Byte transport (``transport.make_transport(port)``).
+    name : str
+        For logs.
+    timeout : float
+        Default answer timeout per try [s].
+    retries : int
+        Default extra tries after a timeout (same sequence number).
+    heartbeat : float or None
+        If set, send PING when nothing was sent for this long [s] (keeps the board's
+        1 s watchdog quiet; use <= 0.3 s). ``None``: the owner sends traffic itself.
+    silence : float
+        No frame received for this long while requests are outstanding or
+        heartbeats are sent -> state ``silent`` [s].
+    backoff_min, backoff_max : float
+        Reopen / re-read back-off bounds [s] (doubling between them).
+    read_timeout : float
+        Reader thread poll period [s]; bounds timer resolution.
+    clock : callable
+        Monotonic clock [s] (steady; never ROS time).
+    """
+
+    def __init__(self, transport: Transport, *, name: str | None = None, timeout: float = 0.25,
+                 retries: int = 2, heartbeat: float | None = None, silence: float = 1.0,
+                 backoff_min: float = 0.1, backoff_max: float = 5.0, read_timeout: float = 0.02,
+                 clock: Callable[[], float] = time.monotonic):
+        self.transport = transport
+        self.name = name or getattr(transport, 'name', 'board')
+        self.timeout = timeout
+        self.retries = retries
+        self.heartbeat = heartbeat
+        self.silence = silence
+        self.backoff_min = backoff_min
+        self.backoff_max = backoff_max
+        self.read_timeout = read_timeout
+        self.clock = clock
+
+        self.framer = Framer()
+        self.tracker = SequenceTracker()
+        self._seq = SequenceCounter()
+        self._pending: dict[int, _Pending] = {}
+        self._lock = threading.RLock()
+        self._wlock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._listeners: list[Callable[[m.Message, Frame], None]] = []
+        self._state_listeners: list[Callable[[LinkState, 'BoardLink'], None]] = []
+        self._state = LinkState.DOWN
+        self._state_cv = threading.Condition()
+        self._refreshing = False
+        self._next_refresh = 0.0
+        self._refresh_backoff = backoff_min
+        self._consecutive_stale = 0
+        self._last_tx = -1e9
+        self._last_rx = -1e9
+        self._opened = 0
+
+        self.info: m.Info | None = None
+        self.last_status: m.Status | None = None
+        self.last_status_time: float | None = None
+        self.version_error: ProtocolVersionError | None = None
+        self.last_error = ''
+        # counters (see counters())
+        self.frames_sent = 0
+        self.decode_errors = 0
+        self.nacks = 0
+        self.timeouts = 0
+        self.retries_sent = 0
+        self.tx_failures = 0
+        self.reconnects = 0
+        self.resets = 0
+        self.version_errors = 0
+        self.seq_resyncs = 0
+        self.bytes_received = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> 'BoardLink':
+        """Start the reader thread (it opens the transport, with back-off)."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name=f'link-{self.name}',
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread, fail pending requests, close the transport."""
+        self._stop.set()
+        t, self._thread = self._thread, None
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout=2.0)
+        self._fail_all(LinkDown('link stopped'))
+        try:
+            self.transport.close()
+        except TransportError:
+            pass
+        self._set_state(LinkState.DOWN)
+
+    close = stop
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    @property
+    def state(self) -> LinkState:
+        return self._state
+
+    @property
+    def is_up(self) -> bool:
+        return self._state == LinkState.UP
+
+    def wait_up(self, timeout: float) -> bool:
+        """Block until the link is ``up`` (INFO read) or ``timeout`` [s] passes."""
+        with self._state_cv:
+            return self._state_cv.wait_for(lambda: self._state == LinkState.UP, timeout)
+
+    def add_listener(self, fn: Callable[[m.Message, Frame], None]) -> None:
+        """``fn(msg, frame)`` for every decoded new frame from the board (answers and
+        unsolicited frames: BOOT, sensor samples). Runs in the reader thread: keep it
+        short and never call :meth:`request` from it (use :meth:`submit`)."""
+        self._listeners.append(fn)
+
+    def add_state_listener(self, fn: Callable[[LinkState, 'BoardLink'], None]) -> None:
+        """``fn(state, link)`` on every state change (reader or refresh thread)."""
+        self._state_listeners.append(fn)
+
+    # ------------------------------------------------------------------- requests
+    def submit(self, msg: m.Message, timeout: float | None = None,
+               retries: int | None = None) -> Future:
+        """Send ``msg`` and return a Future of the answer message.
+
+        The future ends with the answer (:class:`messages.Ack`, ``Info``, ``Status``)
+        or with :class:`NackError`, :class:`LinkTimeout`, :class:`LinkDown` or
+        :class:`ProtocolVersionError`. Never blocks beyond one transport write.
+        """
+        fut: Future = Future()
+        if self._state == LinkState.REFUSED and not isinstance(msg, m.GetInfo):
+            fut.set_exception(self.version_error or ProtocolVersionError(-1))
+            return fut
+        if not self.transport.is_open:
+            fut.set_exception(LinkDown(f'{self.name}: port not open ({self.last_error})'))
+            return fut
+        timeout = self.timeout if timeout is None else timeout
+        retries = self.retries if retries is None else retries
+        with self._lock:
+            seq = self._seq.next()
+            data = encode_frame(m.encode(msg, seq))
+            p = _Pending(seq, msg, data, fut, timeout, retries, self.clock() + timeout)
+            if msg.RESPONSE:
+                self._pending[seq] = p
+        self._write(data, p if msg.RESPONSE else None)
+        if not msg.RESPONSE and not fut.done():
+            fut.set_result(None)
+        return fut
+
+    def request(self, msg: m.Message, timeout: float | None = None,
+                retries: int | None = None) -> m.Message:
+        """Blocking :meth:`submit`: return the answer or raise its error."""
+        fut = self.submit(msg, timeout, retries)
+        t = self.timeout if timeout is None else timeout
+        r = self.retries if retries is None else retries
+        try:
+            return fut.result(timeout=t * (r + 1) + 1.0)
+        except FutureTimeout:  # reader thread stalled: should not happen
+            raise LinkTimeout(f'{self.name}: no answer to {type(msg).__name__}') from None
+
+    def send(self, msg: m.Message) -> None:
+        """Fire and forget (no answer is awaited even if the type has one)."""
+        if not self.transport.is_open:
+            raise LinkDown(f'{self.name}: port not open')
+        with self._lock:
+            data = encode_frame(m.encode(msg, self._seq.next()))
+        self._write(data, None)
+
+    # convenience wrappers (blocking)
+    def ping(self, **kw) -> m.Ack:
+        return self.request(m.Ping(int(self.clock() * 1000) & 0xFFFFFFFF), **kw)
+
+    def get_info(self, **kw) -> m.Info:
+        return self.request(m.GetInfo(), **kw)
+
+    def get_status(self, **kw) -> m.Status:
+        return self.request(m.GetStatus(), **kw)
+
+    def move_to(self, steps: int, speed: float, **kw) -> m.Ack:
+        """MOVE_TO absolute ``steps`` [steps] at ``speed`` [steps/s]."""
+        return self.request(m.MoveTo(int(steps), float(speed)), **kw)
+
+    def stop_motor(self, **kw) -> m.Ack:
+        return self.request(m.Stop(), **kw)
+
+    def home(self, switch: int, speed: float, position: int = 0, **kw) -> m.Ack:
+        """Start homing toward ``switch`` (:class:`messages.Switch`), signed ``speed``
+        [steps/s]; the counter becomes ``position`` [steps] at the switch."""
+        return self.request(m.Home(int(switch), float(speed), int(position)), **kw)
+
+    def set_zero(self, position: int = 0, **kw) -> m.Ack:
+        return self.request(m.SetZero(int(position)), **kw)
+
+    def reset_board(self, **kw) -> m.Ack:
+        return self.request(m.Reset(), **kw)
+
+    # ------------------------------------------------------------------- counters
+    @property
+    def frames_lost(self) -> int:
+        """Board frames never received (sequence gaps; exact across wrap-around)."""
+        return self.tracker.lost
+
+    def counters(self) -> dict[str, int]:
+        """Snapshot of every counter (for diagnostics)."""
+        return {
+            'frames_sent': self.frames_sent,
+            'frames_received': self.tracker.received,
+            'frames_lost': self.tracker.lost,
+            'duplicates': self.tracker.duplicates,
+            'stale': self.tracker.stale,
+            'crc_errors': self.framer.crc_errors,
+            'length_errors': self.framer.length_errors,
+            'bytes_discarded': self.framer.bytes_discarded,
+            'bytes_received': self.bytes_received,
+            'decode_errors': self.decode_errors,
+            'nacks': self.nacks,
+            'timeouts': self.timeouts,
+            'retries': self.retries_sent,
+            'tx_failures': self.tx_failures,
+            'reconnects': self.reconnects,
+            'resets': self.resets,
+            'version_errors': self.version_errors,
+            'seq_resyncs': self.seq_resyncs,
+        }
+
+    # ------------------------------------------------------------------ internals
+    def _write(self, data: bytes, pending: _Pending | None) -> None:
+        try:
+            with self._wlock:
+                self.transport.write(data)
+            self.frames_sent += 1
+            self._last_tx = self.clock()
+        except TransmitError as exc:
+            self.tx_failures += 1
+            self.last_error = str(exc)
+            if pending is None:
+                return
+            # stays pending: retried at its deadline like a lost frame
+        except TransportError as exc:
+            self.last_error = str(exc)
+            if pending is not None:
+                self._resolve(pending.seq, exc=LinkDown(str(exc)))
+
+    def _resolve(self, seq: int, result=None, exc: BaseException | None = None) -> None:
+        with self._lock:
+            p = self._pending.pop(seq, None)
+        if p is None or p.future.done():
+            return
+        if exc is not None:
+            p.future.set_exception(exc)
+        else:
+            p.future.set_result(result)
+
+    def _fail_all(self, exc: BaseException) -> None:
+        with self._lock:
+            seqs = list(self._pending)
+        for s in seqs:
+            self._resolve(s, exc=exc)
+
+    def _set_state(self, state: LinkState, why: str = '') -> None:
+        with self._state_cv:
+            if state == self._state:
+                return
+            old, self._state = self._state, state
+            self._state_cv.notify_all()
+        _log.info('%s: link %s -> %s %s', self.name, old.value, state.value, why)
+        for fn in list(self._state_listeners):
+            try:
+                fn(state, self)
+            except Exception:  # noqa: BLE001 - a listener bug must not kill the link
+                _log.exception('%s: state listener failed', self.name)
+
+    def _run(self) -> None:
+        backoff = self.backoff_min
+        while not self._stop.is_set():
+            if not self.transport.is_open:
+                try:
+                    self.transport.open()
+                except (TransportError, ValueError) as exc:
+                    self.last_error = str(exc)
+                    self._set_state(LinkState.DOWN, str(exc))
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, self.backoff_max)
+                    continue
+                backoff = self.backoff_min
+                self._opened += 1
+                if self._opened > 1:
+                    self.reconnects += 1
+                self.framer.reset()
+                self.tracker.restart()
+                self._set_state(LinkState.CONNECTING, f'opened {self.name}')
+                self._refresh_backoff = self.backoff_min
+                self._schedule_refresh()
+            try:
+                data = self.transport.read(self.read_timeout)
+            except TransportError as exc:
+                self.last_error = str(exc)
+                try:
+                    self.transport.close()
+                except TransportError:
+                    pass
+                self._fail_all(LinkDown(str(exc)))
+                self._set_state(LinkState.DOWN, str(exc))
+                continue
+            now = self.clock()
+            if data:
+                self.bytes_received += len(data)
+                for frame in self.framer.feed(data):
+                    try:
+                        self._on_frame(frame, now)
+                    except Exception:  # noqa: BLE001 - never let one frame kill the reader
+                        _log.exception('%s: error handling frame %r', self.name, frame)
+            self._service(now)
+
+    def _on_frame(self, frame: Frame, now: float) -> None:
+        if frame.version != PROTOCOL_VERSION:
+            self.version_errors += 1
+            self.version_error = ProtocolVersionError(frame.version)
+            self.last_error = str(self.version_error)
+            _log.error('%s: %s', self.name, self.version_error)
+            self._fail_all(self.version_error)
+            self._set_state(LinkState.REFUSED, str(self.version_error))
+            return
+        msg: m.Message | None
+        try:
+            msg = m.decode(frame)
+        except PayloadError as exc:
+            msg = None
+            self.decode_errors += 1
+            self.last_error = str(exc)
+        if isinstance(msg, m.Boot):
+            self.tracker.restart()
+        with self._lock:
+            pending = self._pending.get(frame.ref) if frame.is_response else None
+        verdict = self.tracker.accept(frame.seq)
+        if verdict == 'stale' and (pending is not None or self._consecutive_stale >= 2):
+            # the board restarted its sequence (reset whose BOOT was lost)
+            self.tracker.stale -= 1
+            self.tracker.restart()
+            self.tracker.accept(frame.seq)
+            self.seq_resyncs += 1
+            self._consecutive_stale = 0
+            self._board_reset('sequence restarted')
+            verdict = 'new'
+        if verdict != 'new':
+            if verdict == 'stale':
+                self._consecutive_stale += 1
+            return
+        self._consecutive_stale = 0
+        self._last_rx = now
+        if msg is None:
+            if pending is not None:
+                self._resolve(pending.seq, exc=PayloadError(self.last_error))
+            return
+        if isinstance(msg, m.Boot):
+            self._board_reset('BOOT received')
+        elif isinstance(msg, m.Status):
+            old = self.last_status
+            if old is not None and msg.uptime_ms < old.uptime_ms \
+                    and old.uptime_ms - msg.uptime_ms < 1 << 31:
+                self._board_reset('uptime went back')
+            self.last_status = msg
+            self.last_status_time = now
+        elif isinstance(msg, m.Info):
+            self.info = msg
+        if pending is not None:
+            if isinstance(msg, m.Nack):
+                self.nacks += 1
+                self._resolve(pending.seq, exc=NackError(msg.request_type, msg.code))
+            else:
+                self._resolve(pending.seq, result=msg)
+        for fn in list(self._listeners):
+            try:
+                fn(msg, frame)
+            except Exception:  # noqa: BLE001
+                _log.exception('%s: listener failed', self.name)
+        if self._state in (LinkState.SILENT, LinkState.CONNECTING) and not self._refreshing:
+            self._schedule_refresh()
+
+    def _board_reset(self, why: str) -> None:
+        self.resets += 1
+        _log.warning('%s: board reset detected (%s): position lost until re-homed',
+                     self.name, why)
+        if self._state == LinkState.UP:
+            self._set_state(LinkState.CONNECTING, f'board reset ({why})')
+        if not self._refreshing:
+            self._schedule_refresh()
+
+    def _service(self, now: float) -> None:
+        expired: list[_Pending] = []
+        resend: list[_Pending] = []
+        with self._lock:
+            for p in self._pending.values():
+                if now >= p.deadline:
+                    if p.retries_left > 0:
+                        p.retries_left -= 1
+                        p.deadline = now + p.timeout
+                        resend.append(p)
+                    else:
+                        expired.append(p)
+        for p in resend:
+            self.retries_sent += 1
+            self._write(p.data, p)
+        for p in expired:
+            self.timeouts += 1
+            self._resolve(p.seq, exc=LinkTimeout(
+                f'{self.name}: no answer to {type(p.msg).__name__} (seq {p.seq})'))
+        if expired and self._state == LinkState.UP and now - self._last_rx > self.silence:
+            self._set_state(LinkState.SILENT, 'requests unanswered')
+        if self.heartbeat and now - self._last_tx >= self.heartbeat \
+                and self._state != LinkState.REFUSED:
+            self.submit(m.Ping(int(now * 1000) & 0xFFFFFFFF), retries=0)
+        if self._state == LinkState.UP and self.heartbeat \
+                and now - self._last_rx > max(self.silence, 2 * self.heartbeat):
+            self._set_state(LinkState.SILENT, 'no frame heard')
+        if self._state in (LinkState.CONNECTING, LinkState.SILENT, LinkState.REFUSED) \
+                and not self._refreshing and now >= self._next_refresh:
+            self._schedule_refresh()
+
+    def _schedule_refresh(self) -> None:
+        self._refreshing = True
+        threading.Thread(target=self._refresh, name=f'refresh-{self.name}', daemon=True).start()
+
+    def _refresh(self) -> None:
+        """Re-read INFO and STATUS; the link is UP only after this succeeds."""
+        try:
+            info = self.request(m.GetInfo())
+            if info.protocol != PROTOCOL_VERSION:
+                raise ProtocolVersionError(info.protocol)
+            try:
+                self.request(m.GetStatus())
+            except NackError:
+                pass   # boards without STATUS (some sensor boards) are fine
+            self._refresh_backoff = self.backoff_min
+            self.version_error = None
+            self._set_state(LinkState.UP, f'{info.name_str} fw {info.firmware}')
+        except ProtocolVersionError as exc:
+            self.version_error = exc
+            self.version_errors += 1
+            self.last_error = str(exc)
+            self._set_state(LinkState.REFUSED, str(exc))
+        except (LinkError, ProtocolError) as exc:
+            self.last_error = str(exc)
+            if self.transport.is_open and self._state == LinkState.UP:
+                self._set_state(LinkState.SILENT, str(exc))
+        finally:
+            self._next_refresh = self.clock() + self._refresh_backoff
+            self._refresh_backoff = min(self._refresh_backoff * 2, self.backoff_max)
+            self._refreshing = False
