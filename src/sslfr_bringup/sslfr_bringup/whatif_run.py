@@ -1,0 +1,123 @@
+"""Orchestration of ``sslfr replay BAG --what-if`` (processes + player + comparison).
+
+On a private ROS domain: start a recorder for the decisions (``use_sim_time``), a
+fresh ``planner`` (sslfr_planner) and ``safety`` (sslfr_drivers) with
+``use_sim_time:=true`` and the site config, play only the sensor inputs of the bag
+with /clock, stop the nodes (SIGINT), then compare the decisions the fresh nodes
+recorded with the ones in the bag (:mod:`sslfr_bringup.bag.whatif`). Executables
+that are not installed are reported and skipped.
+"""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .bag.metadata import BagError
+from .bag.playback import absolute
+from .bag.reader import BagReader
+from .bag.whatif import compare_bags
+
+#: (package, executable) of the deciding nodes started fresh.
+DECIDERS = [('sslfr_planner', 'planner'), ('sslfr_drivers', 'safety')]
+
+
+def install_prefix() -> Path:
+    root = os.environ.get('SSLFR_ROOT') or str(Path(__file__).resolve().parents[3])
+    return Path(root) / 'ros_ws' / 'install'
+
+
+def executable(package: str, exe: str) -> Path:
+    """Where ``ros2 run package exe`` finds the executable."""
+    return install_prefix() / package / 'lib' / package / exe
+
+
+def default_config() -> Path | None:
+    """The default site config (share/sslfr_bringup/config/almeria_sslfr.yaml) if installed."""
+    p = install_prefix() / 'sslfr_bringup' / 'share' / 'sslfr_bringup' / 'config' / 'almeria_sslfr.yaml'
+    return p if p.exists() else None
+
+
+def _start(argv, env, log: Path) -> subprocess.Popen:
+    fh = open(log, 'wb')  # noqa: SIM115 - owned by the process' lifetime
+    return subprocess.Popen(argv, env=env, stdout=fh, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5)
+
+
+def run_whatif(reader: BagReader, ns, start_ns, end_ns) -> int:
+    """Run a what-if replay; print and write the comparison; return the exit status."""
+    from .replay import WHATIF_DECISIONS, WHATIF_INPUTS, run_player
+    out = Path(ns.out) if ns.out else Path(tempfile.mkdtemp(prefix='sslfr_whatif_'))
+    out.mkdir(parents=True, exist_ok=True)
+    domain = ns.domain if ns.domain is not None else random.randint(150, 230)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    inputs = [absolute(t) for t in (ns.inputs or WHATIF_INPUTS)]
+    present = [t for t in inputs if t in reader.topics]
+    if not present:
+        print('sslfr replay --what-if: the bag has none of the input topics '
+              + ', '.join(inputs), file=sys.stderr)
+        return 1
+    config = Path(ns.config) if ns.config else default_config()
+    procs = []
+    rec_exe = executable('sslfr_bringup', 'recorder')
+    dec_root = out / 'decisions'
+    rec_argv = [str(rec_exe), '--ros-args', '-p', f'output_dir:={dec_root}', '-p', 'prefix:=whatif',
+                '-p', 'per_day:=false', '-p', 'use_sim_time:=true', '-p', 'fsync:=false',
+                '-p', 'discovery_period:=0.2',
+                '-p', 'topics:=[' + ','.join(f"'{t}'" for t in WHATIF_DECISIONS) + ']']
+    procs.append(('recorder', _start(rec_argv, env, out / 'recorder.log')))
+    started = []
+    for pkg, exe in DECIDERS:
+        path = executable(pkg, exe)
+        if not path.exists():
+            print(f'what-if: {pkg}/{exe} is not installed: its decisions are not compared',
+                  file=sys.stderr)
+            continue
+        argv = [str(path), '--ros-args', '-p', 'use_sim_time:=true']
+        if config is not None:
+            argv += ['--params-file', str(config)]
+        procs.append((exe, _start(argv, env, out / f'{exe}.log')))
+        started.append(exe)
+    try:
+        player = run_player(reader, topics=present, rate=ns.rate, start_ns=start_ns, end_ns=end_ns,
+                            clock_hz=ns.clock_hz, progress=not ns.no_progress,
+                            node_name='sslfr_whatif_player', domain_id=domain,
+                            wait_subscribers=15.0)
+        time.sleep(2.0)  # let the last decisions reach the recorder
+    finally:
+        for _, proc in reversed(procs):
+            _stop(proc)
+    if player.error:
+        print(f'sslfr replay --what-if: {player.error}', file=sys.stderr)
+        return 1
+    bags = sorted(dec_root.glob('whatif_*')) if dec_root.exists() else []
+    if not bags:
+        print('what-if: the fresh nodes published no decision (see logs in ' f'{out})',
+              file=sys.stderr)
+        return 1
+    try:
+        result = compare_bags(reader, BagReader(bags[-1]))
+    except BagError as exc:
+        print(f'sslfr replay --what-if: {exc}', file=sys.stderr)
+        return 1
+    text = (f'what-if replay of {reader.path} (inputs: {", ".join(present)}; fresh nodes: '
+            f'{", ".join(started) or "none"}; domain {domain})\n' + result.text())
+    print(text)
+    (out / 'whatif.md').write_text('# What-if replay\n\n```\n' + text + '\n```\n', encoding='utf-8')
+    print(f'decisions bag and logs: {out}')
+    return 0
