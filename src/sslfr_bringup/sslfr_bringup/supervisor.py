@@ -329,7 +329,7 @@ class RosSide(threading.Thread):
         self._jobs: queue.Queue = queue.Queue()
         self._results: queue.Queue = queue.Queue()
         self._notes: queue.Queue = queue.Queue()
-        self._stop = threading.Event()
+        self._halt = threading.Event()
         self.ready = threading.Event()
         self.error: BaseException | None = None
         self.clock_published = 0
@@ -355,7 +355,7 @@ class RosSide(threading.Thread):
         done.wait(timeout + 0.5)
 
     def shutdown(self) -> None:
-        self._stop.set()
+        self._halt.set()
         self.join(5)
 
     # the thread
@@ -430,7 +430,7 @@ class RosSide(threading.Thread):
             node.create_timer(1.0 / self.clock_rate, publish_clock, clock=steady)
         self.ready.set()
         try:
-            while not self._stop.is_set():
+            while not self._halt.is_set():
                 try:
                     kind, arg = self._jobs.get_nowait()
                 except queue.Empty:

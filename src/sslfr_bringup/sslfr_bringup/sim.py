@@ -1,0 +1,387 @@
+"""``sslfr sim``: the node set against simulated boards over a simulated day.
+
+The same node set as ``sslfr up`` (config/nodeset.yaml), with every board replaced by
+its simulator (``sim_board`` processes speaking the board protocol on real ptys; the
+pty path goes to the driver's ``port`` parameter, so the drivers are unchanged),
+every node on ``use_sim_time``, a simulated clock published on ``/clock`` at
+``--speed`` times real time, the recorder writing an MCAP bag, and at the end the
+day report (``sslfr report``). Times are UTC.
+
+Time. Simulated time is ``start + speed * (t - anchor)`` with ``t`` the system-wide
+CLOCK_MONOTONIC (shared by every process), the same mapping the simulated sensor
+boards apply to their own steady clock (options ``start_utc`` and ``speed``). The
+anchor is the instant the simulated GPS board started (its pty link appeared), so
+GPS time and ``/clock`` agree. Axis boards run their steppers on the steady clock:
+at ``--speed X`` a joint must move X times faster than in reality, so the drivers
+get a raised ``max_speed`` in simulation (nodeset.yaml ``sim.node_parameters``).
+
+Faults (``--fault SPEC``, grammar in :mod:`sslfr_bringup.faults`) fire at their
+simulated time through the simulators' control sockets (``kill:NODE`` through the
+supervisor). A fault duration is simulated seconds; a link drop lasts
+``SECONDS / speed`` wall seconds, so at high speed give it enough simulated seconds
+to exceed the drivers' steady-clock link timeout (1 s wall).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from sslfr_bringup import faults as faults_mod
+from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_bringup.supervisor import Program, RosSide, Supervisor
+from sslfr_bringup.up import find_executable, select
+
+
+class SimClock:
+    """Simulated time [s since the Unix epoch, UTC] from the monotonic clock.
+
+    ``now(t) = start + speed * (t - anchor)``; before :meth:`set_anchor` (and before
+    the anchor) it is ``start``.
+    """
+
+    def __init__(self, start: float, speed: float, anchor: float | None = None):
+        if not speed > 0:
+            raise ValueError('speed must be > 0')
+        self.start, self.speed, self.anchor = float(start), float(speed), anchor
+
+    def set_anchor(self, anchor: float) -> None:
+        self.anchor = float(anchor)
+
+    def now(self, mono: float | None = None) -> float:
+        if self.anchor is None:
+            return self.start
+        t = time.monotonic() if mono is None else mono
+        return self.start + self.speed * max(0.0, t - self.anchor)
+
+    def wall_until(self, sim_t: float, mono: float | None = None) -> float:
+        """Wall seconds from ``mono`` until sim time ``sim_t`` (>= 0)."""
+        return max(0.0, (sim_t - self.now(mono)) / self.speed)
+
+
+def parse_hhmm(text: str) -> float:
+    """``HH:MM`` or ``HH:MM:SS`` (UTC) -> seconds after midnight."""
+    parts = text.split(':')
+    if len(parts) not in (2, 3):
+        raise ValueError(f'time {text!r}: expected HH:MM or HH:MM:SS')
+    h, m = int(parts[0]), int(parts[1])
+    s = float(parts[2]) if len(parts) == 3 else 0.0
+    if not (0 <= h <= 24 and 0 <= m < 60 and 0 <= s < 60) or (h == 24 and (m or s)):
+        raise ValueError(f'time {text!r} is not a time of day')
+    return h * 3600 + m * 60 + s
+
+
+def day_epoch(date: str) -> float:
+    """``YYYY-MM-DD`` -> Unix time of 00:00 UTC that day."""
+    d = dt.date.fromisoformat(date)
+    return dt.datetime(d.year, d.month, d.day, tzinfo=dt.timezone.utc).timestamp()
+
+
+def site_of(params: dict) -> dict:
+    """Site keys from a params file's ``/**`` section (defaults: seed 000 Almeria,
+    36 deg 50' 07" N, 2 deg 24' 08" W, 22 m)."""
+    p = nodeset_mod.node_params(params, '__sim__')
+    return {'latitude_deg': float(p.get('site.latitude_deg', 36 + 50 / 60 + 7 / 3600)),
+            'longitude_deg': float(p.get('site.longitude_deg', -(2 + 24 / 60 + 8 / 3600))),
+            'elevation': float(p.get('site.elevation', 22.0))}
+
+
+def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
+    """Control-socket lines that start (``what='start'``) or end a fault on its
+    board's simulator (see ``sslfr_drivers.sim.runner`` and ``sim.sensors``)."""
+    active = what == 'start'
+    if f.kind == 'link-drop':
+        return [f'disconnect {f.duration / speed:.3f}'] if active else []
+    if f.kind == 'board-reset':
+        return ['reset'] if active else []
+    cmd = {'cmd': 'fault', 'kind': f.kind, 'active': active}
+    if f.kind == 'thermocouple-open':
+        cmd['target'] = f.target
+    return [json.dumps(cmd)]
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog='sslfr sim', description=__doc__.split('\n\n')[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='fault specs (times UTC, durations in simulated seconds):\n' + '\n'.join(
+            '  ' + line for line in faults_mod.__doc__.split('::')[1].split('\n\nBOARD')[0].strip('\n').splitlines()))
+    p.add_argument('--config', default=None, help='site params file (default: almeria_sslfr.yaml, seed 000)')
+    p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
+    p.add_argument('--date', default=None, help='simulated day YYYY-MM-DD (default 2026-06-21)')
+    p.add_argument('--start', default=None, help='start HH:MM UTC (default 04:00)')
+    p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00)')
+    p.add_argument('--speed', type=float, default=None, help='simulated seconds per wall second (default 400)')
+    p.add_argument('--record', default=None, help='bag output directory (default OUT/bags)')
+    p.add_argument('--out', default=None, help='output directory: logs, bags, report (default out/sim-DATE)')
+    p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
+    p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
+    p.add_argument('--skip', default='', help='comma-separated nodes not to run')
+    p.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 42)')
+    p.add_argument('--seed', type=int, default=1, help='random seed of the simulated boards')
+    p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
+    return p
+
+
+def _wait_links(paths: dict[str, Path], progs: dict[str, Program], timeout: float) -> dict[str, float]:
+    """Wait for each simulator's pty symlink; return board -> monotonic time it appeared."""
+    seen: dict[str, float] = {}
+    deadline = time.monotonic() + timeout
+    offset = time.time() - time.monotonic()
+    while len(seen) < len(paths) and time.monotonic() < deadline:
+        for board, path in paths.items():
+            if board in seen:
+                continue
+            try:
+                st = os.lstat(path)
+            except FileNotFoundError:
+                if not progs[board].alive():
+                    raise RuntimeError(f'simulated board {board} exited (code {progs[board].proc.returncode}); '
+                                       f'see its log') from None
+                continue
+            seen[board] = min(time.monotonic(), st.st_mtime - offset)
+        time.sleep(0.005)
+    missing = set(paths) - set(seen)
+    if missing:
+        raise RuntimeError(f'simulated boards without a pty after {timeout:.0f} s: {", ".join(sorted(missing))}')
+    return seen
+
+
+def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated day
+    args = parser().parse_args(argv)
+    t_wall0 = time.monotonic()
+    try:
+        ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
+        config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        params = nodeset_mod.read_params(config)
+        simcfg = ns.sim
+        date = args.date or str(simcfg.get('date', '2026-06-21'))
+        start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))
+        end_s = parse_hhmm(args.end or str(simcfg.get('end', '20:00')))
+        speed = float(args.speed if args.speed is not None else simcfg.get('speed', 400.0))
+        if end_s <= start_s:
+            raise ValueError('--end must be after --start')
+        if not 0 < speed <= 5000:
+            raise ValueError('--speed must be in (0, 5000]')
+        day0 = day_epoch(date)
+        faults = [faults_mod.parse(s, boards=tuple(ns.boards), nodes=[n.name for n in ns.nodes])
+                  for s in args.fault]
+    except (ValueError, KeyError) as exc:   # NodeSetError and FaultSpecError are ValueErrors
+        print(f'sslfr sim: {exc}', file=sys.stderr)
+        return 2
+    for f in faults:
+        if f.board is not None and f.board not in {n.board for n in ns.nodes}:
+            print(f'sslfr sim: fault {f.spec}: board {f.board} is not simulated in this node set', file=sys.stderr)
+            return 2
+    out = Path(args.out or f'out/sim-{date}').resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    bag_root = Path(args.record).resolve() if args.record else out / 'bags'
+    bag_root.mkdir(parents=True, exist_ok=True)
+    logs = out / 'logs'
+    if logs.exists():
+        shutil.rmtree(logs)
+    logs.mkdir()
+    run = Path(tempfile.mkdtemp(prefix='sslfr-sim-'))   # short paths: UNIX sockets <= 107 bytes
+    clock = SimClock(day0 + start_s, speed)
+    site = site_of(params)
+    env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
+    env['SSLFR_SIM_WORLD'] = str(run / 'world.json')
+    domain = int(env['ROS_DOMAIN_ID'])
+    say = print
+    say(f'sslfr sim: {date} {args.start or simcfg.get("start", "04:00")}-{args.end or simcfg.get("end", "20:00")} UTC '
+        f'at {speed:g}x, config {config.name}, site {site["latitude_deg"]:.4f}, {site["longitude_deg"]:.4f}, '
+        f'ROS_DOMAIN_ID={domain}, out {out}')
+
+    # ---- simulated boards
+    boards_needed = [b for b in ns.boards if any(n.board == b for n in ns.nodes)]
+    board_progs: dict[str, Program] = {}
+    links: dict[str, Path] = {}
+    controls: dict[str, str] = {}
+    missing: list[str] = []
+    for bname in boards_needed:
+        board = ns.boards[bname]
+        exe = find_executable(board.sim_package or '', board.sim_executable or '')
+        if exe is None:
+            missing.append(f'simulated board {bname} ({board.sim_package}/{board.sim_executable})')
+            continue
+        links[bname] = run / f'{bname}.pty'
+        controls[bname] = str(run / f'{bname}.sock')
+        values = {'pty': links[bname], 'control': controls[bname], 'start': f'{clock.start:.3f}',
+                  'speed': f'{speed:g}', 'anchor': '', 'axis': bname, 'config': str(config),
+                  'seed': args.seed + len(board_progs), 'world': run / 'world.json', **site}
+        board_progs[bname] = Program(name=f'sim_{bname}', argv=nodeset_mod.sim_board_argv(board, exe, values),
+                                     start=-1, stop=3, restart=False, kind='board')
+    # ---- nodes (ports = the simulators' pty links)
+    extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
+    if any(n.name == 'recorder' for n in ns.nodes):
+        extra.setdefault('recorder', {})['output_dir'] = str(bag_root)
+    sim_ports = {b: str(p) for b, p in links.items()}
+    node_progs, missing_nodes = _node_programs(ns, config, sim_ports, extra)
+    missing += missing_nodes
+    for node in ns.nodes:
+        if node.board and node.board not in links and any(p.name == node.name for p in node_progs):
+            missing.append(f'{node.name}: its board {node.board} has no simulator, node not started')
+            node_progs = [p for p in node_progs if p.name != node.name]
+    for m in missing:
+        print(f'sslfr sim: MISSING {m}', file=sys.stderr)
+    if not node_progs:
+        print('sslfr sim: no node can run', file=sys.stderr)
+        return 1
+
+    ros = RosSide(domain, namespace=ns.namespace, clock_fn=clock.now,
+                  clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim')
+    ros.start()
+    ros.ready.wait(30)
+    if ros.error is not None:
+        print(f'sslfr sim: ROS side failed: {ros.error}', file=sys.stderr)
+        return 1
+    log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
+    sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
+                     stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
+                     ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('started ', 'lifecycle active')))
+    schedule = faults_mod.Schedule(faults)
+    fired: list[dict] = []
+    end_epoch = day0 + end_s
+    state = {'phase': 'boards', 'last_report': 0.0}
+
+    # start the boards first, anchor the clock on the GPS simulator, then the nodes
+    for p in board_progs.values():
+        sup._spawn(p)   # noqa: SLF001 - same supervisor, boards first
+    try:
+        appeared = _wait_links(links, board_progs, timeout=30.0)
+    except RuntimeError as exc:
+        print(f'sslfr sim: {exc}', file=sys.stderr)
+        sup.stop()
+        ros.shutdown()
+        return 1
+    anchor_board = 'gps' if 'gps' in appeared else (next(iter(appeared)) if appeared else None)
+    clock.set_anchor(appeared[anchor_board] if anchor_board else time.monotonic())
+    for b, t in appeared.items():
+        if b in ('absorber', 'irradiance'):
+            say(f'sslfr sim: {b} simulator clock offset vs /clock {speed * (clock.anchor - t):+.1f} s (sim)')
+    t_nodes = time.monotonic()
+
+    def tick():
+        now_sim = clock.now()
+        for f, what in schedule.due(now_sim - day0):
+            rec = {'spec': f.spec, 'what': what, 'sim_time': now_sim, 'wall': time.monotonic() - t_wall0}
+            try:
+                if f.kind == 'kill':
+                    if what == 'start':
+                        sup.kill(f.target, hold=True)
+                    else:
+                        sup.release(f.target)
+                    rec['result'] = 'ok'
+                else:
+                    from sslfr_drivers.sim.runner import SimControl
+                    ctl = SimControl(controls[f.board], timeout=2.0)
+                    rec['result'] = [ctl.cmd(line).get('ok', False) for line in fault_commands(f, what, speed)]
+            except Exception as exc:  # noqa: BLE001 - a failed injection is reported, the day goes on
+                rec['result'] = f'FAILED: {exc}'
+                print(f'sslfr sim: fault {f.spec} ({what}) could not be injected: {exc}', file=sys.stderr)
+            fired.append(rec)
+            say(f'sslfr sim: fault {f.spec} {what} at {_hhmm(now_sim - day0)} UTC: {rec["result"]}')
+        if time.monotonic() - state['last_report'] >= 10.0:
+            state['last_report'] = time.monotonic()
+            say(f'sslfr sim: {_hhmm(now_sim - day0)} UTC (wall {time.monotonic() - t_wall0:.0f} s)')
+
+    # the node programs join the supervisor now (boards are already running)
+    for p in node_progs:
+        sup._spawn(p)  # noqa: SLF001
+    sup.say('nodes started: ' + ', '.join(p.name for p in node_progs))
+    stop_reason = 'end of the simulated window'
+    try:
+        _supervise(sup, tick, until=lambda: clock.now() >= end_epoch)
+    except KeyboardInterrupt:
+        stop_reason = 'interrupted'
+    took = sup.stop() if not sup.stopping else 0.0
+    ros.shutdown()
+    log_stream.close()
+    wall = time.monotonic() - t_wall0
+    summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
+               'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
+               'startup_s': round(t_nodes - t_wall0, 2), 'faults': fired, 'missing': missing,
+               'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
+               'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
+               'clock_messages': ros.clock_published}
+    (out / 'sim.json').write_text(json.dumps(summary, indent=2))
+    shutil.rmtree(run, ignore_errors=True)
+    say(f'sslfr sim: {stop_reason}; wall time {wall:.1f} s (stop {took:.2f} s); bag(s) in {bag_root}; logs in {logs}')
+    if missing:
+        say('sslfr sim: ran WITHOUT: ' + '; '.join(missing))
+    if args.no_report:
+        return 0 if stop_reason != 'interrupted' else 130
+    return _report(bag_root, out)
+
+
+def _supervise(sup: Supervisor, tick, until) -> None:
+    import signal
+    import threading
+    stop_flag = threading.Event()
+
+    def _handler(signum, frame):  # noqa: ARG001
+        stop_flag.set()
+
+    old = {s: signal.signal(s, _handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        while not stop_flag.is_set():
+            sup.step()
+            tick()
+            if until():
+                return
+            stop_flag.wait(0.02)
+        raise KeyboardInterrupt
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _node_programs(ns, config, sim_ports, extra):
+    from sslfr_bringup.up import build_programs
+    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra)
+
+
+def _report(bag_root: Path, out: Path) -> int:
+    """Run the day report on the newest bag under ``bag_root``."""
+    bags = sorted((p for p in bag_root.iterdir() if (p / 'metadata.yaml').exists()),
+                  key=lambda p: p.stat().st_mtime) if bag_root.exists() else []
+    if not bags:
+        print(f'sslfr sim: no bag was recorded in {bag_root}: no report', file=sys.stderr)
+        return 1
+    try:
+        from sslfr_bringup import report
+    except ImportError:
+        print('sslfr sim: MISSING the report module (sslfr_bringup.report): no report', file=sys.stderr)
+        return 1
+    return int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
+
+
+def _hhmm(sod: float) -> str:
+    sod = max(0.0, sod)
+    return f'{int(sod // 3600):02d}:{int(sod % 3600 // 60):02d}:{int(sod % 60):02d}'
+
+
+class _Tee:
+    """Supervisor messages: all to the log file, the important ones also to stderr."""
+
+    def __init__(self, fh, stream, quiet=()):
+        self.fh, self.stream, self.quiet = fh, stream, quiet
+
+    def write(self, text: str) -> None:
+        self.fh.write(text)
+        if text.strip() and not any(q in text for q in self.quiet):
+            self.stream.write(text)
+
+    def flush(self) -> None:
+        self.fh.flush()
+        self.stream.flush()
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
