@@ -153,6 +153,8 @@ class SafetyNode(Node):
         self.core = SafetyCore(config, self._core_clock)
         self._sequence = 0
         self._last_transition = 'none'
+        self._since_steady = None
+        self._since_msg = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._pub = self.create_publisher(SafetyState, 'safety/state', 10)
@@ -236,16 +238,21 @@ class SafetyNode(Node):
     # ------------------------------------------------------------ services
     def _srv_estop(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         response.success, response.message = self.core.estop(bool(request.data))
-        log = self.get_logger().warning if response.success else self.get_logger().error
-        log(f'safety/estop {request.data}: {response.message}')
+        # (one call site per severity: rclpy refuses a severity change at a call site)
+        if response.success:
+            self.get_logger().warning(f'safety/estop {request.data}: {response.message}')
+        else:
+            self.get_logger().error(f'safety/estop {request.data}: {response.message}')
         self._evaluate(publish_on_change=True)
         return response
 
     def _srv_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.core.evaluate()
         response.success, response.message = self.core.reset()
-        log = self.get_logger().info if response.success else self.get_logger().error
-        log(f'safety/reset: {response.message}')
+        if response.success:
+            self.get_logger().info(f'safety/reset: {response.message}')
+        else:
+            self.get_logger().error(f'safety/reset: {response.message}')
         self._evaluate(publish_on_change=True)
         return response
 
@@ -286,7 +293,10 @@ class SafetyNode(Node):
         msg.stow_required = state.stow_required
         msg.reasons = list(state.reasons)
         msg.stopped_axes = list(state.stopped_axes)
-        msg.since = self._ros_time_of(state.since).to_msg()
+        if state.since != self._since_steady:      # a new level: stamp its entry once
+            self._since_steady = state.since
+            self._since_msg = self._ros_time_of(state.since).to_msg()
+        msg.since = self._since_msg
         msg.sequence = self._sequence
         self._sequence = (self._sequence + 1) % (1 << 32)
         self._pub.publish(msg)
