@@ -1,0 +1,153 @@
+"""``irradiance``: VEML7700 illuminance -> beam irradiance.
+
+Seed 000 section 3.5.5: a VEML7700 (0-120,000 lx, 16-bit) on the irradiance PCB;
+beam irradiance = illuminance / 104 lm/W. The board does the auto gain / integration
+time ranging and sends the raw count with the register codes used; the conversion
+is :mod:`sslfr_drivers.veml7700`.
+
+Publishes
+    ``irradiance/illuminance`` (sensor_msgs/Illuminance, R10, ~1 Hz) [lx], variance [lx^2].
+    ``irradiance/beam`` (sslfr_interfaces/Irradiance, R10) [W/m^2], with the efficacy used
+    and ``saturated`` (counter at full scale or above 120 klx: the value is a lower bound).
+    ``diagnostics`` (saturation and invalid samples are sensor faults).
+"""
+from __future__ import annotations
+
+import collections
+import sys
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import Illuminance
+
+from sslfr_interfaces.msg import Irradiance
+
+from . import veml7700
+from .messages_sensors import AlsSample
+from .sensor_node_util import (BoardSource, RateMeter, board_status, check_parameters,
+                               declare_parameters, parameter_callback)
+
+PARAMS = {
+    'port': ('', 'irradiance board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
+                 'empty = no board (the node stays up and reports it) [-]', None),
+    'baudrate': (115200, 'serial line speed [bit/s]', (1200, 921600)),
+    'frame_id': ('irradiance', 'frame_id of the published messages [-]', None),
+    'luminous_efficacy': (veml7700.LUMINOUS_EFFICACY,
+                          'luminous efficacy of beam sunlight [lm/W] (seed 000: 104)', (50.0, 250.0)),
+    'relative_uncertainty': (0.1, '1-sigma relative error of illuminance (sensor calibration and '
+                                  'spectrum) [-]', (0.0, 1.0)),
+    'max_sample_age': (3.0, 'diagnostics WARN when no sample for this long [s]', (0.1, 3600.0)),
+    'heartbeat': (0.5, 'board link PING period [s]', (0.05, 5.0)),
+}
+
+
+class IrradianceNode(Node):
+    """See the module docstring."""
+
+    def __init__(self):
+        super().__init__('irradiance')
+        self._values = declare_parameters(self, PARAMS)
+        check_parameters(PARAMS, self._values)
+        self._queue: collections.deque = collections.deque(maxlen=1000)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._meter = RateMeter()
+        self._saturated = False
+        self._saturated_count = 0
+        self._invalid = 0
+        self._last: veml7700.Sample | None = None
+        self._pub_lux = self.create_publisher(Illuminance, 'irradiance/illuminance', 10)
+        self._pub_beam = self.create_publisher(Irradiance, 'irradiance/beam', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._source = self._make_source(self._values).start()
+        self.add_on_set_parameters_callback(
+            parameter_callback(self, PARAMS, self._values, self._apply))
+        self.create_timer(0.02, self._drain, clock=self._steady)
+        self.create_timer(1.0, self._diagnostics, clock=self._steady)
+        self.get_logger().info(f'irradiance: port {self._values["port"] or "(none)"}, '
+                               f'efficacy {self._values["luminous_efficacy"]:.1f} lm/W')
+
+    def _make_source(self, v: dict) -> BoardSource:
+        return BoardSource(v['port'], 'protocol', v['baudrate'], on_message=self._on_message,
+                           heartbeat=v['heartbeat'])
+
+    def _apply(self, new: dict) -> None:
+        if any(new[k] != self._values[k] for k in ('port', 'baudrate', 'heartbeat')):
+            self._source.stop()
+            self._source = self._make_source(new).start()
+
+    def _on_message(self, msg) -> None:
+        if isinstance(msg, AlsSample):
+            self._queue.append((msg, self.get_clock().now()))
+
+    def _drain(self) -> None:
+        while self._queue:
+            msg, stamp = self._queue.popleft()
+            s = veml7700.decode(msg.count, msg.gain_code, msg.it_code,
+                                self._values['relative_uncertainty'])
+            if not s.valid:
+                self._invalid += 1
+                self.get_logger().warning(
+                    f'invalid VEML7700 sample: count {msg.count}, gain code {msg.gain_code}, '
+                    f'IT code {msg.it_code}', throttle_duration_sec=10.0)
+                continue
+            self._meter.tick()
+            self._last = s
+            if s.saturated and not self._saturated:
+                self.get_logger().warning(f'VEML7700 saturated ({s.illuminance:.0f} lx is a lower bound)')
+            self._saturated = s.saturated
+            self._saturated_count += int(s.saturated)
+            eff = self._values['luminous_efficacy']
+            beam, var = veml7700.beam_irradiance(s.illuminance, s.variance, eff)
+            lux = Illuminance()
+            lux.header.stamp = stamp.to_msg()
+            lux.header.frame_id = self._values['frame_id']
+            lux.illuminance, lux.variance = s.illuminance, s.variance
+            self._pub_lux.publish(lux)
+            b = Irradiance()
+            b.header = lux.header
+            b.beam, b.variance, b.illuminance = beam, var, s.illuminance
+            b.luminous_efficacy, b.saturated = eff, s.saturated
+            self._pub_beam.publish(b)
+
+    def _diagnostics(self) -> None:
+        faults = ['VEML7700 saturated'] if self._saturated else []
+        s = self._last
+        extra = {'illuminance_lx': f'{s.illuminance:.1f}' if s else 'none',
+                 'gain': f'{s.gain:g}' if s else 'none',
+                 'integration_time_s': f'{s.integration_time:g}' if s else 'none',
+                 'saturated_samples': self._saturated_count, 'invalid_samples': self._invalid}
+        st = board_status('irradiance: board', self._source, self._meter,
+                          self._values['max_sample_age'], faults, extra)
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
+
+    def destroy_node(self):
+        self._source.stop()
+        return super().destroy_node()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    try:
+        node = IrradianceNode()
+    except ValueError as exc:
+        print(f'irradiance: invalid parameters: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
