@@ -248,7 +248,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     schedule = faults_mod.Schedule(faults)
     fired: list[dict] = []
     end_epoch = day0 + end_s
-    state = {'phase': 'boards', 'last_report': 0.0}
+    state = {'last_report': 0.0, 'last_rss': 0.0, 'peak_nodes': 0, 'peak_pss': 0, 'peak_boards': 0,
+             'peak_detail': {}}
 
     # start the boards first, anchor the clock on the GPS simulator, then the nodes
     for p in board_progs.values():
@@ -287,6 +288,15 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
                 print(f'sslfr sim: fault {f.spec} ({what}) could not be injected: {exc}', file=sys.stderr)
             fired.append(rec)
             say(f'sslfr sim: fault {f.spec} {what} at {_hhmm(now_sim - day0)} UTC: {rec["result"]}')
+        if time.monotonic() - state['last_rss'] >= 2.0:
+            state['last_rss'] = time.monotonic()
+            mem = sup.rss(full=True)
+            nodes = {k: v for k, v in mem.items() if not k.startswith('sim_')}
+            rss_nodes = sum(v[0] for v in nodes.values())
+            if rss_nodes > state['peak_nodes']:
+                state['peak_nodes'], state['peak_detail'] = rss_nodes, mem
+            state['peak_pss'] = max(state['peak_pss'], sum(v[1] for v in nodes.values()))
+            state['peak_boards'] = max(state['peak_boards'], sum(v[0] for k, v in mem.items() if k.startswith('sim_')))
         if time.monotonic() - state['last_report'] >= 10.0:
             state['last_report'] = time.monotonic()
             say(f'sslfr sim: {_hhmm(now_sim - day0)} UTC (wall {time.monotonic() - t_wall0:.0f} s)')
@@ -309,10 +319,18 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
                'startup_s': round(t_nodes - t_wall0, 2), 'faults': fired, 'missing': missing,
                'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
                'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
-               'clock_messages': ros.clock_published}
+               'clock_messages': ros.clock_published,
+               'peak_rss_nodes_mb': round(state['peak_nodes'] / 2**20, 1),
+               'peak_pss_nodes_mb': round(state['peak_pss'] / 2**20, 1),
+               'peak_rss_sim_boards_mb': round(state['peak_boards'] / 2**20, 1),
+               'rss_pss_at_peak_mb': {k: [round(v[0] / 2**20, 1), round(v[1] / 2**20, 1)]
+                                      for k, v in state['peak_detail'].items()}}
     (out / 'sim.json').write_text(json.dumps(summary, indent=2))
     shutil.rmtree(run, ignore_errors=True)
-    say(f'sslfr sim: {stop_reason}; wall time {wall:.1f} s (stop {took:.2f} s); bag(s) in {bag_root}; logs in {logs}')
+    say(f'sslfr sim: {stop_reason}; wall time {wall:.1f} s (stop {took:.2f} s); peak RSS of the node set '
+        f'{summary["peak_rss_nodes_mb"]:.0f} MB (PSS {summary["peak_pss_nodes_mb"]:.0f} MB; '
+        f'{len(node_progs)} processes; simulated boards '
+        f'{summary["peak_rss_sim_boards_mb"]:.0f} MB); bag(s) in {bag_root}; logs in {logs}')
     if missing:
         say('sslfr sim: ran WITHOUT: ' + '; '.join(missing))
     if args.no_report:

@@ -277,6 +277,35 @@ class Supervisor:
                 p.log_file.close()
                 p.log_file = None
 
+    def rss(self, full: bool = False) -> dict[str, tuple[int, int]]:
+        """Memory of every running program with its children: ``(rss, pss)`` [bytes].
+
+        RSS counts the shared libraries (rclpy, DDS, numpy) once per process, so
+        their sum overstates the total; PSS shares them out and sums to what the set
+        really occupies. ``pss`` is 0 unless ``full`` (reading smaps is slower).
+        """
+        import psutil
+        out = {}
+        for p in self.programs.values():
+            if not p.alive():
+                continue
+            try:
+                root = psutil.Process(p.pid)
+                rss = pss = 0
+                for proc in [root, *root.children(recursive=True)]:
+                    try:
+                        if full:
+                            info = proc.memory_full_info()
+                            rss, pss = rss + info.rss, pss + getattr(info, 'pss', 0)
+                        else:
+                            rss += proc.memory_info().rss
+                    except psutil.Error:
+                        pass
+                out[p.name] = (rss, pss)
+            except psutil.Error:
+                pass
+        return out
+
     def pids(self) -> list[int]:
         return [p.pid for p in self.programs.values() if p.alive()]
 
