@@ -1,0 +1,161 @@
+"""Check a recorded (simulated or real) day against the ephemeris: the numbers the
+system scenario tests assert on. Pure Python + numpy (no rclpy); reads bags with
+:class:`sslfr_bringup.bag.reader.BagReader`.
+
+- :func:`read_day` turns a bag into time series (ROS time [s since the Unix epoch]
+  of each message's header stamp; angles [rad]).
+- :func:`tracking_error` compares each axis' measured angle with the ideal command
+  of :func:`sslfr_planner.daytable.evaluate` (seed 000 eqs. 9-13 and the
+  collector's longitudinal law) for the same site and collector.
+
+Time quantisation in simulation. At ``--speed X`` the drivers poll their board on a
+steady (wall) clock and ``/clock`` advances in steps, so a measured angle stamped
+``t`` belongs to a setpoint between ``t - lag`` and ``t`` with
+``lag = X * (wall latency)``. :func:`tracking_error` therefore reports the distance
+from the measured angle to the ideal angles over ``[t - lag, t]`` (zero lag: the
+plain difference), and the tests bound it by one motor step plus the position
+sensor noise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
+
+
+def _stamp(h) -> float:
+    return h.stamp.sec + h.stamp.nanosec * 1e-9
+
+
+def _time(t) -> float:
+    return t.sec + t.nanosec * 1e-9
+
+
+@dataclass
+class Series:
+    """Columns of one topic (numpy arrays / lists, equal length)."""
+
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cols: dict = field(default_factory=dict)
+
+    def __getitem__(self, key):
+        return self.cols[key]
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def between(self, t0: float, t1: float) -> 'Series':
+        k = (self.t >= t0) & (self.t <= t1)
+        return Series(self.t[k], {c: (v[k] if isinstance(v, np.ndarray) else [x for x, kk in zip(v, k) if kk])
+                                  for c, v in self.cols.items()})
+
+
+@dataclass
+class Day:
+    """Time series of a recorded day (see :func:`read_day`)."""
+
+    axes: dict[str, Series]
+    phase: Series
+    safety: Series
+    outlet: Series
+    inlet: Series
+    fix: Series
+    trajectory: Series
+    topics: dict[str, int]
+
+    def phase_changes(self) -> list[tuple[float, str]]:
+        """(time, phase_name) at each change of the published phase."""
+        out = []
+        last = None
+        for t, name in zip(self.phase.t, self.phase['name']):
+            if name != last:
+                out.append((float(t), name))
+                last = name
+        return out
+
+
+def _collect(reader, topic: str, fields: dict) -> Series:
+    """Rows of ``topic`` sorted by header stamp (log time when there is no header)."""
+    rows = []
+    for raw, msg in reader.decoded([topic]):
+        header = getattr(msg, 'header', None)
+        t = _stamp(header) if header is not None else raw.log_time * 1e-9
+        rows.append((t, [f(msg) for f in fields.values()]))
+    rows.sort(key=lambda r: r[0])
+    cols = {}
+    for i, key in enumerate(fields):
+        values = [r[1][i] for r in rows]
+        numeric = values and all(isinstance(v, (bool, int, float)) for v in values)
+        cols[key] = np.asarray(values) if numeric or not values else values
+    return Series(np.asarray([r[0] for r in rows], dtype=float), cols)
+
+
+def read_day(bag: str | Path) -> Day:
+    """Read the tracker's topics from a bag directory (or .mcap file)."""
+    from sslfr_bringup.bag.reader import BagReader
+
+    reader = BagReader(bag)
+    topics = {}
+    for raw in reader.messages():
+        topics[raw.topic] = topics.get(raw.topic, 0) + 1
+    axes = {}
+    for axis in AXES:
+        axes[axis] = _collect(reader, f'/axes/{axis}/status', {
+            'measured': lambda m: float(m.measured), 'setpoint': lambda m: float(m.setpoint),
+            'commanded': lambda m: float(m.commanded), 'error': lambda m: float(m.error),
+            'state': lambda m: m.state, 'link_state': lambda m: int(m.link_state),
+            'frames_lost': lambda m: int(m.frames_lost), 'homed': lambda m: bool(m.homed),
+            'fault_bits': lambda m: int(m.fault_bits), 'steps': lambda m: int(m.steps)})
+    phase = _collect(reader, '/tracker/phase', {
+        'phase': lambda m: int(m.phase), 'name': lambda m: m.phase_name, 'reason': lambda m: m.reason,
+        'mode': lambda m: m.mode, 'site_source': lambda m: m.site_source,
+        'latitude': lambda m: float(m.latitude), 'longitude': lambda m: float(m.longitude),
+        'sunrise': lambda m: _time(m.sunrise), 'sunset': lambda m: _time(m.sunset)})
+    safety = _collect(reader, '/safety/state', {
+        'level': lambda m: int(m.level), 'reasons': lambda m: list(m.reasons),
+        'stow_required': lambda m: bool(m.stow_required), 'stopped_axes': lambda m: list(m.stopped_axes)})
+    outlet = _collect(reader, '/absorber/outlet_temperature', {'value': lambda m: float(m.temperature)})
+    inlet = _collect(reader, '/absorber/inlet_temperature', {'value': lambda m: float(m.temperature)})
+    fix = _collect(reader, '/gps/fix', {'status': lambda m: int(m.status.status),
+                                        'latitude': lambda m: float(m.latitude)})
+    traj = _collect(reader, '/tracker/trajectory', {'points': lambda m: len(m.points)})
+    return Day(axes, phase, safety, outlet, inlet, fix, traj, topics)
+
+
+def interval_distance(value: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from ``value`` to the closed interval between ``a`` and ``b`` (any order)."""
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    return np.maximum(0.0, np.maximum(lo - value, value - hi))
+
+
+def tracking_error(t: np.ndarray, measured: np.ndarray, ideal_fn, lag: float = 0.0,
+                   samples: int = 8) -> np.ndarray:
+    """|measured - ideal| [rad] allowing the measurement to lag by up to ``lag`` [s].
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Stamps of the measurements [s since the Unix epoch].
+    measured : numpy.ndarray
+        Measured joint angles [rad].
+    ideal_fn : callable
+        ``ideal_fn(t_array) -> angles [rad]``, e.g. a column of
+        ``sslfr_planner.daytable.evaluate``.
+    lag : float
+        Allowed lag [s] (>= 0); the ideal path over ``[t - lag, t]`` is sampled at
+        ``samples`` points and the distance to the nearest is returned.
+    """
+    t = np.asarray(t, dtype=float)
+    measured = np.asarray(measured, dtype=float)
+    if lag <= 0:
+        return np.abs(measured - ideal_fn(t))
+    best = np.full(t.shape, np.inf)
+    prev = ideal_fn(t - lag)
+    for k in range(1, samples + 1):
+        cur = ideal_fn(t - lag + lag * k / samples)
+        best = np.minimum(best, interval_distance(measured, prev, cur))
+        prev = cur
+    return best
