@@ -25,17 +25,20 @@ import numpy as np
 #: Seed 000 section 3.4: stepper motors and drivers "with a step of 0.006 deg".
 SEED_STEP_ANGLE = math.radians(0.006)
 
-#: Mechanical joint ranges [rad] (seed 000 section 3.5.2: mirrors -45..+90 deg,
-#: mobile structure and secondary reflector 0..90 deg).
+#: Mechanical joint ranges [rad] (seed 000 section 3.5.2: mirrors -45..+90 deg;
+#: mobile structure and secondary reflector tilt 0..90 deg in magnitude toward
+#: either end, so -pi/2..+pi/2 signed, rest at 0 - the limit switch layout of the
+#: simulated boards, sslfr_drivers.sim.axis.AXES).
 AXIS_LIMITS = {
     'mirrors': (-math.pi / 4, math.pi / 2),
-    'mobile_structure': (0.0, math.pi / 2),
-    'secondary_reflector': (0.0, math.pi / 2),
+    'mobile_structure': (-math.pi / 2, math.pi / 2),
+    'secondary_reflector': (-math.pi / 2, math.pi / 2),
 }
 
-#: Stow (defocus) position per axis [rad]: mirrors go to the sleeping position
-#: +pi/2 (seed 000 section 3.5.2, "no dust is deposited on the mirrors"); the
-#: other two axes go back to their 0 rad rest position.
+#: Stow (defocus) position per axis [rad], also where the SLEEP switch (the home
+#: reference) closes: mirrors go to the sleeping position +pi/2 (seed 000 section
+#: 3.5.2, "no dust is deposited on the mirrors"); the other two axes go back to
+#: their 0 rad rest position.
 STOW_POSITIONS = {'mirrors': math.pi / 2, 'mobile_structure': 0.0, 'secondary_reflector': 0.0}
 
 AXES = tuple(AXIS_LIMITS)
@@ -530,6 +533,7 @@ class AxisSupervisor:
         self.reason = ''
         self.commanded: float = float('nan')     # last joint angle commanded [rad]
         self.setpoint: float = float('nan')      # trajectory setpoint for now [rad]
+        self.last_known: float | None = None      # last referenced joint angle [rad]
         self._cmd_steps: int | None = None       # last MOVE_TO target [steps]
         self._cmd_speed: float = 0.0
 
@@ -562,10 +566,31 @@ class AxisSupervisor:
         if cfg.use_sensor and board.sensor is not None:
             self.state, self.reason = 'homing', 'position lost: re-established from the position sensor'
             return Action('set_zero', cal.steps(board.sensor))
-        direction = -1.0 if cfg.home_switch == 'low' else 1.0   # joint direction toward the switch
+        direction = self._home_direction(board)          # joint direction toward the switch
         rate = cal.step_rate(cfg.home_speed) * direction * (1.0 if cal.joint_per_step > 0 else -1.0)
         self.state, self.reason = 'homing', f'homing toward the {cfg.home_switch} switch'
         return Action('home', cal.steps(cfg.home_position), rate, HOME_SWITCHES[cfg.home_switch])
+
+    def _home_direction(self, board: BoardState) -> float:
+        """Joint direction (+1 / -1) toward the home switch.
+
+        'low' -> -1, 'high' -> +1. 'sleep' may lie inside the range (0 rad on the
+        structure and reflector axes): go toward it from the last known angle
+        (``home_position - last_known``), +1 when unknown; after a homing attempt
+        that ended on an end switch (LOW/HIGH closed) go the other way.
+        """
+        sw = self.cfg.home_switch
+        if sw == 'low':
+            return -1.0
+        if sw == 'high':
+            return 1.0
+        if board.limit_bits & 0x2:          # HIGH closed: the switch is below
+            return -1.0
+        if board.limit_bits & 0x1:          # LOW closed: it is above
+            return 1.0
+        if self.last_known is not None and self.last_known > self.cfg.home_position:
+            return -1.0
+        return 1.0
 
     def _move(self, board: BoardState, target: float, state: str, reason: str = '') -> Action:
         cfg, cal = self.cfg, self.cfg.calibration
@@ -605,6 +630,8 @@ class AxisSupervisor:
             self.state, self.reason = 'link_down', 'no answer from the board'
             self._cmd_steps = None
             return Action()
+        if board.homed and not board.homing:
+            self.last_known = self.measured(board)
         if not active:
             return self._stop(board, 'inactive', 'lifecycle state is not active')
         if self.fault:

@@ -78,12 +78,12 @@ PARAMETERS: dict[str, tuple] = {
     'gear_ratio': (_F, 1.0, 'motor angle per joint angle [-]', (1e-3, 1e4)),
     'offset': (_F, 0.0, 'joint angle at step count 0 [rad]', (-2 * math.pi, 2 * math.pi)),
     'invert': (_B, False, 'positive steps turn the joint negative', None),
-    'lower_limit': (_F, None, 'soft lower limit [rad] (mirrors -pi/4, others 0)', (-math.pi, math.pi)),
+    'lower_limit': (_F, None, 'soft lower limit [rad] (mirrors -pi/4, others -pi/2)', (-math.pi, math.pi)),
     'upper_limit': (_F, None, 'soft upper limit [rad] (pi/2)', (-math.pi, math.pi)),
     'max_speed': (_F, 0.05, 'maximum joint speed of a move [rad/s]', (1e-5, 2.0)),
     'min_speed': (_F, 1e-4, 'minimum joint speed of a move [rad/s]', (1e-6, 2.0)),
     'stow_position': (_F, None, 'stow (defocus) position [rad] (mirrors pi/2 sleeping, others 0)', (-math.pi, math.pi)),
-    'home_switch': (_S, None, 'limit switch HOME drives to: low | high | sleep (mirrors sleep, others low)', None),
+    'home_switch': (_S, None, 'limit switch HOME drives to: low | high | sleep (default sleep: mirrors +pi/2, others 0)', None),
     'home_position': (_F, None, 'joint angle where the home switch closes [rad]', (-math.pi, math.pi)),
     'home_speed': (_F, 0.05, 'homing speed [rad/s]', (1e-5, 2.0)),
     'use_sensor': (_B, True, "use the board's position sensor (measured angle, re-referencing after a reset)", None),
@@ -101,8 +101,7 @@ def _axis_default(axis: str, name: str):
     lo, hi = AXIS_LIMITS[axis]
     return {
         'lower_limit': lo, 'upper_limit': hi, 'stow_position': STOW_POSITIONS[axis],
-        'home_switch': 'sleep' if axis == 'mirrors' else 'low',
-        'home_position': math.pi / 2 if axis == 'mirrors' else 0.0,
+        'home_switch': 'sleep', 'home_position': STOW_POSITIONS[axis],
     }[name]
 
 

@@ -237,3 +237,17 @@ def test_supervisor_starvation_holds_last_point():
     cal = Calibration()
     act = sup.tick(500.0, 0.5, _board(steps=cal.steps(0.01), sensor=0.01), True)
     assert act.kind == 'none' and sup.state == 'holding'
+
+
+def test_home_direction_toward_sleep_switch_inside_the_range():
+    cfg = AxisConfig('mobile_structure', Calibration(), SoftLimits(-math.pi / 2, math.pi / 2),
+                     0.05, 0.0005, 0.05, 0.0, 'sleep', 0.0, 0.02, use_sensor=False)
+    sup = AxisSupervisor(cfg)
+    sup.safety.receive(0.0, 0, False, [], 1)
+    cal = Calibration()
+    sup.tick(0.0, 0.1, BoardState(cal.steps(0.2), cal.steps(0.2), False, True, False, None), True)
+    act = sup.tick(0.0, 0.2, BoardState(0, 0, False, False, False, None), True)   # reset at +0.2 rad
+    assert act.kind == 'home' and act.speed < 0 and act.switch == 2 and act.steps == 0
+    # a homing attempt that ended on the LOW switch goes back up
+    act = sup.tick(0.0, 0.3, BoardState(0, 0, False, False, False, None, limit_bits=1), True)
+    assert act.kind == 'home' and act.speed > 0
