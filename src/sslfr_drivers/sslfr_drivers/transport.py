@@ -220,7 +220,11 @@ class XBeeCoordinator:
         self._boards[board.address] = board
 
     def detach(self, board: 'XBeeBoardTransport') -> None:
-        self._boards.pop(board.address, None)
+        """Forget ``board``; the UART is closed when the last board detaches."""
+        with self._lock:
+            self._boards.pop(board.address, None)
+            if not self._boards:
+                self.close()
 
     def _on_data(self, message) -> None:
         self.rx_frames += 1

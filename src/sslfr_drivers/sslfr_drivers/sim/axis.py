@@ -195,6 +195,20 @@ class AxisSim(SimBoard):
             return True
         return bool(direction < 0 and bits & m.LimitBits.LOW)
 
+    def _back_to_edge(self, switch: int, direction: int) -> None:
+        """Undo the part of the last sub-step beyond the switch's closing edge (the
+        firmware samples its switches at every step, so it stops within one step)."""
+        c = self.cfg
+        if self.stalled or direction == 0:
+            return
+        edge = {m.Switch.LOW: c.lo, m.Switch.HIGH: c.hi,
+                m.Switch.SLEEP: c.sleep - direction * c.switch_width / 2}[switch]
+        beyond = (self.angle - edge) * direction
+        if beyond > 0:
+            steps_back = math.floor(beyond / c.step_rad)
+            self.counter -= direction * steps_back
+            self.angle -= direction * steps_back * c.step_rad
+
     def _home_done(self) -> None:
         _, position = self.homing
         self.homing = None
@@ -231,9 +245,11 @@ class AxisSim(SimBoard):
                 self.angle = min(max(self.angle, lo_stop), hi_stop)
             direction = (move > 0) - (move < 0)
             if self.homing is not None and self.limit_bits() & (1 << self.homing[0]):
+                self._back_to_edge(self.homing[0], direction)
                 self._home_done()
                 break
             if self._blocking(direction):
+                self._back_to_edge(m.Switch.HIGH if direction > 0 else m.Switch.LOW, direction)
                 self.faults |= m.FaultBits.LIMIT
                 self.homing = None
                 self.target = self.counter

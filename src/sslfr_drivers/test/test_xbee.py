@@ -1,0 +1,132 @@
+"""XBee API mode (AP=2): digi-xbee (host) against the simulated coordinator (sim)."""
+import os
+import random
+import subprocess
+import sys
+import time
+
+import pytest
+from digi.xbee.models.address import XBee64BitAddress
+from digi.xbee.models.mode import OperatingMode
+from digi.xbee.packets.base import XBeePacket
+from digi.xbee.packets.factory import build_frame
+from digi.xbee.packets.raw import RX64Packet, TX64Packet, TXStatusPacket
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sslfr_drivers import messages as m
+from sslfr_drivers.link import BoardLink, LinkState
+from sslfr_drivers.sim.axis import AxisConfig, AxisSim
+from sslfr_drivers.sim.base import FaultInjector
+from sslfr_drivers.sim.runner import SimControl, SimThread
+from sslfr_drivers.sim.xbee import ApiParser, XBeeSimCoordinator, api_frame
+from sslfr_drivers.transport import make_transport
+
+# addresses containing bytes that must be escaped (0x7E, 0x7D, 0x11, 0x13)
+ADDR_A = '0013A2007E7D1113'
+ADDR_B = '0013A20040000002'
+
+
+def wait_for(pred, timeout, step=0.01):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(step)
+    return pred()
+
+
+@given(st.binary(min_size=8, max_size=8), st.binary(max_size=100), st.integers(1, 255))
+def test_api_codec_matches_digi_xbee(addr, data, frame_id):
+    """Our escaped API codec and digi-xbee's packet classes agree both ways."""
+    tx = TX64Packet(frame_id, XBee64BitAddress(addr), 0, data,
+                    op_mode=OperatingMode.ESCAPED_API_MODE)
+    raw = tx.output(escaped=True)
+    frames = ApiParser().feed(raw)
+    assert frames == [bytes((0x00, frame_id)) + addr + b'\x00' + data]
+    ours = api_frame(bytes((0x80,)) + addr + bytes((0x28, 0)) + data)
+    # digi-xbee's reader unescapes a packet before building it (reader.py)
+    pkt = build_frame(XBeePacket.unescape_data(bytearray(ours)), OperatingMode.ESCAPED_API_MODE)
+    assert isinstance(pkt, RX64Packet)
+    assert bytes(pkt.x64bit_source_addr.address) == addr
+    assert bytes(pkt.rf_data or b'') == data
+    status = build_frame(XBeePacket.unescape_data(bytearray(api_frame(bytes((0x89, frame_id, 1))))),
+                         OperatingMode.ESCAPED_API_MODE)
+    assert isinstance(status, TXStatusPacket) and status.frame_id == frame_id
+
+
+def test_api_parser_rejects_bad_checksum():
+    good = api_frame(b'\x89\x01\x00')
+    p = ApiParser()
+    assert p.feed(good[:-1] + bytes((good[-1] ^ 0xFF,)) + good) == [b'\x89\x01\x00']
+    assert p.bad_checksums == 1
+
+
+@pytest.fixture
+def xbee_sim():
+    host = XBeeSimCoordinator()
+    host.add_board(bytes.fromhex(ADDR_A), AxisSim(AxisConfig.for_axis('mirrors'), board_id=11,
+                                                  rng=random.Random(1)),
+                   FaultInjector(rng=random.Random(2)))
+    host.add_board(bytes.fromhex(ADDR_B),
+                   AxisSim(AxisConfig.for_axis('mobile_structure'), board_id=12,
+                           rng=random.Random(3)),
+                   FaultInjector(rng=random.Random(4)))
+    with SimThread(host) as sim:
+        yield sim
+
+
+def test_two_boards_behind_one_coordinator(xbee_sim):
+    la = BoardLink(make_transport(f'xbee:{xbee_sim.path}?addr={ADDR_A}'), heartbeat=0.25)
+    lb = BoardLink(make_transport(f'xbee:{xbee_sim.path}?addr={ADDR_B}'), heartbeat=0.25)
+    try:
+        la.start()
+        lb.start()
+        assert la.wait_up(5) and lb.wait_up(5)
+        coord = la.transport.coordinator
+        assert coord is lb.transport.coordinator            # one UART owner
+        assert coord._dev.operating_mode == OperatingMode.ESCAPED_API_MODE
+        assert coord.local_address == '0013A20040000000'
+        assert (la.info.board_id, lb.info.board_id) == (11, 12)
+        lb.set_zero(0)
+        lb.move_to(500, 3000)
+        assert wait_for(lambda: not lb.get_status().moving, 2)
+        assert lb.get_status().position == 500
+        assert xbee_sim.host.boards[0][1].counter == 0      # A untouched
+        # cut B's radio: its transmissions fail (TX status != 0) and are counted,
+        # A is unaffected; B recovers afterwards
+        xbee_sim.command(f'disconnect 0.6 @{ADDR_B.lower()}')
+        time.sleep(0.7)
+        assert lb.transport.tx_failures > 0 and lb.tx_failures == lb.transport.tx_failures
+        assert la.transport.tx_failures == 0 and la.state == LinkState.UP
+        assert wait_for(lambda: lb.state == LinkState.UP, 3)
+        assert lb.get_status().position == 500
+        assert coord.tx_failures == lb.transport.tx_failures
+    finally:
+        la.stop()
+        lb.stop()
+    assert not coord.is_open                                 # last board closed the UART
+
+
+def test_runner_xbee_process(tmp_path):
+    ctl = str(tmp_path / 'ctl')
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--xbee',
+         '--board', f'axis:mirrors@{ADDR_A}', '--board', f'axis:secondary_reflector@{ADDR_B}',
+         '--control', ctl, '--seed', '1'], stdout=subprocess.PIPE, text=True)
+    try:
+        path = proc.stdout.readline().split()[1]
+        link = BoardLink(make_transport(f'xbee:{path}?addr={ADDR_B}')).start()
+        try:
+            assert link.wait_up(5)
+            assert wait_for(lambda: os.path.exists(ctl), 2)
+            SimControl(ctl).cmd(f'reset @{ADDR_B.lower()}')
+            assert wait_for(lambda: link.resets >= 2, 3)
+            assert not link.get_status().homed
+            boards = SimControl(ctl).cmd('status')['boards']
+            assert [b['resets'] for b in boards] == [0, 1]
+        finally:
+            link.stop()
+    finally:
+        proc.terminate()
+        assert proc.wait(5) == 0
