@@ -1,0 +1,96 @@
+"""`sslfr up` with the real node executables against simulated axis boards on ptys
+(the boards a Pi would have on /dev/sslfr/*): lifecycle driven to active, a killed
+safety supervisor restarted and reported loudly, SIGTERM stops the axes first and
+everything within 5 s."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+
+import psutil
+import pytest
+import yaml
+
+from conftest import ROOT, NodeProcess, executable
+
+AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
+
+
+@pytest.fixture
+def axis_boards(ros_env, tmp_path):
+    exe = executable('sslfr_drivers', 'sim_board')
+    if not exe.exists():
+        pytest.fail('sim_board is not installed: run make setup')
+    boards = {}
+    for axis in AXES:
+        link = tmp_path / f'{axis}.pty'
+        boards[axis] = (NodeProcess([str(exe), '--kind', 'axis', '--axis', axis, '--link', str(link),
+                                     '--opt', f'initial_angle_deg={90 if axis == "mirrors" else 0}'],
+                                    ros_env, tmp_path / f'sim_{axis}.log'), link)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and not all(link.exists() for _, link in boards.values()):
+        time.sleep(0.05)
+    assert all(link.exists() for _, link in boards.values()), [p.output() for p, _ in boards.values()]
+    yield {a: str(link) for a, (_, link) in boards.items()}
+    for proc, _ in boards.values():
+        proc.stop()
+
+
+def test_up_activates_axes_reports_safety_restart_and_stops_axes_first(ros, ros_env, axis_boards, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from sslfr_drivers.lifecycle_util import get_state
+
+    site = tmp_path / 'site.yaml'
+    site.write_text(yaml.safe_dump({
+        '/**': {'ros__parameters': {'site': {'latitude_deg': 36.835, 'longitude_deg': -2.402, 'elevation': 22.0}}},
+        **{f'{a}_driver': {'ros__parameters': {'port': axis_boards[a]}} for a in AXES}}))
+    nodes = ['safety', *(f'{a}_driver' for a in AXES)]
+    logs = tmp_path / 'logs'
+    up = subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', ','.join(nodes),
+                           '--log-dir', str(logs)], env=ros_env, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    try:
+        states = {}
+
+        def all_active():
+            for a in AXES:
+                if states.get(a) != 'active':
+                    states[a] = get_state(ros.node, f'{a}_driver', timeout=1.0, executor=ros.executor)
+            return all(states.get(a) == 'active' for a in AXES)
+        assert ros.spin_until(all_active, 45), (states, (logs / 'mirrors_driver.log').read_text()
+                                                if (logs / 'mirrors_driver.log').exists() else '')
+        # kill the safety supervisor: restarted, reported loudly (stderr + diagnostics ERROR)
+        children = psutil.Process(up.pid).children(recursive=True)
+        safety = [p for p in children if any('__node:=safety' in a for a in p.cmdline())]
+        assert len(safety) == 1, [p.cmdline() for p in children]
+        os.kill(safety[0].pid, signal.SIGKILL)
+
+        def safety_error_reported():
+            return any(s.name == 'sslfr_supervisor: safety' and s.level == DiagnosticStatus.ERROR
+                       for arr in diags for s in arr.status)
+        assert ros.spin_until(safety_error_reported, 15)
+
+        def safety_back():
+            return len([p for p in psutil.Process(up.pid).children(recursive=True)
+                        if any('__node:=safety' in a for a in p.cmdline())]) == 1
+        assert ros.spin_until(safety_back, 15)
+        kids = psutil.Process(up.pid).children(recursive=True)
+        t0 = time.monotonic()
+        os.kill(up.pid, signal.SIGTERM)
+        out, _ = up.communicate(timeout=20)
+        took = time.monotonic() - t0
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGKILL)
+            up.wait(5)
+    assert up.returncode == 0, out
+    assert took < 5.0 + 1.0, (took, out)   # the supervisor's 5 s budget + its own start/exit
+    assert 'CRITICAL: safety DIED (exit code -9' in out and 'safety restarted (#1' in out, out
+    assert 'stopped in' in out
+    assert not [k for k in kids if k.is_running() and k.status() != psutil.STATUS_ZOMBIE], 'children left behind'
+    # the axes were stopped (deactivated: motor stopped) before the safety node got SIGINT
+    for a in AXES:
+        assert 'motor stopped' in (logs / f'{a}_driver.log').read_text()
