@@ -64,8 +64,8 @@ def _e0(t, site: Site, grid: spa.GeocentricGrid):
     """Topocentric elevation without refraction e_0 [deg] (fast path on ``grid``)."""
     e0, *_ = spa._topocentric_fast(np.atleast_1d(np.asarray(t, dtype=float)), math.degrees(site.latitude),
                                    math.degrees(site.longitude), site.elevation, site.pressure / 100.0,
-                                   site.temperature, site.delta_t, grid=grid)
-    return e0
+                                   site.temperature, site.delta_t, grid=grid, projections=False)
+    return np.degrees(e0)
 
 
 def crossings(t0: float, t1: float, site: Site, grid: spa.GeocentricGrid | None = None):
@@ -121,10 +121,8 @@ def hour_angle(t, site: Site, grid: spa.GeocentricGrid | None = None):
     t = np.atleast_1d(np.asarray(t, dtype=float))
     if grid is None:
         grid = spa.GeocentricGrid(float(t.min()), float(t.max()), site.delta_t)
-    _, _, _, g = grid(t)
-    jd = spa.julian_day(t)
-    h = spa.mean_sidereal_time(jd, spa.julian_century(jd)) + math.degrees(site.longitude) + g
-    return (h + 180.0) % 360.0 - 180.0
+    gha = grid(t)[3]
+    return (np.degrees(gha) + math.degrees(site.longitude) + 180.0) % 360.0 - 180.0
 
 
 def solar_transit(t_guess: float, site: Site, grid: spa.GeocentricGrid | None = None) -> float:

@@ -17,12 +17,12 @@ Two evaluation paths
     evaluated exactly on a grid of nodes every :data:`NODE_STEP` seconds (aligned on
     multiples of NODE_STEP since the Unix epoch, so the result of an instant never
     depends on the batch it is in) and interpolated linearly to each instant: the
-    quantities interpolated are sin(delta), cos(delta), the equatorial horizontal
-    parallax xi (eq. 33) and (Delta psi cos epsilon - alpha), i.e. the equation of
-    the equinoxes minus the right ascension. The mean sidereal time (eq. 28), which
-    turns 361 deg a day, is evaluated exactly per instant. With NODE_STEP = 600 s the
-    interpolation error is below 1e-8 deg (test_spa.py measures it against the exact
-    path; the bound follows from |d2 alpha/dt2| < 0.004 deg/day^2). The topocentric
+    quantities interpolated are sin(delta), cos(delta), sin(xi) (xi: equatorial
+    horizontal parallax, eq. 33) and the sun's apparent Greenwich hour angle
+    nu - alpha (eqs. 28-30), which is linear in time but for the slow variation of
+    alpha and of the nutation. With NODE_STEP = 600 s the interpolation error is
+    ~1e-8 deg (h^2/8 |d2 alpha/dt2| with |d2 alpha/dt2| < 0.004 deg/day^2;
+    test_spa.py measures it against the exact path). The topocentric
     part (eqs. 32-46) is evaluated per instant in the algebraically equivalent vector
     form of :func:`_topocentric_fast` (same geometry, fewer transcendental calls).
 
@@ -471,17 +471,29 @@ def solar_position_exact(unixtime, latitude, longitude, elevation=0.0, pressure=
 
 
 # ------------------------------------------------------------ fast path
-def _node_values(k, delta_t):
-    """Exact geocentric values at the nodes k*NODE_STEP: sin d, cos d, sin xi, g [deg].
+_TWO_PI = 2.0 * np.pi
+_NODE_FIELDS = 4  # sin(delta), cos(delta), sin(xi), Greenwich hour angle of the sun
 
-    g = Delta psi cos(epsilon) - alpha, so that H = nu0 + sigma + g (eqs. 29, 32).
+
+def _node_values(k, delta_t):
+    """Exact geocentric values at the nodes k*NODE_STEP (eqs. 5-31, 33).
+
+    Returns sin(delta), cos(delta), sin(xi) and the sun's apparent Greenwich hour
+    angle nu - alpha [rad] (eqs. 29-30; H = nu - alpha + sigma, eq. 32), 0..2 pi.
     """
     tn = k * NODE_STEP
     dt = delta_t_model(tn) if delta_t is None else np.broadcast_to(np.asarray(delta_t, float), tn.shape)
     g = geocentric(julian_day(tn), dt)
     dr = np.radians(g['delta'])
-    eq = g['dpsi'] * np.cos(np.radians(g['epsilon'])) - g['alpha']
-    return np.sin(dr), np.cos(dr), np.sin(np.radians(equatorial_horizontal_parallax(g['R']))), eq
+    gha = np.radians((g['nu'] - g['alpha']) % 360.0)
+    return np.sin(dr), np.cos(dr), np.sin(np.radians(equatorial_horizontal_parallax(g['R']))), gha
+
+
+def _slopes(v0, v1):
+    """Per-interval increments of the node quantities (hour angle wrapped to +/-pi)."""
+    d = [b - a for a, b in zip(v0, v1)]
+    d[3] = (d[3] + np.pi) % _TWO_PI - np.pi
+    return d
 
 
 class GeocentricGrid:
@@ -499,50 +511,58 @@ class GeocentricGrid:
         self.k0 = float(np.floor(t0 / NODE_STEP))
         k1 = float(np.floor(t1 / NODE_STEP)) + 2.0  # one spare node: t1 may be rounded up to a node
         self.nodes = np.arange(self.k0, k1 + 1.0)
-        self.sd, self.cd, self.sx, self.g = _node_values(self.nodes, delta_t)
+        v = _node_values(self.nodes, delta_t)
+        self.values = [x[:-1].copy() for x in v]
+        self.slopes = _slopes([x[:-1] for x in v], [x[1:] for x in v])
 
     def __call__(self, t):
-        """Interpolated (sin d, cos d, sin xi, g) at instants ``t`` inside the grid."""
-        s = np.asarray(t, dtype=float) / NODE_STEP
+        """Interpolated (sin d, cos d, sin xi, Greenwich hour angle [rad]) at ``t``."""
+        s = np.asarray(t, dtype=float) / NODE_STEP - self.k0
         k = np.floor(s)
         f = s - k
-        i = (k - self.k0).astype(np.intp)
-        if i.size and (i.min() < 0 or i.max() + 1 >= self.nodes.size):
+        i = k.astype(np.intp)
+        if i.size and (i.min() < 0 or i.max() >= self.values[0].size):
             raise ValueError('instant outside the geocentric grid')
-        return _interpolate(self.sd, self.cd, self.sx, self.g, i, i + 1, f)
-
-
-def _interpolate(sd, cd, sx, g, i, j, f):
-    dg = (g[j] - g[i] + 180.0) % 360.0 - 180.0
-    return (sd[i] + f * (sd[j] - sd[i]), cd[i] + f * (cd[j] - cd[i]),
-            sx[i] + f * (sx[j] - sx[i]), g[i] + f * dg)
+        out = []
+        for v, d in zip(self.values, self.slopes):
+            r = d[i]
+            r *= f
+            r += v[i]
+            out.append(r)
+        return out
 
 
 def _interpolated_geocentric(t, delta_t):
-    """sin delta, cos delta, sin xi and g [deg] at instants ``t`` (linear between nodes).
+    """Interpolated geocentric quantities at instants ``t`` (see :class:`GeocentricGrid`).
 
-    Dense batches use one contiguous node range (:class:`GeocentricGrid`); sparse ones
-    (e.g. random instants over decades) only the two nodes around each instant. Both
-    give the same number for the same instant: nodes are absolute (k*NODE_STEP).
+    Dense batches use one contiguous node range; sparse ones (e.g. random instants
+    over decades) only the two nodes around each instant. Both give the same number
+    for the same instant, since the nodes are absolute (k*NODE_STEP).
     """
     n = t.size
     if n == 0:
-        return (t.copy(),) * 4
+        return [t.copy() for _ in range(_NODE_FIELDS)]
     kmin, kmax = np.floor(t.min() / NODE_STEP), np.floor(t.max() / NODE_STEP)
     if np.ndim(delta_t) == 0 and kmax - kmin + 2 <= 2 * n + 2:
         return GeocentricGrid(float(t.min()), float(t.max()), delta_t)(t)
     s = t / NODE_STEP
     k = np.floor(s)
+    f = s - k
     if np.ndim(delta_t) != 0:
         delta_t = np.concatenate([np.broadcast_to(np.asarray(delta_t, float), t.shape)] * 2)
-    sd, cd, sx, g = _node_values(np.concatenate([k, k + 1.0]), delta_t)
-    i = np.arange(n)
-    return _interpolate(sd, cd, sx, g, i, i + n, s - k)
+    v = _node_values(np.concatenate([k, k + 1.0]), delta_t)
+    v0, v1 = [x[:n] for x in v], [x[n:] for x in v]
+    return [a + f * d for a, d in zip(v0, _slopes(v0, v1))]
+
+
+def _observer_terms(lat_deg, elevation):
+    u = u_term(lat_deg)
+    return x_term(u, lat_deg, elevation), y_term(u, lat_deg, elevation)
 
 
 def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, delta_t,
-                      atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None):
-    """Fast path: e0, zenith, azimuth [deg] and (theta_t, theta_l) [rad] at instants ``t``.
+                      atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None, projections=True):
+    """Fast path: e0, zenith, azimuth, theta_t, theta_l [rad] at instants ``t``.
 
     Equations 32-46 in vector form. With H the local hour angle (eq. 32), the sun seen
     from the observer, in units of the sun's distance and in the equatorial frame
@@ -551,41 +571,67 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     (eq. 40 with eq. 37) and its declination d' (eq. 39). Rotated to the horizon:
     up = sin(phi) Z + cos(phi) X, south = sin(phi) X - cos(phi) Z, west = Y, so
     e0 = atan2(up, |(south, west)|) (eq. 41) and Gamma = atan2(west, south) (eq. 45).
-    Refraction (eq. 42) turns the vector by Delta e in its vertical plane (sin and cos
-    of Delta e < 0.011 rad by their series to 1e-18), which gives the projection
-    angles of :mod:`sslfr_planner.geometry` without further trigonometry.
+    sin H and cos H come from tan(H/2) (one tangent instead of two calls). Refraction
+    (eq. 42) raises the vector in its vertical plane to the apparent elevation e, so
+    the apparent sun vector is proportional to (horizontal components, |horizontal|
+    tan e), which gives the projection angles of :mod:`sslfr_planner.geometry`.
+    ``projections=False`` skips theta_t, theta_l (returned as None).
     """
-    sd, cd, sx, g = _interpolated_geocentric(t, delta_t) if grid is None else grid(t)
-    jd = julian_day(t)
-    nu0 = mean_sidereal_time(jd, julian_century(jd))
-    H = np.radians(nu0 + (lon_deg + g))
-    u = u_term(lat_deg)
-    x = x_term(u, lat_deg, elevation)
-    y = y_term(u, lat_deg, elevation)
-    X = cd * np.cos(H) - x * sx
-    Y = cd * np.sin(H)
-    Z = sd - y * sx
-    sphi, cphi = np.sin(np.radians(lat_deg)), np.cos(np.radians(lat_deg))
-    up = sphi * Z + cphi * X
-    south = sphi * X - cphi * Z
-    hor = np.sqrt(south * south + Y * Y)
-    e0 = np.degrees(np.arctan2(up, hor))
-    de = refraction_correction(pressure, temperature, e0, atmos_refract)
-    zenith = 90.0 - (e0 + de)
-    azimuth = np.degrees(np.arctan2(-Y, -south)) % 360.0
-    der = np.radians(de)
-    d2 = der * der
-    sde = der * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0))
-    cde = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0))
-    up_r = up * cde + hor * sde
-    hor_r = hor * cde - up * sde
-    cg, sg = np.cos(collector_azimuth), np.sin(collector_azimuth)
-    trans = Y * cg - south * sg  # component along the collector's transversal (+x, "west") axis
-    longi = south * cg + Y * sg  # component along the collector's +p ("south") axis
-    hu = hor * up_r
-    theta_t = np.arctan2(trans * hor_r, hu)
-    theta_l = np.arctan2(longi * hor_r, hu)
-    return e0, zenith, azimuth, theta_t, theta_l
+    sd, cd, sx, gha = _interpolated_geocentric(t, delta_t) if grid is None else grid(t)
+    x, y = _observer_terms(lat_deg, elevation)
+    h = gha  # (owned temporary: modified in place)
+    h += np.radians(lon_deg)
+    h *= 0.5
+    th = np.tan(h)
+    t2 = th * th
+    den = t2 + 1.0
+    np.divide(cd, den, out=den)             # cos d / (1 + tan^2(H/2))
+    X = 1.0 - t2
+    X *= den
+    X -= x * sx                             # cos d cos H - x sin xi
+    Y = th
+    Y *= 2.0
+    Y *= den                                # cos d sin H
+    Z = sx
+    Z *= -y
+    Z += sd                                 # sin d - y sin xi
+    phi = np.radians(lat_deg)
+    sphi, cphi = np.sin(phi), np.cos(phi)
+    up = sphi * Z
+    up += cphi * X
+    south = sphi * X
+    south -= cphi * Z
+    hor = south * south
+    hor += Y * Y
+    np.sqrt(hor, out=hor)
+    e0 = np.arctan2(up, hor)
+    # refraction, eq. 42 (degrees inside), zero below -(0.26667 + atmos_refract) deg
+    e0d = e0 * (180.0 / np.pi)
+    safe = np.maximum(e0d, -2.0)
+    arg = safe + 5.11
+    np.divide(10.3, arg, out=arg)
+    arg += safe
+    arg *= np.pi / 180.0
+    de = np.tan(arg)
+    np.divide(pressure / 1010.0 * 283.0 / (273.0 + temperature) * 1.02 / 60.0 * np.pi / 180.0, de, out=de)
+    de *= e0d >= -(SUN_RADIUS + atmos_refract)
+    e = e0 + de                             # eq. 43
+    zenith = np.pi / 2 - e                  # eq. 44
+    Y_neg = -Y
+    az = np.arctan2(Y_neg, south)           # -Gamma (eq. 45)
+    np.subtract(np.pi, az, out=az)          # eq. 46: Gamma + 180 deg, in [0, 2 pi)
+    if not projections:
+        return e0, zenith, az, None, None
+    if collector_azimuth:
+        cg, sg = np.cos(collector_azimuth), np.sin(collector_azimuth)
+        trans = Y * cg - south * sg  # along the collector's transversal +x ("west") axis
+        longi = south * cg + Y * sg  # along the collector's +p ("south") axis
+    else:
+        trans, longi = Y, south
+    # the apparent sun vector is (trans, longi, hor tan e) up to the factor cos e > 0
+    np.tan(e, out=e0d)
+    e0d *= hor
+    return e0, zenith, az, np.arctan2(trans, e0d), np.arctan2(longi, e0d)
 
 
 @dataclass
@@ -647,7 +693,7 @@ def sun_position(t, site, exact: bool = False, collector_azimuth: float = 0.0,
         return SunPosition(zen, az, np.radians(r['e0']), tt, tl)
     e0, zen, az, tt, tl = _topocentric_fast(t, lat, lon, site.elevation, p_mbar, site.temperature,
                                             site.delta_t, collector_azimuth=collector_azimuth, grid=grid)
-    return SunPosition(np.radians(zen), np.radians(az), np.radians(e0), tt, tl)
+    return SunPosition(zen, az, e0, tt, tl)
 
 
 def solar_position(unixtime, latitude, longitude, elevation=0.0, pressure=1013.25, temperature=12.0,
@@ -663,5 +709,5 @@ def solar_position(unixtime, latitude, longitude, elevation=0.0, pressure=1013.2
                                  atmos_refract)
         return r['zenith'], r['azimuth'], r['e0']
     e0, zen, az, _, _ = _topocentric_fast(t, float(latitude), float(longitude), elevation, pressure,
-                                          temperature, delta_t, atmos_refract)
-    return zen, az, e0
+                                          temperature, delta_t, atmos_refract, projections=False)
+    return np.degrees(zen), np.degrees(az), np.degrees(e0)

@@ -1,0 +1,102 @@
+"""``sslfr plan``: the per-step day table as CSV (degrees in, degrees out).
+
+One row per step of the whole UTC day: sun zenith and azimuth (NREL SPA), transversal
+and longitudinal incidence angles, the day-cycle phase and the commanded axis
+angles (:func:`sslfr_planner.daytable.plan_day`). Header (exact)::
+
+    utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,mobile_structure_deg,secondary_reflector_deg
+
+Bad input (latitude 91, 2023-02-30, step 0, ...) exits 2 with one line on stderr.
+"""
+from __future__ import annotations
+
+import datetime
+import math
+import sys
+
+import numpy as np
+
+from ._cliutil import OneLineParser, finite_float, run
+from .collector import LAWS, Collector
+from .daytable import PHASE_NAMES, plan_day
+from .site import Site
+
+HEADER = ('utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,'
+          'mobile_structure_deg,secondary_reflector_deg')
+
+
+def _date(text: str) -> datetime.date:
+    try:
+        return datetime.date.fromisoformat(text)
+    except ValueError:
+        import argparse
+        raise argparse.ArgumentTypeError(f'not a valid date YYYY-MM-DD: {text!r}') from None
+
+
+def parser() -> OneLineParser:
+    """The argument parser of ``sslfr plan``."""
+    p = OneLineParser(prog='sslfr plan', description='Per-step day table of the tracker as CSV '
+                      '(whole UTC day; angles in degrees).')
+    p.add_argument('--lat', type=finite_float, required=True, help='latitude [deg], north positive')
+    p.add_argument('--lon', type=finite_float, required=True, help='longitude [deg], east positive')
+    p.add_argument('--elevation', type=finite_float, default=0.0, help='elevation [m] (default 0)')
+    p.add_argument('--date', type=_date, default=None, help='UTC date YYYY-MM-DD (default: today, UTC)')
+    p.add_argument('--step', type=finite_float, default=1.0, help='time step [s] (default 1)')
+    p.add_argument('--mode', choices=LAWS, default='continuous',
+                   help='longitudinal law of the mobile structure and secondary reflector')
+    p.add_argument('--collector-azimuth', type=finite_float, default=0.0,
+                   help='azimuth of the collector axis, clockwise from north [deg] (default 0: N-S)')
+    p.add_argument('--pressure', type=finite_float, default=1013.25, help='mean air pressure [hPa]')
+    p.add_argument('--temperature', type=finite_float, default=12.0, help='mean air temperature [degC]')
+    p.add_argument('--delta-t', type=finite_float, default=None,
+                   help='TT - UT [s] (default: Espenak-Meeus model)')
+    p.add_argument('--out', default=None, help='output CSV file (default: stdout)')
+    return p
+
+
+def format_rows(table) -> list[str]:
+    """CSV lines (without header) of a DayTable, degrees with 6 decimals."""
+    t = table.t
+    whole = np.all(np.abs(t - np.round(t)) < 5e-4)
+    stamps = np.datetime_as_string(np.round(t * 1000.0).astype('datetime64[ms]'),
+                                   unit='s' if whole else 'ms', timezone='UTC')
+    names = np.array([PHASE_NAMES[i] for i in range(7)], dtype=object)[table.phase]
+    cols = [np.degrees(getattr(table, k)) for k in ('zenith', 'azimuth', 'transversal', 'longitudinal',
+                                                   'mirrors', 'mobile_structure', 'secondary_reflector')]
+    cols = np.round(np.stack(cols, axis=1), 6) + 0.0  # + 0.0: no "-0.000000"
+    fmt = '%s,%s,' + ','.join(['%.6f'] * 7)
+    return [fmt % (s, n, *row) for s, n, row in zip(stamps, names, cols.tolist())]
+
+
+def _main(argv) -> int:
+    a = parser().parse_args(argv)
+    if not -90.0 <= a.lat <= 90.0:
+        raise ValueError(f'latitude must be within -90..90 deg, got {a.lat:g}')
+    if not -180.0 <= a.lon <= 180.0:
+        raise ValueError(f'longitude must be within -180..180 deg, got {a.lon:g}')
+    if not 0.0 < a.step <= 86400.0:
+        raise ValueError(f'step must be > 0 and <= 86400 s, got {a.step:g}')
+    if not 10.0 <= a.pressure <= 1200.0:
+        raise ValueError(f'pressure must be within 10..1200 hPa, got {a.pressure:g}')
+    day = a.date or datetime.datetime.now(datetime.timezone.utc).date()
+    site = Site.from_degrees(a.lat, a.lon, a.elevation, pressure=a.pressure * 100.0,
+                             temperature=a.temperature, delta_t=a.delta_t)
+    collector = Collector(law=a.mode, azimuth=math.radians(a.collector_azimuth))
+    table = plan_day(day, site, collector, a.step)
+    text = HEADER + '\n' + '\n'.join(format_rows(table)) + '\n'
+    if a.out:
+        with open(a.out, 'w', encoding='ascii') as fh:
+            fh.write(text)
+    else:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    return 0
+
+
+def main(argv=None) -> int:
+    """Entry point of ``sslfr plan`` (returns the exit status)."""
+    return run('plan', _main, sys.argv[1:] if argv is None else argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
