@@ -68,53 +68,38 @@ class Costs:
 
 # --- sun positions and laws ------------------------------------------------------------
 
+def _site(site: AnalysisSite):
+    from .site import Site
+    return Site.from_degrees(site.latitude_deg, site.longitude_deg, site.elevation)
+
+
 def sun_positions(t, site: AnalysisSite):
     """Topocentric apparent zenith and azimuth (clockwise from north) [rad] at UTC ``t`` [s].
 
-    Uses the project's NREL SPA implementation (sslfr_planner.spa).
+    The project's NREL SPA (:func:`sslfr_planner.spa.sun_position`, fast path).
     """
-    from .site import Site
-    from .spa import solar_position
+    from .spa import sun_position
 
-    s = Site.from_degrees(site.latitude_deg, site.longitude_deg, site.elevation)
-    zen, azi = solar_position(np.asarray(t, dtype=float), s)
-    return np.asarray(zen), np.asarray(azi)
+    pos = sun_position(np.asarray(t, dtype=float), _site(site))
+    return pos.zenith, pos.azimuth
 
 
-def longitudinal_tilts(law: str, zenith, azimuth, latitude_deg: float, t=None, collector_azimuth=0.0):
-    """Tilts (beta_M, beta_a) of the mobile structure and the reflector [rad], optics frame.
+def longitudinal_tilts(law: str, zenith, azimuth, t, site: AnalysisSite):
+    """Tilts (beta_M, beta_a) of the mobile structure and the reflector [rad].
 
-    Signed in the optics frame of :mod:`sslfr_planner.optics` (positive faces the
-    south; a southern-hemisphere site gets negative tilts, i.e. facing north).
-
-    * ``continuous``: beta_M = beta_a = theta_z / 2 toward the sun's side of the
-      transversal plane (seed 000 eq. 16);
-    * ``optimum_fixed``: beta_M = latitude / 2, beta_a = latitude (seed 001 eqs. 16, 19);
-    * ``horizontal``: 0, 0 (the classic large-scale LFR);
-    * ``daily``: both set once a day to half the noon zenith angle |latitude - delta|
-      (seed 000 section 1), declination delta from Spencer's series (seed 000 eq. 3).
+    The planner's own laws (:mod:`sslfr_planner.laws` through the day table), so the
+    analysis judges exactly what the tracker commands: ``continuous`` (seed 000
+    eq. 16), ``optimum_fixed`` (seed 001 eqs. 16, 19), ``horizontal``, ``daily``.
+    Signs as docs/conventions.md (positive faces the south end).
     """
-    z = np.asarray(zenith, dtype=float)
-    lat = np.radians(latitude_deg)
-    if law == 'continuous':
-        _, tl = optics.projection_angles(z, azimuth, collector_azimuth)
-        beta = np.sign(tl) * z / 2.0
-        return beta, beta
-    if law == 'optimum_fixed':
-        return np.full_like(z, lat / 2.0), np.full_like(z, lat)
-    if law == 'horizontal':
-        return np.zeros_like(z), np.zeros_like(z)
-    if law == 'daily':
-        if t is None:
-            raise ValueError("law 'daily' needs the instants t")
-        doy = np.array([datetime.fromtimestamp(float(x), tz=timezone.utc).timetuple().tm_yday
-                        for x in np.atleast_1d(t)]).reshape(np.shape(t))
-        gam = 2 * np.pi * (doy - 1) / 365.0
-        dec = (0.006918 - 0.399912 * np.cos(gam) + 0.070257 * np.sin(gam) - 0.006758 * np.cos(2 * gam)
-               + 0.000907 * np.sin(2 * gam) - 0.002697 * np.cos(3 * gam) + 0.00148 * np.sin(3 * gam))
-        beta = (lat - dec) / 2.0
-        return beta, beta
-    raise ValueError(f'unknown law {law!r}; expected one of {", ".join(LAWS)}')
+    from .collector import Collector
+    from .daytable import _longitudinal
+
+    if law not in LAWS:
+        raise ValueError(f'unknown law {law!r}; expected one of {", ".join(LAWS)}')
+    _, tl = optics.projection_angles(zenith, azimuth, site.collector_azimuth)
+    collector = Collector(law=law, azimuth=site.collector_azimuth)
+    return _longitudinal(np.asarray(zenith, dtype=float), tl, np.asarray(t, dtype=float), _site(site), collector)
 
 
 # --- seed 000 section 5.2: tracking error ------------------------------------------------
@@ -131,18 +116,16 @@ class ErrorRow:
     loss_total: float            # (Q - Q^e) / Q * 100 [%] (seed 000 eq. 24)
 
 
-def solar_time_instant(day: date, hour: float, longitude_deg: float) -> float:
-    """UTC instant [s] of a solar time ``hour`` [h] on ``day`` at ``longitude_deg`` [deg].
+def solar_time_instant(day: date, hour: float, site: AnalysisSite) -> float:
+    """UTC instant [s] of the local apparent solar time ``hour`` [h] on ``day``.
 
-    Solar time = UTC + longitude / 15 h + equation of time (Spencer 1971, as used with
-    seed 000 eqs. 2-4), so the hours of seed 000 Figs. 21-24 are local solar hours.
+    Solar noon is the sun's transit from the SPA (:func:`sslfr_planner.events.solar_transit`);
+    the seed's 9:00/12:00/15:00 (Figs. 21-24) are solar hours, 15 deg of hour angle each.
     """
-    doy = day.timetuple().tm_yday
-    gam = 2 * np.pi * (doy - 1) / 365.0
-    eot_min = 229.18 * (0.000075 + 0.001868 * np.cos(gam) - 0.032077 * np.sin(gam)
-                        - 0.014615 * np.cos(2 * gam) - 0.040849 * np.sin(2 * gam))
-    midnight = datetime(day.year, day.month, day.day, tzinfo=timezone.utc).timestamp()
-    return midnight + 3600.0 * hour - 240.0 * longitude_deg - 60.0 * eot_min
+    from .events import local_mean_noon, solar_transit
+
+    s = _site(site)
+    return solar_transit(local_mean_noon(day, s), s) + 3600.0 * (hour - 12.0)
 
 
 def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours, sun=None):
@@ -172,7 +155,7 @@ def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hou
     rows = []
     for day in days:
         for hour in hours:
-            t = solar_time_instant(day, hour, site.longitude_deg)
+            t = solar_time_instant(day, hour, site)
             zen, azi = sun(np.array([t]), site)
             if zen[0] >= np.pi / 2:
                 continue
@@ -252,8 +235,7 @@ def annual_energy(sky: YearSky, site: AnalysisSite, params: OpticalParameters, l
     installation must leave room for every position: for ``continuous`` that is the
     flat position at sunrise).
     """
-    bm, ba = longitudinal_tilts(law, sky.zenith, sky.azimuth, site.latitude_deg, sky.t,
-                                site.collector_azimuth)
+    bm, ba = longitudinal_tilts(law, sky.zenith, sky.azimuth, sky.t, site)
     if model == 'seed000':
         q = optics.power_seed000(sky.dni, sky.zenith, sky.azimuth, bm, ba, params,
                                  collector_azimuth=site.collector_azimuth)
@@ -390,3 +372,28 @@ def days_of_year(year: int) -> list[date]:
     """Every date of ``year``."""
     d0 = date(year, 1, 1)
     return [d0 + timedelta(days=k) for k in range((date(year + 1, 1, 1) - d0).days)]
+
+
+def day_energy(t, dni, zenith, azimuth, mirrors, beta_m, beta_a, params: OpticalParameters,
+               collector_azimuth: float = 0.0) -> float:
+    """Energy absorbed over recorded samples [Wh] (seed 000 eqs. 18, 20 and 25).
+
+    For a recorded day: ``mirrors`` is the central mirror's tilt actually held [rad]
+    (west positive, as the ``mirrors`` joint), so the tracking error of every mirror
+    is epsilon = theta_t / 2 - mirrors (all mirrors share one drive, seed 000 section
+    2.4.1); ``beta_m`` and ``beta_a`` are the longitudinal tilts held [rad] in the optics
+    frame. Pass the ideal angles to get the ideal energy, the measured ones to get the
+    achieved energy. The power is integrated with the trapezoidal rule over ``t`` [s].
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size < 2:
+        return 0.0
+    z = np.asarray(zenith, dtype=float)
+    tt, tl = optics.projection_angles(z, azimuth, collector_azimuth)
+    error = tt / 2.0 - np.asarray(mirrors, dtype=float)
+    cap = optics.transversal_capture(tt, params, error=error)
+    l_abs = optics.illuminated_length(tl, np.asarray(beta_m, dtype=float), np.asarray(beta_a, dtype=float), params)
+    q = np.asarray(dni, dtype=float) * np.where(z < np.pi / 2, l_abs, 0.0) * np.sum(
+        optics.optical_yield(params) * cap, axis=-1)
+    q = np.nan_to_num(q, nan=0.0)
+    return float(np.sum((q[1:] + q[:-1]) / 2.0 * np.diff(t)) / 3600.0)

@@ -32,6 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import geometry
+from .geometry import projection_angles  # noqa: F401 - part of this module's API (seed 000 eqs. 9-10)
+
 
 @dataclass(frozen=True)
 class OpticalParameters:
@@ -116,8 +119,7 @@ def mirror_positions(p: OpticalParameters) -> np.ndarray:
     Seed 000 eq. 15: L_i = i (W_M + d); left mirrors at -L_i, right at +L_i. Ordered
     from the n-th left mirror (``nL``) through the central one (``C``) to ``nR``.
     """
-    i = np.arange(-p.n_per_side, p.n_per_side + 1)
-    return i * (p.mirror_width + p.gap)
+    return geometry.mirror_positions(p.n_per_side, p.mirror_width, p.gap)
 
 
 def mirror_labels(p: OpticalParameters) -> list[str]:
@@ -138,7 +140,7 @@ def receiver_angles(p: OpticalParameters) -> np.ndarray:
     is west-positive, so a mirror on the west side (x_i > 0) sends its ray east:
     psi_i = -arctan(x_i / (f + D/2)).
     """
-    return -np.arctan(mirror_positions(p) / aim_height(p))
+    return geometry.receiver_angles(mirror_positions(p), p.receiver_height, p.tube_diameter)
 
 
 def optical_yield(p: OpticalParameters) -> np.ndarray:
@@ -160,8 +162,7 @@ def ideal_tilts(transversal: np.ndarray, p: OpticalParameters) -> np.ndarray:
     seed's left/right sign cases folded into the signed psi_i (beta_0 = theta_t / 2 for
     the central mirror, eq. 13).
     """
-    tt = np.asarray(transversal, dtype=float)[..., None]
-    return (tt + receiver_angles(p)) / 2.0
+    return geometry.mirror_tilts(transversal, mirror_positions(p), p.receiver_height, p.tube_diameter)
 
 
 def transversal_capture(transversal, p: OpticalParameters, error=0.0, tilts=None):
@@ -274,17 +275,6 @@ def sun_vector(zenith, azimuth, collector_azimuth=0.0):
     south = -np.sin(z) * np.cos(a)
     up = np.cos(z)
     return np.stack(np.broadcast_arrays(west, south, up), axis=-1)
-
-
-def projection_angles(zenith, azimuth, collector_azimuth=0.0):
-    """Transversal and longitudinal incidence angles [rad] (seed 000 eqs. 9-10).
-
-    theta_t = arctan(sin gamma_S / tan alpha_S), west positive; theta_l =
-    arctan(cos gamma_S / tan alpha_S), south positive; here evaluated as
-    atan2 of the sun vector's components so they hold for any sun position.
-    """
-    v = sun_vector(zenith, azimuth, collector_azimuth)
-    return np.arctan2(v[..., 0], v[..., 2]), np.arctan2(v[..., 1], v[..., 2])
 
 
 def incidence_cosines(zenith, azimuth, beta_m, p: OpticalParameters, collector_azimuth=0.0,
