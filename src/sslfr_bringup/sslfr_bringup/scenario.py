@@ -159,3 +159,50 @@ def tracking_error(t: np.ndarray, measured: np.ndarray, ideal_fn, lag: float = 0
         best = np.minimum(best, interval_distance(measured, prev, cur))
         prev = cur
     return best
+
+
+# ------------------------------------------------------------------------------ reference
+def planner_config(config: str | Path) -> dict:
+    """The planner's parameter values for a site config: its defaults overlaid by the
+    config's ``/**`` and ``planner`` sections (``sslfr_planner.planner_params``)."""
+    from sslfr_bringup import nodeset
+    from sslfr_planner import planner_params
+
+    cfg = planner_params.defaults()
+    for key, value in nodeset.node_params(nodeset.read_params(config), 'planner').items():
+        if key in cfg:
+            cfg[key] = value
+    return cfg
+
+
+def reference(config: str | Path, latitude_deg: float, longitude_deg: float, elevation: float):
+    """``table(t) -> DayTable``: the ephemeris core's ideal table
+    (:func:`sslfr_planner.daytable.evaluate`, NREL SPA + seed 000 eqs. 9-16) for the
+    config's collector at the given site [deg, deg, m] (the site the planner reports
+    in ``tracker/phase``)."""
+    from sslfr_planner import daytable
+    from sslfr_planner.day_planner import make_collector, make_site
+    from sslfr_planner.site_source import SiteFix
+
+    cfg = planner_config(config)
+    site = make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters'))
+    collector = make_collector(cfg)
+    return lambda t: daytable.evaluate(np.atleast_1d(np.asarray(t, dtype=float)), site, collector)
+
+
+# ------------------------------------------------------------------------------ running
+def run_sim(args: list[str], env: dict, out: str | Path, timeout: float = 300.0):
+    """Run ``sslfr sim ARGS --out OUT`` as a process; return
+    ``(completed_process, summary dict from OUT/sim.json, newest bag dir or None)``."""
+    import json
+    import os
+    import subprocess
+
+    root = Path(os.environ.get('SSLFR_ROOT') or Path(__file__).resolve().parents[3])
+    out = Path(out)
+    proc = subprocess.run([str(root / 'sslfr'), 'sim', *args, '--out', str(out)], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+    summary = json.loads((out / 'sim.json').read_text()) if (out / 'sim.json').exists() else {}
+    bags = sorted((p for p in (Path(summary['bags']).iterdir() if summary.get('bags') else [])
+                   if (p / 'metadata.yaml').exists()), key=lambda p: p.stat().st_mtime)
+    return proc, summary, (bags[-1] if bags else None)
