@@ -221,6 +221,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
     if any(n.name == 'recorder' for n in ns.nodes):
         extra.setdefault('recorder', {})['output_dir'] = str(bag_root)
+    if any(n.name == 'planner' for n in ns.nodes):   # persisted site: per run, not ~/.local/state
+        extra.setdefault('planner', {})['state_dir'] = str(out / 'state')
     sim_ports = {b: str(p) for b, p in links.items()}
     node_progs, missing_nodes = _node_programs(ns, config, sim_ports, extra)
     missing += missing_nodes
@@ -377,7 +379,9 @@ def _report(bag_root: Path, out: Path) -> int:
     except ImportError:
         print('sslfr sim: MISSING the report module (sslfr_bringup.report): no report', file=sys.stderr)
         return 1
-    return int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
+    code = int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
+    print(f'plots: {out / "report"}/*.png')
+    return code
 
 
 def _hhmm(sod: float) -> str:
