@@ -84,7 +84,7 @@ class AbsorberBoardNode(Node):
         check_parameters(PARAMS, self._values)
         self._model = self._error_model(self._values)
         self._debouncer = SwitchDebouncer(self._values['debounce_time'])
-        self._clock = _BoardClock()
+        self._board_clock = _BoardClock()
         self._queue: collections.deque = collections.deque(maxlen=2000)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._meter = RateMeter()
@@ -146,7 +146,7 @@ class AbsorberBoardNode(Node):
                 self._publish_temperature('outlet', msg.outlet, stamp)
             else:
                 self._switch_meter.tick()
-                t = self._clock.seconds(msg.board_ms)
+                t = self._board_clock.seconds(msg.board_ms)
                 self._board_now = t
                 changed = self._debouncer.update(msg.bits, t)
                 for name in changed:
