@@ -1,0 +1,214 @@
+"""System scenarios, faults: every `--fault` spec of `./sslfr sim` produces its
+documented reaction (sslfr_bringup/faults.py), seen live on topics and in the bag.
+
+One simulated morning carries the faults one after the other (each given time to
+show its reaction and recover), so the node set starts once:
+
+  10:05 gps-loss +900 s     -> gps/fix NO_FIX; the planner keeps its site, tracking goes on
+  10:25 link-drop:mirrors +600 s (3 s wall) -> link not UP, frames lost; then UP and tracking
+  10:50 board-reset:mobile_structure -> the axis loses its reference, re-homes, tracks again
+  11:05 thermocouple-open +600 s -> outlet NaN; safety raises a thermocouple reason
+  11:25 kill:planner +500 s -> no trajectory; the drivers finish the horizon, then hold
+  11:50 overtemp            -> safety STOW (latched), mirrors to the sleeping position
+
+The safety supervisor kill (stow within 1.2 s, wall) is its own short run.
+"""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+from sslfr_bringup import nodeset, scenario
+from sslfr_bringup.sim import day_epoch, parse_hhmm
+
+DATE = '2026-06-21'
+DAY0 = day_epoch(DATE)
+SPEED = 200.0
+STEP = math.radians(0.006)
+TOL = STEP + 4 * math.radians(0.003)
+LAG = SPEED * 0.25
+
+
+def T(hhmm: str) -> float:
+    return DAY0 + parse_hhmm(hhmm)
+
+
+def _config() -> str:
+    try:
+        return str(nodeset.resolve_config('almeria_sslfr.yaml'))
+    except nodeset.NodeSetError as exc:
+        pytest.fail(f'site config missing: {exc}')
+
+
+def _sim(ros, env, out, args, timeout=150.0, watch=None):
+    cmd = [str(ROOT / 'sslfr'), 'sim', '--date', DATE, '--config', _config(), '--no-report',
+           '--out', str(out), *args]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        ros.spin_until(lambda: (watch() if watch else False) or proc.poll() is not None, timeout)
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+    text, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, text
+    summary = json.loads((out / 'sim.json').read_text())
+    bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
+    assert bags, text
+    return text, summary, scenario.read_day(bags[-1])
+
+
+@pytest.fixture(scope='module')
+def morning(tmp_path_factory):
+    """The faulty morning, run once for the tests of this module (own domain)."""
+    from conftest import RosHarness, _acquire_domain
+    import fcntl
+    import os
+    from sslfr_interfaces.msg import AxisStatus, SafetyState
+    from sensor_msgs.msg import NavSatFix, Temperature
+
+    dom, fh = _acquire_domain()
+    tmp = tmp_path_factory.mktemp('faults')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp / 'roslog'), PYTHONUNBUFFERED='1')
+    ros = RosHarness(dom)
+    live = {'fix': ros.collect(NavSatFix, 'gps/fix'), 'safety': ros.collect(SafetyState, 'safety/state'),
+            'mirrors': ros.collect(AxisStatus, 'axes/mirrors/status'),
+            'outlet': ros.collect(Temperature, 'absorber/outlet_temperature')}
+    faults = ['gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
+              'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@11:50']
+    args = ['--start', '09:55', '--end', '12:05', '--speed', str(SPEED)]
+    for f in faults:
+        args += ['--fault', f]
+    try:
+        text, summary, day = _sim(ros, env, tmp / 'out', args)
+    finally:
+        ros.close()
+        fcntl.flock(fh, fcntl.LOCK_UN)
+        fh.close()
+    return {'text': text, 'summary': summary, 'day': day, 'live': live}
+
+
+def _fired(morning, spec):
+    rec = [f for f in morning['summary']['faults'] if f['spec'] == spec and f['what'] == 'start']
+    assert rec and 'FAILED' not in str(rec[0]['result']), (spec, morning['summary']['faults'], morning['text'])
+    return rec[0]
+
+
+def _ref(day):
+    k = np.asarray(day.phase['site_source']) != ''
+    return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+                              float(np.median(day.phase['longitude'][k])), 22.0)
+
+
+def test_gps_loss_planner_keeps_the_site_and_tracks(morning):
+    from sensor_msgs.msg import NavSatStatus
+    _fired(morning, 'gps-loss@10:05+900')
+    day = morning['day']
+    lost = day.fix.between(T('10:07'), T('10:19'))
+    assert len(lost) and np.all(lost['status'] == NavSatStatus.STATUS_NO_FIX), lost['status']
+    assert any(m.status.status == NavSatStatus.STATUS_NO_FIX for m in morning['live']['fix'])
+    ph = day.phase.between(T('10:07'), T('10:19'))
+    assert len(ph) and set(ph['name']) == {'TRACKING'}
+    assert set(ph['site_source']) <= {'gps', 'persisted'}, set(ph['site_source'])
+    assert np.ptp(ph['latitude']) < 1e-3 and np.ptp(ph['longitude']) < 1e-3
+    s = day.axes['mirrors'].between(T('10:08'), T('10:19'))
+    ref = _ref(day)
+    assert np.max(scenario.tracking_error(s.t, s['measured'], lambda t: ref(t).mirrors, lag=LAG)) <= TOL
+
+
+def test_link_drop_then_recovery(morning):
+    _fired(morning, 'link-drop:mirrors@10:25+600')
+    day = morning['day']
+    s = day.axes['mirrors'].between(T('10:25'), T('10:45'))
+    from sslfr_interfaces.msg import AxisStatus
+    assert np.any(s['link_state'] != AxisStatus.LINK_UP), 'the drop was seen'
+    after = day.axes['mirrors'].between(T('10:40'), T('10:48'))
+    assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP), 'recovered'
+    ref = _ref(day)
+    err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=LAG)
+    assert np.max(err) <= TOL, np.degrees(np.max(err))
+
+
+def test_board_reset_rehomes_then_tracks(morning):
+    _fired(morning, 'board-reset:mobile_structure@10:50')
+    day = morning['day']
+    s = day.axes['mobile_structure'].between(T('10:50'), T('11:04'))
+    assert np.any(~s['homed']) or any(st == 'homing' for st in s['state']), 'the reset was seen'
+    after = day.axes['mobile_structure'].between(T('10:58'), T('11:04'))
+    assert len(after) and np.all(after['homed'])
+    ref = _ref(day)
+    err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mobile_structure, lag=LAG)
+    assert np.max(err) <= TOL, np.degrees(np.max(err))
+
+
+def test_thermocouple_open_is_reported(morning):
+    _fired(morning, 'thermocouple-open@11:05+600')
+    day = morning['day']
+    o = day.outlet.between(T('11:06'), T('11:14'))
+    assert len(o) and np.all(np.isnan(o['value']))
+    assert any(math.isnan(m.temperature) for m in morning['live']['outlet'])
+    s = day.safety.between(T('11:06'), T('11:14'))
+    assert any(any('thermocouple' in r for r in rs) for rs in s['reasons']), s['reasons'][:3]
+    assert np.all(s['level'] >= 1)
+
+
+def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
+    _fired(morning, 'kill:planner@11:25+500')
+    day = morning['day']
+    traj = day.trajectory.between(T('11:27'), T('11:33'))
+    assert len(traj) == 0, 'no trajectory while the planner is down'
+    horizon = scenario.planner_config(_config())['horizon']
+    hold = day.axes['mirrors'].between(T('11:25') + horizon + 2 * LAG, T('11:33'))
+    assert len(hold) > 5
+    assert np.ptp(hold['measured']) < 4 * TOL, 'holding position'
+    ref = _ref(day)
+    moved = abs(ref(hold.t[-1]).mirrors[0] - ref(hold.t[0]).mirrors[0])
+    assert moved > 4 * TOL, 'the sun moved meanwhile (the hold is visible)'
+    back = day.axes['mirrors'].between(T('11:42'), T('11:49'))
+    err = scenario.tracking_error(back.t, back['measured'], lambda t: ref(t).mirrors, lag=LAG)
+    assert len(back) and np.max(err) <= TOL, 'tracking again after the restart'
+
+
+def test_overtemp_stows(morning):
+    from sslfr_interfaces.msg import SafetyState
+    _fired(morning, 'overtemp@11:50')
+    day = morning['day']
+    s = day.safety.between(T('11:50'), T('12:05'))
+    assert np.any(s['level'] >= SafetyState.STOW)
+    t_stow = s.t[np.argmax(s['level'] >= SafetyState.STOW)]
+    assert t_stow - T('11:50') <= SPEED * 1.0, 'STOW within one wall second'
+    assert any(m.level >= SafetyState.STOW for m in morning['live']['safety'])
+    end = day.axes['mirrors'].between(T('12:00'), T('12:05'))
+    assert len(end) and np.all(np.abs(end['measured'] - math.pi / 2) < 0.01), 'mirrors asleep'
+    ph = day.phase.between(T('11:55'), T('12:05'))
+    assert set(ph['name']) <= {'STOW', 'STOWING'}, set(ph['name'])
+
+
+def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
+    from sslfr_interfaces.msg import AxisStatus, SafetyState
+    arrivals = {'safety': [], 'stow': []}
+    ros.node.create_subscription(SafetyState, 'safety/state',
+                                 lambda m: arrivals['safety'].append(time.monotonic()), 10)
+
+    def on_status(m):
+        if m.state in ('stowing', 'holding', 'fault') and arrivals['safety']:
+            arrivals['stow'].append((time.monotonic(), m.state))
+    ros.node.create_subscription(AxisStatus, 'axes/mirrors/status', on_status, 10)
+    text, summary, day = _sim(ros, ros_env, tmp_path / 'out',
+                              ['--start', '10:00', '--end', '10:12', '--speed', '60',
+                               '--fault', 'kill:safety@10:06'])
+    kill = [f for f in summary['faults'] if f['spec'] == 'kill:safety@10:06']
+    assert kill and kill[0]['result'] == 'ok', summary['faults']
+    gaps = np.diff(arrivals['safety'])
+    i = int(np.argmax(gaps))
+    last_safety = arrivals['safety'][i] if gaps.size and gaps[i] > 1.0 else arrivals['safety'][-1]
+    after = [(t, st) for t, st in arrivals['stow'] if t > last_safety]
+    assert after, (arrivals['stow'][:5], text)
+    assert after[0][0] - last_safety <= 1.2, after[0][0] - last_safety
