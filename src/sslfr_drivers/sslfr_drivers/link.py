@@ -521,6 +521,8 @@ class BoardLink:
         """Re-read INFO and STATUS; the link is UP only after this succeeds."""
         try:
             info = self.request(m.GetInfo())
+            if not isinstance(info, m.Info):
+                raise ProtocolError(f'GET_INFO answered with {type(info).__name__}')
             if info.protocol != PROTOCOL_VERSION:
                 raise ProtocolVersionError(info.protocol)
             try:

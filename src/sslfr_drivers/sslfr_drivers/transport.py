@@ -158,7 +158,8 @@ class XBeeCoordinator:
     -----
     ``open()`` uses digi-xbee's ``Raw802Device.open()``, which reads the local
     module's parameters (AP, HV, VR, SH, SL, NI, MY, CE) with AT commands; the
-    simulated coordinator (``sslfr_drivers.sim.xbee``) answers them. Counters:
+    simulated coordinator (``sslfr_drivers.sim.xbee``) answers them. Transmission
+    uses digi-xbee's packet classes (see :meth:`send`). Counters:
     ``tx_ok``, ``tx_failures``, ``rx_frames``, ``rx_unknown`` (data from an address no
     board transport is registered for).
     """
@@ -175,6 +176,8 @@ class XBeeCoordinator:
         self.rx_frames = 0
         self.rx_unknown = 0
         self.local_address: str | None = None
+        self._frame_id = 0
+        self._tx_waits: dict[int, tuple[threading.Event, list]] = {}
 
     @property
     def is_open(self) -> bool:
@@ -204,6 +207,7 @@ class XBeeCoordinator:
                 _log.warning('XBee on %s is in %s, expected escaped API mode (AP=2)',
                              self.port, dev.operating_mode)
             dev.add_data_received_callback(self._on_data)
+            dev.add_packet_received_callback(self._on_packet)
             self.local_address = str(dev.get_64bit_addr())
             self._dev = dev
 
@@ -235,23 +239,66 @@ class XBeeCoordinator:
             return
         board._deliver(bytes(message.data))
 
+    def _on_packet(self, packet) -> None:
+        """digi-xbee packet callback: complete the wait of a TX status' frame id."""
+        from digi.xbee.packets.raw import TXStatusPacket
+        if isinstance(packet, TXStatusPacket):
+            wait = self._tx_waits.get(packet.frame_id)
+            if wait is not None:
+                wait[1].append(packet.transmit_status)
+                wait[0].set()
+
+    def _next_frame_id(self) -> int:
+        with self._lock:
+            self._frame_id = self._frame_id % 255 + 1      # 1..255 (0 = no status)
+            return self._frame_id
+
     def send(self, address: bytes, data: bytes) -> None:
-        """Transmit ``data`` (<= 100 bytes) to ``address`` (8 bytes) and check the
-        TX status. Raises :class:`TransmitError` on a failed status or no status,
-        :class:`TransportError` if the port is gone."""
-        from digi.xbee.exception import TimeoutException, TransmitException, XBeeException
+        """Transmit ``data`` (<= 100 bytes) to ``address`` (8 bytes) as one TX64 API
+        frame and wait for its TX status (``sync_timeout``).
+
+        Raises :class:`TransmitError` on a status other than SUCCESS or no status,
+        :class:`TransportError` if the port is gone.
+
+        Notes
+        -----
+        The frame is built with digi-xbee's ``TX64Packet`` and sent with
+        ``send_packet(sync=False)``; the status (``TXStatusPacket``) is matched by
+        frame id in a packet callback registered once, and awaited on an Event
+        created *before* sending. digi-xbee's own synchronous ``send_data_64`` was
+        not used: its ``SyncRequestSender`` can miss a status that arrives before it
+        starts waiting and then blocks for the whole timeout (seen in
+        benchmarks/bench_link_latency.py: ~3 % of sends took 1 s).
+        """
+        from digi.xbee.exception import XBeeException
         from digi.xbee.models.address import XBee64BitAddress
+        from digi.xbee.models.status import TransmitStatus
+        from digi.xbee.packets.raw import TX64Packet
         dev = self._dev
         if dev is None or not self.is_open:
             raise TransportError(f'XBee coordinator on {self.port} is not open')
+        fid = self._next_frame_id()
+        wait: tuple[threading.Event, list] = (threading.Event(), [])
+        self._tx_waits[fid] = wait
         try:
-            dev.send_data_64(XBee64BitAddress(address), bytes(data))
-        except (TransmitException, TimeoutException) as exc:
-            self.tx_failures += 1
-            raise TransmitError(f'XBee transmit to {address.hex()} failed: {exc}') from None
+            packet = TX64Packet(fid, XBee64BitAddress(address), 0, bytes(data),
+                                op_mode=dev.operating_mode)
+            dev.send_packet(packet, sync=False)
+            got = wait[0].wait(self.sync_timeout)
         except (XBeeException, serial.SerialException, OSError) as exc:
             self.close()
             raise TransportError(f'XBee coordinator on {self.port} failed: {exc}') from None
+        finally:
+            self._tx_waits.pop(fid, None)
+        if not got:
+            self.tx_failures += 1
+            raise TransmitError(f'XBee transmit to {address.hex()}: no TX status in '
+                                f'{self.sync_timeout} s')
+        status = wait[1][0]
+        if status != TransmitStatus.SUCCESS:
+            self.tx_failures += 1
+            raise TransmitError(f'XBee transmit to {address.hex()} failed: '
+                                f'{getattr(status, "description", status)}')
         self.tx_ok += 1
 
 
