@@ -25,6 +25,8 @@ of an XBee sim, default all)::
     stall on|off            steps are counted but the joint does not move
     reset                   power-cycle the board (position lost, BOOT sent)
     set_angle DEG           move the joint by hand (board not told) [deg]
+    {"cmd": ...}            a JSON object: passed to the board model's control()
+                            (sensor boards, see sim.sensors), "board": ADDR|INDEX
     quit                    exit
 
 ``python -m sslfr_drivers.sim.runner --help`` lists the options.
@@ -272,6 +274,15 @@ class Runner:
 
     def command(self, line: str) -> dict:
         """Execute one control command (see module docstring) -> JSON-able reply."""
+        if line.lstrip().startswith('{'):
+            # a JSON object: a board-model command (sensor boards: sim.sensors, control())
+            req = json.loads(line)
+            boards = [b for _, b, _ in self._select(req.pop('board', None)) if hasattr(b, 'control')]
+            if not boards:
+                return {'ok': False, 'error': f'no board accepts model commands: {line!r}'}
+            replies = [b.control(dict(req)) for b in boards]
+            bad = [r for r in replies if not r.get('ok')]
+            return bad[0] if bad else {'ok': True}
         words = line.split()
         if not words:
             return {'ok': False, 'error': 'empty command'}

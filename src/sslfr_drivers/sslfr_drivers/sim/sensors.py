@@ -16,9 +16,11 @@ of :mod:`sslfr_drivers.sensor_world`:
   time (:func:`sslfr_drivers.veml7700.next_setting`) measuring the clear-sky beam
   illuminance DNI * 104 lm/W (1 % noise).
 
-Time. The boards run on the runner's steady clock ``now`` [s]. The simulated UTC is
-``start_utc + speed * (now - now_at_start)`` (options ``start_utc`` [s since epoch or
-ISO 8601 string] and ``speed`` [-]); without ``start_utc`` it is the wall clock.
+Time. The boards run on the runner's steady clock ``now`` [s] (CLOCK_MONOTONIC, shared
+by every process). The simulated UTC is ``start_utc + speed * (now - anchor)``
+(options ``start_utc`` [s since epoch or ISO 8601 string], ``speed`` [-] and
+``anchor`` [s of CLOCK_MONOTONIC], default: the board's first tick), the mapping
+``sslfr sim`` uses for ``/clock``; without ``start_utc`` it is the wall clock.
 
 World state (how the absorber sees the mirrors). The option ``world`` names a small
 JSON file (default: environment variable ``SSLFR_SIM_WORLD``; none = no file) that
@@ -110,6 +112,8 @@ class _SensorSim(SimBoard):
         self.options = o
         self.start_utc = _utc_option(o.get('start_utc'))
         self.speed = float(o.get('speed', 1.0))
+        anchor = o.get('anchor')
+        self.anchor = float(anchor) if anchor not in (None, '') else None
         self.world = o.get('world', os.environ.get('SSLFR_SIM_WORLD'))
         self.site = {k: float(o.get(k, v)) for k, v in DEFAULT_SITE.items()}
         self._t0: float | None = None
@@ -126,8 +130,8 @@ class _SensorSim(SimBoard):
             import time
             return time.time()
         if self._t0 is None:
-            self._t0 = self.now
-        return self.start_utc + self.speed * (self.now - self._t0)
+            self._t0 = self.anchor if self.anchor is not None else self.now
+        return self.start_utc + self.speed * max(0.0, self.now - self._t0)
 
     def handle(self, msg, frame):
         if isinstance(msg, m.GetStatus):
