@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 def utc_day(t_ns: int) -> str:
     """UTC calendar day ``YYYY-MM-DD`` of a time [ns since the Unix epoch]."""
-    return _dt.datetime.fromtimestamp(t_ns / 1e9, tz=_dt.timezone.utc).strftime('%Y-%m-%d')
+    return _dt.datetime.fromtimestamp(t_ns // 1_000_000_000, tz=_dt.timezone.utc).strftime('%Y-%m-%d')
 
 
 def bag_name(prefix: str, t_ns: int, per_day: bool = True) -> str:
@@ -21,7 +21,7 @@ def bag_name(prefix: str, t_ns: int, per_day: bool = True) -> str:
     ``<prefix>_YYYY-MM-DD`` with one bag per UTC day (the "recorded mcap days"),
     else ``<prefix>_YYYY-MM-DD-HH-MM-SS`` of the first message (rosbag2 style).
     """
-    stamp = _dt.datetime.fromtimestamp(t_ns / 1e9, tz=_dt.timezone.utc)
+    stamp = _dt.datetime.fromtimestamp(t_ns // 1_000_000_000, tz=_dt.timezone.utc)
     return f'{prefix}_{stamp:%Y-%m-%d}' if per_day else f'{prefix}_{stamp:%Y-%m-%d-%H-%M-%S}'
 
 
