@@ -78,7 +78,8 @@ def _main(argv) -> int:
     lines = [HEADER]
     for x in a.positions:
         f = fit_linear(x, a.height, a.radius, rng)
-        lines.append(f'{x:.6f},{f.a:.6f},{math.degrees(f.b):.6f},{math.degrees(f.max_error):.6f}')
+        b = round(math.degrees(f.b), 6) + 0.0  # no '-0.000000'
+        lines.append(f'{x:.6f},{f.a:.6f},{b:.6f},{math.degrees(f.max_error):.6f}')
     sys.stdout.write('\n'.join(lines) + '\n')
     return 0
 

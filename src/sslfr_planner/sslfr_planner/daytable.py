@@ -4,8 +4,9 @@
 projection angles, the day-cycle phase of seed 000 section 4 and what each axis is
 commanded to in that phase; :func:`plan_day` is the same on a whole UTC day grid
 (the seed's per-second "database", section 4.1). Pure numpy, deterministic: an
-instant gets the same numbers whatever batch it is evaluated in (the SPA nodes and
-the sunrise/sunset search grid are aligned on absolute multiples of 600 s).
+instant gets the same numbers whatever batch it is evaluated in, to the last bits of
+numpy's vectorised math (< 1e-12 rad; the SPA nodes and the sunrise/sunset search
+grid are aligned on absolute multiples of 600 s, so the same nodes serve it).
 
 Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
 
