@@ -15,6 +15,7 @@ EXECUTABLES: dict[str, dict[str, str]] = {
     'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node',
                       'sim_board': 'cli', 'gps': 'node', 'absorber_board': 'node',
                       'irradiance': 'node'},
+    'sslfr_planner': {'planner': 'node'},
 }
 
 
