@@ -247,13 +247,13 @@ def test_link_cut_then_restored_resumes_tracking_and_reset_uses_sensor(rig, ros)
     # board reset (sensor present): position re-established from the sensor, no NOT_HOMED move
     r.sim.cmd('reset')
     t_reset = time.time()
-    assert ros.spin_until(lambda: _stamp(r.status[-1]) > t_reset and not r.status[-1].homed, 3) or True
-    assert ros.spin_until(tracking_again, 5.0)
+    assert ros.spin_until(lambda: _stamp(r.status[-1]) > t_reset + 0.3 and tracking_again(), 5.0)
+    back = next(s for s in r.status if _stamp(s) > t_reset and s.homed and s.state == 'following')
     ros.spin_for(1.0)
     b = r.board()
     assert abs(b['angle'] - b['counter'] * STEP) <= STEP + 4 * NOISE, b
     assert r.diag().get('nacks_not_homed') == '0', r.diag()
-    print(f'board reset (sensor): tracking again {_stamp(r.status[-1]) - t_reset:.2f} s later')
+    print(f'board reset (sensor): re-referenced and following {_stamp(back) - t_reset:.2f} s later')
 
 
 def test_board_reset_without_sensor_rehomes_before_moving(rig, ros):
@@ -310,11 +310,12 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     ros.spin_for(1.5)
     r.sim.cmd('corrupt 0.01')
     t_c = time.time()
-    worst_truth = 0.0
+    truth = []                         # (wall time, true joint angle): no sensor noise
     while time.time() < t_c + 8.0:
-        b = r.board()
-        worst_truth = max(worst_truth, abs(b['angle'] - ideal(time.time())))
+        truth.append((time.time(), r.board()['angle']))
         ros.spin_for(0.05)
+    lag = max(ideal(t) - a for t, a in truth)
+    ahead = max(a - ideal(t) for t, a in truth)
     r.sim.cmd('corrupt 0')
     ros.spin_for(0.5)
     out1, host1, lost1 = frozen_counts()
@@ -322,15 +323,19 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     lost = lost1 - lost0
     print(f'\n1% byte corruption for 8 s: board sent {out1 - out0} frames, host counted '
           f'{host1 - host0} received+lost, {lost} lost, {board["bytes_corrupted"]} bytes corrupted; '
-          f'worst |truth - ideal| = {worst_truth / STEP:.1f} steps')
-    assert board['bytes_corrupted'] > 50
+          f'truth lags the ideal by <= {lag / STEP:.1f} steps, ahead by <= {ahead / STEP:.1f} steps')
+    assert board['bytes_corrupted'] > 10
     assert lost > 0
     assert out1 - out0 == host1 - host0            # every board frame is received or counted lost
     assert r.status[-1].frames_lost == lost1
     assert r.status[-1].frames_bad > 0
-    # no wrong move: the joint never left the trajectory by more than a few polls' worth
-    # of motion (the trajectory moves ~0.1 deg/s; a lost poll stops the board at its target)
-    assert worst_truth <= 10 * STEP, worst_truth / STEP
+    # no wrong move: this morning trajectory only rises (~0.1 deg/s): the joint never
+    # went down, never got ahead of the ideal by more than the one-period lead + a step;
+    # lost frames only make it wait (lag, bounded by a second of trajectory motion)
+    angles = [a for _, a in truth]
+    assert all(a2 >= a1 - 1e-12 for a1, a2 in zip(angles, angles[1:]))
+    assert ahead <= 2 * STEP, ahead / STEP
+    assert lag <= 20 * STEP, lag / STEP
     assert r.diag()['faults'] == '0'
 
 
@@ -385,7 +390,8 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
 def test_old_protocol_board_is_refused_with_a_clear_message(rig, ros):
     r = rig(sim_args=['--protocol-version', '0'])
     assert r.driver.wait_for_output('protocol version 0', 10), r.driver.output()
-    ros.spin_for(1.0)
+    assert ros.spin_until(lambda: bool(r.status), 10)
     assert r.driver.running()
-    assert r.status and r.status[-1].state == 'unconfigured'
+    assert r.status[-1].state == 'unconfigured' and r.status[-1].link_state == 3   # LINK_FAULT
+    assert r.driver.output().count('configure refused') == 1     # retried, logged once
     assert r.board()['frames_in'] == 0 or r.board()['counter'] == 0

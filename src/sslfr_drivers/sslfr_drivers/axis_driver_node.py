@@ -33,6 +33,7 @@ for ``heartbeat_period``.
 """
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -71,7 +72,7 @@ PARAMETERS: dict[str, tuple] = {
     'control_rate': (_F, 20.0, 'control loop and STATUS poll rate [Hz] (steady clock)', (1.0, 200.0)),
     'status_rate': (_F, 5.0, 'axes/<axis>/status rate [Hz]', (0.1, 50.0)),
     'joint_state_rate': (_F, 10.0, 'joint_states rate [Hz]', (0.1, 100.0)),
-    'request_timeout': (_F, 0.25, 'board answer time-out [s]', (0.01, 5.0)),
+    'request_timeout': (_F, 0.25, 'board answer time-out per try [s] (STATUS polls use min(this, 2 / control_rate))', (0.01, 5.0)),
     'link_timeout': (_F, 1.0, 'no answer for this long -> link down, reconnect [s]', (0.1, 30.0)),
     'heartbeat_period': (_F, 0.25, 'PING when nothing was sent for this long [s] (board watchdog is 1 s)', (0.02, 0.9)),
     'step_angle': (_F, SEED_STEP_ANGLE, 'motor rotation per step [rad/step] (seed 000: 0.006 deg)', (1e-7, 0.5)),
@@ -230,8 +231,9 @@ class AxisDriver(rclpy.lifecycle.Node):
                                            self.p['link_timeout'], self.p['heartbeat_period'])
                 info = session.open()
             except BoardRefused as exc:
+                if str(exc) != self.last_error:      # autostart retries: log changes only
+                    self.get_logger().error(f'configure refused: {exc}')
                 self.last_error = str(exc)
-                self.get_logger().error(f'configure refused: {exc}')
                 return TransitionCallbackReturn.FAILURE
             except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
                 error = f'cannot reach the board on {self.port}: {exc}'
@@ -394,7 +396,8 @@ class AxisDriver(rclpy.lifecycle.Node):
             now_ros = self.get_clock().now().nanoseconds * 1e-9
             board = None
             if session is not None:
-                board = session.poll(now_steady)
+                period = 1.0 / self.p['control_rate']
+                board = session.poll(now_steady, 2 * period, 3 * period)
                 if session.take_reset():
                     self.counters['board_resets'] += 1
                     self.sup.position_lost()
@@ -503,10 +506,37 @@ class AxisDriver(rclpy.lifecycle.Node):
         self.pub_diag.publish(arr)
 
 
+class _RosLogHandler(logging.Handler):
+    """Forward the pure modules' ``logging`` records (link, transport) to the node's
+    rclpy logger, once (the link's own stderr fallback is not used)."""
+
+    def __init__(self, node):
+        super().__init__(logging.INFO)
+        self.node = node
+        self.last = ''
+
+    def emit(self, record):
+        text = record.getMessage()
+        if text == self.last:
+            return
+        self.last = text
+        log = self.node.get_logger()
+        if record.levelno >= logging.ERROR:
+            log.error(text)
+        elif record.levelno >= logging.WARNING:
+            log.warning(text)
+        else:
+            log.info(text)
+
+
 def main(args=None):
     rclpy.init(args=args)
     try:
         node = AxisDriver()
+        pkg_log = logging.getLogger('sslfr_drivers')
+        pkg_log.addHandler(_RosLogHandler(node))
+        pkg_log.setLevel(logging.INFO)
+        pkg_log.propagate = False
     except ValueError as exc:
         print(f'axis_driver: invalid parameters: {exc}', flush=True)
         rclpy.try_shutdown()

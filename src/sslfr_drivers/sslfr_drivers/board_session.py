@@ -73,6 +73,8 @@ class AxisBoardSession:
         self.board_info = ''
         self.last_status: m.Status | None = None
         self.poll_failures = 0
+        self.stale_polls = 0
+        self._last_ok: tuple[float, BoardState] | None = None
         self._seen_resets = 0
         self._seen_reconnects = 0
 
@@ -122,17 +124,31 @@ class AxisBoardSession:
         self.link.stop()
 
     # ------------------------------------------------------------------ state
-    def poll(self, now: float | None = None) -> BoardState | None:
-        """STATUS now (one try), or None when the link is not UP or did not answer."""
+    def poll(self, now: float, timeout: float, max_age: float) -> BoardState | None:
+        """STATUS now (one try of ``timeout`` [s]).
+
+        When the answer is lost (noisy link) the previous STATUS is returned if it
+        is younger than ``max_age`` [s] (steady ``now`` [s]) and the link is still
+        UP with no reset seen since; otherwise None (link down, reconnecting, or
+        re-reading INFO/STATUS after a board reset).
+        """
         if self.link.state != LinkState.UP:
+            self._last_ok = None
             return None
         try:
-            status = self.link.request(m.GetStatus(), retries=0)
+            status = self.link.request(m.GetStatus(), timeout=min(timeout, self.request_timeout), retries=0)
         except (LinkError, ProtocolError):
             self.poll_failures += 1
+            last = self._last_ok
+            if (last is not None and now - last[0] <= max_age and self.link.state == LinkState.UP
+                    and self.link.resets == self._seen_resets):
+                self.stale_polls += 1
+                return last[1]
             return None
         self.last_status = status
-        return board_state(status)
+        state = board_state(status)
+        self._last_ok = (now, state)
+        return state
 
     def take_reset(self) -> bool:
         """True once after each board reset detected by the link (BOOT, uptime, seq)."""
@@ -169,6 +185,7 @@ class AxisBoardSession:
     def counters(self) -> dict[str, int]:
         c = dict(self.link.counters())
         c['status_poll_failures'] = self.poll_failures
+        c['status_reused'] = self.stale_polls
         c['link_state'] = self.link.state.value
         return c
 
