@@ -13,7 +13,7 @@ from pathlib import Path
 EXECUTABLES: dict[str, dict[str, str]] = {
     'sslfr_bringup': {'sslfr': 'cli', 'recorder': 'node'},
     'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node',
-                      'sim_board': 'cli', 'gps': 'node', 'absorber_board': 'node',
+                      'sim_board': 'cli', 'xbee_hub': 'cli', 'gps': 'node', 'absorber_board': 'node',
                       'irradiance': 'node'},
     'sslfr_planner': {'planner': 'node'},
 }

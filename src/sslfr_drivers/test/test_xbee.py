@@ -130,3 +130,32 @@ def test_runner_xbee_process(tmp_path):
     finally:
         proc.terminate()
         assert proc.wait(5) == 0
+
+
+def test_hub_gives_each_remote_board_a_pty(xbee_sim, tmp_path):
+    """xbee_hub: one process owns the coordinator UART, drivers open plain ptys."""
+    from sslfr_drivers.transport import SerialTransport
+    from sslfr_drivers.xbee_hub import XBeeHub
+    import threading
+    paths = {ADDR_A: str(tmp_path / 'a'), ADDR_B: str(tmp_path / 'b')}
+    hub = XBeeHub(xbee_sim.path, paths, control=str(tmp_path / 'hub.sock'))
+    t = threading.Thread(target=hub.serve, daemon=True)
+    t.start()
+    links = [BoardLink(SerialTransport(paths[a]), heartbeat=0.25).start() for a in (ADDR_A, ADDR_B)]
+    try:
+        assert all(lk.wait_up(5) for lk in links)
+        assert [lk.info.board_id for lk in links] == [11, 12]
+        links[1].set_zero(0)
+        links[1].move_to(-300, 3000)
+        assert wait_for(lambda: links[1].get_status().position == -300, 2)
+        xbee_sim.command(f'disconnect 0.5 @{ADDR_A.lower()}')
+        time.sleep(0.6)
+        st = SimControl(str(tmp_path / 'hub.sock')).cmd('status')
+        assert st['boards'][0]['tx_failures'] > 0 and st['boards'][1]['tx_failures'] == 0
+        assert wait_for(lambda: links[0].state == LinkState.UP, 3)
+    finally:
+        for lk in links:
+            lk.stop()
+        hub.running = False
+        t.join(2)
+        hub.close()
