@@ -188,3 +188,32 @@ def test_old_protocol_version_refused():
             assert not lk.wait_up(0.3)
         finally:
             lk.stop()
+
+
+def test_loss_counter_exact_across_board_sequence_wrap():
+    """Board sequence numbers start just below 65535 and wrap during the run while
+    5 % of board frames are corrupted: frames_lost stays exactly the corrupted count."""
+    from sslfr_drivers.protocol import SequenceCounter
+    board = AxisSim(AxisConfig.for_axis('mobile_structure'), rng=random.Random(8))
+    board.take_output()                        # drop the power-up BOOT (seq 0) ...
+    board._seq = SequenceCounter(65450)        # ... and boot again near the wrap
+    board.send(m.Boot(int(board.kind), board.protocol_version))
+    with SimThread.plain(board, FaultInjector(rng=random.Random(9))) as sim:
+        lk = BoardLink(SerialTransport(sim.path), timeout=0.1, retries=4).start()
+        try:
+            assert lk.wait_up(3)
+            lk.set_zero(0)
+            sim.command('corrupt_frames 0.05')
+            for i in range(150):
+                lk.move_to(i, 3000)
+            sim.command('corrupt_frames 0')
+            lk.ping()
+            with sim.locked():
+                corrupted = sim.faults.frames_corrupted
+                wrapped_to = sim.board._seq.peek()
+            assert wrapped_to < 1000               # the board's counter wrapped
+            assert corrupted > 0
+            assert lk.frames_lost == corrupted
+            assert lk.counters()['seq_resyncs'] == 0
+        finally:
+            lk.stop()
