@@ -113,33 +113,25 @@ def fit_linear(x, height: float, radius: float, theta_range=SEED004_RANGE, n: in
 def position_from_offset(b, height: float, radius: float, theta_range=SEED004_RANGE) -> float:
     """The axis position x [m] whose fitted offset (:func:`fit_linear`) is ``b`` [rad].
 
-    b decreases monotonically with x (a west line tilts east to face the receiver), so
-    a secant/bisection search on x in (-5 Z_abs, 5 Z_abs) converges.
+    b(x) is close to arctan(-x / Z_abs)/2 (the r = 0 law) and decreases monotonically
+    with x, so Newton's method with a numerical derivative, started from
+    x = -Z_abs tan(2 b), converges in a few steps (to 1e-12 m).
     """
     f = lambda xx: fit_linear(xx, height, radius, theta_range).b - b
-    lo, hi = -5.0 * height, 5.0 * height
-    flo, fhi = f(lo), f(hi)
-    if flo * fhi > 0:
+    x = -height * math.tan(2.0 * b)
+    for _ in range(30):
+        fx = f(x)
+        h = 1e-6
+        d = (f(x + h) - fx) / h
+        if d == 0:
+            break
+        step = fx / d
+        x -= step
+        if abs(step) < 1e-12:
+            return float(x)
+    if abs(f(x)) > 1e-12:
         raise ValueError(f'offset {b} rad is out of reach for this geometry')
-    for _ in range(80):
-        mid = lo - flo * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
-        if not lo < mid < hi:
-            mid = 0.5 * (lo + hi)
-        fm = f(mid)
-        if abs(fm) < 1e-14 or hi - lo < 1e-12:
-            return float(mid)
-        if fm * flo > 0:
-            lo, flo = mid, fm
-        else:
-            hi, fhi = mid, fm
-        if hi - lo > 0 and abs(fhi) > 2 * abs(flo):  # keep the bracket shrinking (bisection)
-            m2 = 0.5 * (lo + hi)
-            f2 = f(m2)
-            if f2 * flo > 0:
-                lo, flo = m2, f2
-            else:
-                hi, fhi = m2, f2
-    return float(0.5 * (lo + hi))
+    return float(x)
 
 
 def common_drive_errors(lines, a_common: float, theta_range=SEED004_RANGE, height=SEED004_HEIGHT,
