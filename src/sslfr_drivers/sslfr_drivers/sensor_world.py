@@ -104,14 +104,17 @@ class Sky:
         self.longitude_deg = longitude_deg
         self.elevation = elevation
         self.cloud_factor = 1.0   #: multiplies DNI (1 clear, 0 overcast) [-]
-        self._cache: dict[int, float] = {}
+
+    #: clear-sky DNI per (site, minute), shared by every Sky of the process [W/m^2]
+    _cache: dict[tuple, float] = {}
 
     def sun(self, utc: float) -> SunState:
         """Sun position at ``utc`` (:func:`sun_position`)."""
         return sun_position(utc, self.latitude_deg, self.longitude_deg)
 
     def _dni_minute(self, minute: int) -> float:
-        v = self._cache.get(minute)
+        key = (self.latitude_deg, self.longitude_deg, self.elevation, minute)
+        v = self._cache.get(key)
         if v is None:
             from sslfr_planner.beam import clear_sky_dni
             t = minute * 60.0
@@ -119,7 +122,7 @@ class Sky:
                                     self.longitude_deg, self.elevation)[0])
             if len(self._cache) > 4096:
                 self._cache.clear()
-            self._cache[minute] = v
+            self._cache[key] = v
         return v
 
     def dni(self, utc: float) -> float:

@@ -172,6 +172,13 @@ class Runner:
         self._ctl = None
         self._clients: dict[socket.socket, bytearray] = {}
         self.running = True
+        # shared world file (sim.sensors): axis angles for the absorber's focus model
+        world = os.environ.get('SSLFR_SIM_WORLD')
+        if world:
+            from .sensors import WorldPublisher
+            self.world = WorldPublisher(world)
+        else:
+            self.world = None
         if control:
             try:
                 os.unlink(control)
@@ -209,6 +216,8 @@ class Runner:
             self._register_master()
         for _, board, _ in self.host.boards:
             board.tick(now)
+        if self.world is not None:
+            self.world.update([b for _, b, _ in self.host.boards], now)
         out = self.host.to_wire(now)
         if ep.plugged:
             ep.write(out)

@@ -32,7 +32,9 @@ angles in rad (the joint angle the axis board's position sensor reports). The
 absorber reads the ``mirrors`` angle for the focus (mirror error = theta_t / 2 -
 angle, seed 000 eq. 17) and all three for its limit switches; without a file or an
 entry it assumes ideal tracking (beta_0 = theta_t / 2 while the sun is up, the
-sleeping position +pi/2 at night). :func:`write_axis_angle` is the writer.
+sleeping position +pi/2 at night). The writer is the ``sim_board`` runner: when
+``SSLFR_SIM_WORLD`` is set, :class:`WorldPublisher` records every simulated axis
+board's true joint angle there at 5 Hz (``sslfr sim`` sets it for all simulators).
 
 Fault injection (:meth:`control` of each class, the runner's control channel):
 ``{"cmd": "fault", "kind": KIND, "active": bool, ...}`` with the kinds of
@@ -88,6 +90,32 @@ def write_axis_angle(path: str, axis: str, angle: float) -> None:
     with os.fdopen(fd, 'w') as fh:
         json.dump(world, fh)
     os.replace(tmp, path)
+
+
+class WorldPublisher:
+    """Writes the joint angle of the simulated axis boards of one runner process to the
+    world file every ``period`` seconds (the runner calls :meth:`update` after each
+    tick). Several processes share the file: each rewrites only its own axes
+    (read-modify-write with atomic replace: a reader never sees a torn file; a
+    concurrent update lost by a race is restored at the next period)."""
+
+    def __init__(self, path: str, period: float = 0.2):
+        self.path = path
+        self.period = period
+        self._next = 0.0
+
+    def update(self, boards, now: float) -> None:
+        if now < self._next:
+            return
+        self._next = now + self.period
+        for board in boards:
+            axis = getattr(getattr(board, 'cfg', None), 'axis', None)
+            angle = getattr(board, 'angle', None)
+            if axis and isinstance(angle, (int, float)):
+                try:
+                    write_axis_angle(self.path, axis, angle)
+                except OSError:
+                    pass
 
 
 def read_axis_angles(path: str | None) -> dict[str, float]:

@@ -1,0 +1,147 @@
+"""Simulated sensor boards and their protocol messages (no ROS, no pty)."""
+import datetime as dt
+import math
+from types import SimpleNamespace
+
+import pytest
+from hypothesis import given, strategies as st
+
+from sslfr_drivers import max6675, messages as m, nmea, veml7700
+from sslfr_drivers.messages_sensors import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
+from sslfr_drivers.protocol import Framer, PayloadError
+from sslfr_drivers.sensor_world import sun_position
+from sslfr_drivers.sim.sensors import (AbsorberSim, GpsSim, IrradianceSim, WorldPublisher,
+                                       read_axis_angles, write_axis_angle)
+
+NOON = dt.datetime(2026, 6, 21, 12, 0, tzinfo=dt.timezone.utc).timestamp()
+
+
+def _run(board, seconds, dt_=0.05):
+    """Tick ``board`` for ``seconds`` of steady time; return the decoded messages it sent."""
+    framer, out = Framer(), []
+    t = board.now
+    for _ in range(int(seconds / dt_)):
+        t += dt_
+        board.tick(t)
+        out += [m.decode(f) for f in framer.feed(board.take_output())]
+    return out
+
+
+def _outlets(msgs):
+    return [max6675.decode(x.outlet).temperature for x in msgs if isinstance(x, ThermocoupleSample)]
+
+
+def test_heating_depends_on_mirror_focus(tmp_path):
+    """Focused mirrors heat the tube; the same sun with stowed mirrors does not."""
+    lat, lon = 36.8381, -2.4597
+    ideal = sun_position(NOON, lat, lon).transversal / 2
+    temps = {}
+    for name, angle in (('focused', ideal), ('off_by_1deg', ideal + math.radians(1.0)),
+                        ('stowed', math.pi / 2)):
+        world = str(tmp_path / f'{name}.json')
+        write_axis_angle(world, 'mirrors', angle)
+        b = AbsorberSim({'start_utc': NOON, 'speed': 60.0, 'noise': 0.0, 'world': world})
+        # 2 simulated minutes (the sun's transversal angle moves ~0.5 deg meanwhile)
+        temps[name] = _outlets(_run(b, 2.0))[-1]
+    assert temps['focused'] > 45.0                          # from 25 degC ambient
+    assert 30.0 < temps['off_by_1deg'] < temps['focused'] - 5.0
+    assert temps['stowed'] <= 25.5
+
+
+def test_stagnation_reaches_a_real_over_temperature():
+    """Pump stopped (flow 0) at noon: the tube passes the seed's 150 degC limit."""
+    b = AbsorberSim({'start_utc': NOON, 'speed': 600.0, 'noise': 0.0, 'flow': 0.0})
+    temps = _outlets(_run(b, 6.0))                           # one simulated hour
+    assert temps[-1] > 150.0
+    assert all(b2 >= a - 0.5 for a, b2 in zip(temps, temps[1:]))  # monotone heating curve
+
+
+def test_absorber_faults_and_switches(tmp_path):
+    world = str(tmp_path / 'w.json')
+    write_axis_angle(world, 'mirrors', math.pi / 2)
+    write_axis_angle(world, 'mobile_structure', 0.0)
+    write_axis_angle(world, 'secondary_reflector', 0.2)
+    b = AbsorberSim({'start_utc': NOON, 'world': world})
+    sw = [x for x in _run(b, 0.5) if isinstance(x, SwitchSample)]
+    assert sw and sw[-1].bits == 0b01100                    # sleeping + longitudinal_1
+    b.control({'cmd': 'fault', 'kind': 'thermocouple-open', 'target': 'inlet'})
+    b.control({'cmd': 'fault', 'kind': 'overtemp', 'value': 175.0})
+    th = [x for x in _run(b, 0.6) if isinstance(x, ThermocoupleSample)]
+    assert max6675.decode(th[-1].inlet).fault == max6675.FAULT_OPEN
+    assert max6675.decode(th[-1].outlet).temperature == pytest.approx(175.0, abs=0.5)
+    assert not b.control({'cmd': 'fault', 'kind': 'thermocouple-open', 'target': 'middle'})['ok']
+    assert not b.control({'cmd': 'fault', 'kind': 'no-such-fault'})['ok']
+
+
+def test_world_publisher_and_reader(tmp_path):
+    path = str(tmp_path / 'world.json')
+    axis = SimpleNamespace(cfg=SimpleNamespace(axis='mirrors'), angle=0.25)
+    WorldPublisher(path).update([axis, object()], now=1.0)
+    assert read_axis_angles(path) == {'mirrors': 0.25}
+    (tmp_path / 'bad.json').write_text('{not json')
+    assert read_axis_angles(str(tmp_path / 'bad.json')) == {}
+    assert read_axis_angles(None) == {}
+
+
+def test_gps_sim_protocol_and_raw_framing():
+    b = GpsSim({'start_utc': NOON, 'ttff': 0.0})
+    chunks = [x for x in _run(b, 2.5) if isinstance(x, NmeaChunk)]
+    s = nmea.NmeaStream()
+    recs = s.feed(b''.join(c.data for c in chunks))
+    fixes = [r for r in recs if isinstance(r, nmea.FixRecord) and r.has_fix]
+    assert len(fixes) == 3 and s.counters.bad_checksum == 0 and s.counters.truncated == 0
+    assert fixes[0].utc == NOON
+    raw = GpsSim({'start_utc': NOON, 'ttff': 0.0, 'framing': 'raw_nmea'})
+    out = b''
+    for k in range(50):
+        raw.tick(0.05 * (k + 1))
+        out += raw.take_output()
+    assert b'\xa5\x5a' not in out and out.startswith(b'$GPRMC')   # no BOOT, no frames
+    assert len(nmea.NmeaStream().feed(out)) == 6                 # 3 epochs: RMC + GGA
+    with pytest.raises(ValueError):
+        GpsSim({'framing': 'ubx'})
+
+
+def test_irradiance_sim_measures_clear_sky_beam():
+    b = IrradianceSim({'start_utc': NOON, 'noise': 0.0, 'period': 0.2})
+    als = [x for x in _run(b, 2.0) if isinstance(x, AlsSample)]
+    s = veml7700.decode(als[-1].count, als[-1].gain_code, als[-1].it_code)
+    assert s.illuminance == pytest.approx(b.illuminance(), rel=0.001)
+    assert 850.0 < s.illuminance / 104.0 < 1050.0           # clear-sky DNI at solstice noon
+    b.control({'cmd': 'fault', 'kind': 'lux', 'value': 200000.0})
+    als = [x for x in _run(b, 0.5) if isinstance(x, AlsSample)]
+    assert veml7700.decode(als[-1].count, als[-1].gain_code, als[-1].it_code).saturated
+
+
+def test_sensor_boards_refuse_get_status_and_identify():
+    b = IrradianceSim({'start_utc': NOON})
+    from sslfr_drivers.protocol import encode_frame
+    b.receive(encode_frame(m.encode(m.GetStatus(), 1)) + encode_frame(m.encode(m.GetInfo(), 2)))
+    out = [m.decode(f) for f in Framer().feed(b.take_output())]
+    assert any(isinstance(x, m.Nack) and x.code == m.ErrorCode.UNKNOWN_TYPE for x in out)
+    info = [x for x in out if isinstance(x, m.Info)][0]
+    assert info.board_kind == m.BoardKind.IRRADIANCE and info.name_str == 'sim-irradiance'
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 0xFFFF), st.integers(0, 0xFFFF))
+def test_thermocouple_sample_roundtrip(ms, a, b):
+    msg = ThermocoupleSample(ms, a, b)
+    assert m.decode(m.encode(msg, 7)) == msg
+
+
+@given(st.binary(min_size=1, max_size=88))
+def test_nmea_chunk_roundtrip(data):
+    assert m.decode(m.encode(NmeaChunk(data), 1)) == NmeaChunk(data)
+
+
+def test_bad_sensor_payloads_raise_payload_error():
+    with pytest.raises(PayloadError):
+        NmeaChunk(b'').pack()
+    with pytest.raises(PayloadError):
+        NmeaChunk(b'x' * 89).pack()
+    with pytest.raises(PayloadError):
+        m.decode(m.encode(SwitchSample(1, 0x20), 1))        # a sixth switch does not exist
+    from sslfr_drivers.protocol import Frame
+    with pytest.raises(PayloadError):
+        m.decode(Frame(AlsSample.TYPE, 1, b'\x00\x01'))
+    assert all(0xC0 <= c.TYPE <= 0xDF for c in (NmeaChunk, ThermocoupleSample, SwitchSample, AlsSample))
