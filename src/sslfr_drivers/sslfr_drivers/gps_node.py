@@ -44,7 +44,8 @@ PARAMS = {
                  'empty = no board (the node stays up and reports it) [-]', None),
     'framing': ('protocol', 'protocol: NMEA in board-protocol frames; raw_nmea: a bare GPS '
                             'module streaming NMEA text [-]', ('protocol', 'raw_nmea')),
-    'baudrate': (9600, 'serial line speed [bit/s] (NEO-6M default 9600)', (1200, 921600)),
+    'baudrate': (115200, 'serial line speed [bit/s] (board protocol: 115200; a bare NEO-6M '
+                         'module with framing raw_nmea: 9600)', (1200, 921600)),
     'frame_id': ('gps', 'frame_id of gps/fix (the antenna) [-]', None),
     'time_ref_source': ('gps', 'TimeReference.source [-]', None),
     'uere': (4.0, 'user-equivalent range error of an autonomous fix, GGA quality 1 '
