@@ -387,3 +387,30 @@ def make_transport(port: str, baudrate: int = 115200) -> Transport:
         baud = int(query.get('baud', ['9600'])[0])
         return XBeeBoardTransport(shared_coordinator(serial_port, baud), query['addr'][0])
     return SerialTransport(port, baudrate)
+
+
+class FrameProtocol:
+    """Adapter for ``serial.threaded.ReaderThread``: feeds every chunk pyserial reads
+    into a :class:`~sslfr_drivers.protocol.Framer` and calls ``on_frame(frame)`` for
+    each valid frame (for code that prefers pyserial's own reader thread to
+    :class:`~sslfr_drivers.link.BoardLink`)::
+
+        with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(cb)) as proto: ...
+    """
+
+    def __init__(self, on_frame):
+        from .protocol import Framer
+        self.framer = Framer()
+        self.on_frame = on_frame
+        self.transport = None
+
+    # serial.threaded.Protocol interface
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        for frame in self.framer.feed(data):
+            self.on_frame(frame)
+
+    def connection_lost(self, exc) -> None:
+        self.transport = None

@@ -217,3 +217,18 @@ def test_loss_counter_exact_across_board_sequence_wrap():
             assert lk.counters()['seq_resyncs'] == 0
         finally:
             lk.stop()
+
+
+def test_frame_protocol_with_pyserial_reader_thread():
+    import serial
+    import serial.threaded
+    from sslfr_drivers.transport import FrameProtocol
+    got = []
+    ser = serial.serial_for_url('loop://', timeout=0.05)
+    with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(got.append)) as proto:
+        frames = [Frame(0x83, i, bytes(range(i))) for i in range(30)]
+        wire = b'junk' + b''.join(encode_frame(f) for f in frames)
+        for i in range(0, len(wire), 7):
+            proto.transport.write(wire[i:i + 7])
+        assert wait_for(lambda: len(got) == 30, 3)
+    assert got == frames
