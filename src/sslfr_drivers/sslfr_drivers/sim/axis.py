@@ -1,5 +1,13 @@
 """Simulated stepper axis board (firmware behaviour of seed 000 section 3.5 boards).
 
+Seed facts used: stepper motors with a step of 0.006 deg (seed 000 section 3.4);
+mirrors rotate from -45 deg to +90 deg, +90 deg being the sleeping position (seed
+000 section 4, Fig. 13); the mobile structure and the secondary reflector tilt 0..90
+deg (Fig. 14; the team convention allows either sign, so the sim spans -90..+90 deg
+with the rest position at 0); limit switches mark the initial, last and sleeping
+positions (section 3.5.3); the Position PCB measures each joint with an ADNS-9800
+laser sensor (section 3.5.4), modelled here as the board's position sensor.
+
 Model
 -----
 * Joint angle ``angle`` [rad] (the truth), step counter ``counter`` [steps, float
@@ -27,8 +35,9 @@ from .. import messages as m
 from .base import Refuse, SimBoard
 
 AXES = {
-    # name: (lo, hi, sleep) joint limits [rad] (team conventions: mirrors -pi/4..+pi/2,
-    # sleeping at +pi/2; structure and reflector tilts magnitude 0..pi/2, rest at 0)
+    # name: (lo, hi, sleep) joint limits [rad] (seed 000 section 4 and team conventions:
+    # mirrors -pi/4..+pi/2, sleeping at +pi/2; structure and reflector tilts of
+    # magnitude 0..pi/2 on either side, rest at 0)
     'mirrors': (-math.pi / 4, math.pi / 2, math.pi / 2),
     'mobile_structure': (-math.pi / 2, math.pi / 2, 0.0),
     'secondary_reflector': (-math.pi / 2, math.pi / 2, 0.0),
