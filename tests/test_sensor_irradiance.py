@@ -85,3 +85,18 @@ def test_efficacy_parameter_and_refusal(sim, launch, ros, tmp_path):
     assert not res.results[0].successful
     n = len(beam)
     assert ros.spin_until(lambda: len(beam) > n, 3) and beam[-1].luminous_efficacy == 120.0
+
+
+def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
+    """The same node reaches its board through a (simulated) XBee 802.15.4 coordinator."""
+    from sslfr_drivers.sim.base import FaultInjector
+    from sslfr_drivers.sim.xbee import XBeeSimCoordinator
+    host = XBeeSimCoordinator()
+    host.add_board(bytes.fromhex('0013A20040000012'),
+                   IrradianceSim({'start_utc': T, 'period': 0.25, 'noise': 0.0}), FaultInjector())
+    with SimThread(host, link=str(tmp_path / 'xbee')):
+        beam = ros.collect(Irradiance, 'irradiance/beam')
+        node = launch('sslfr_drivers', 'irradiance',
+                      params={'port': f'xbee:{tmp_path / "xbee"}?addr=0013A20040000012'})
+        assert ros.spin_until(lambda: len(beam) >= 3, 25), node.output()
+        assert 800.0 < beam[-1].beam < 1100.0 and not beam[-1].saturated
