@@ -72,6 +72,7 @@ class GpsNode(Node):
         self._meter = RateMeter()
         self._last_jump = 0.0
         self._last_fix_status = None
+        self._last_fix: nmea.FixRecord | None = None
         self._chunks_dropped = 0
         self._fix_pub = self.create_publisher(NavSatFix, 'gps/fix', 10)
         self._time_pub = self.create_publisher(TimeReference, 'gps/time_reference', 10)
@@ -134,6 +135,7 @@ class GpsNode(Node):
         msg.position_covariance = [float(c) for c in rec.covariance]
         msg.position_covariance_type = rec.covariance_type
         self._fix_pub.publish(msg)
+        self._last_fix = rec
         if rec.status != self._last_fix_status:
             self.get_logger().info('fix acquired' if rec.has_fix else 'no fix')
             self._last_fix_status = rec.status
@@ -163,7 +165,12 @@ class GpsNode(Node):
             fix.level, fix.message = DiagnosticStatus.WARN, 'no fix'
         else:
             fix.level, fix.message = DiagnosticStatus.OK, 'fix'
-        fix.values = [KeyValue(key='fixes', value=str(c.fixes)), KeyValue(key='no_fix', value=str(c.no_fix))]
+        f = self._last_fix
+        fix.values = [KeyValue(key='fixes', value=str(c.fixes)), KeyValue(key='no_fix', value=str(c.no_fix)),
+                      KeyValue(key='satellites', value=str(f.satellites) if f else 'none'),
+                      KeyValue(key='hdop', value=f'{f.hdop:.2f}' if f else 'none'),
+                      KeyValue(key='quality', value=str(f.quality) if f else 'none'),
+                      KeyValue(key='nav_mode', value=str(f.nav_mode) if f else 'none')]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st, fix]
