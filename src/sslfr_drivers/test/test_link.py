@@ -150,8 +150,8 @@ def test_board_reset_detected_and_state_reread(sim, link):
 
 
 def test_silence_then_recovery(sim, link):
-    sim.command('disconnect 1.0')
-    assert wait_for(lambda: link.state == LinkState.SILENT, 2)
+    sim.command('disconnect 1.6')
+    assert wait_for(lambda: link.state == LinkState.SILENT, 2.5)
     assert wait_for(lambda: link.state == LinkState.UP, 4)
     assert link.get_status().fault_bits & m.FaultBits.RESET   # state re-read
 

@@ -37,6 +37,7 @@ def test_known_frame_bytes():
         ' '.join(f'{b:02x}' for b in struct.pack('<H', crc16(body)))
 
 
+@settings(deadline=None)
 @given(frames)
 def test_roundtrip(frame):
     assert decode_frame(encode_frame(frame)) == frame
@@ -48,6 +49,7 @@ def test_payload_too_long_refused():
     assert len(encode_frame(Frame(1, 0, bytes(MAX_PAYLOAD)))) == 100   # one XBee packet
 
 
+@settings(deadline=None)
 @given(st.lists(frames, min_size=1, max_size=8), st.data())
 def test_framer_any_chunking(frame_list, data):
     """Frames split across reads and merged in one read come out intact, in order."""
@@ -63,6 +65,7 @@ def test_framer_any_chunking(frame_list, data):
     assert framer.pending == 0 and framer.bytes_discarded == 0
 
 
+@settings(deadline=None)
 @given(st.binary(max_size=300), frames, st.binary(max_size=300))
 def test_resync_after_garbage(before, frame, after):
     framer = Framer()
@@ -71,7 +74,7 @@ def test_resync_after_garbage(before, frame, after):
     assert frame in out
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=2000), st.integers(1, 64))
 def test_fuzz_random_bytes(blob, chunk):
     framer = Framer()
@@ -132,6 +135,7 @@ def test_duplicate_and_stale_detected():
     assert (t.duplicates, t.stale, t.lost, t.received) == (1, 2, 1, 4)
 
 
+@settings(deadline=None)
 @given(st.integers(0, SEQ_MOD - 1), st.lists(st.integers(1, 300), min_size=1, max_size=400))
 def test_loss_counter_exact_across_wrap(start, gaps):
     """Receive a subsequence of a stream that wraps 65535 -> 0: lost == skipped."""
@@ -173,12 +177,14 @@ def _msg_strategy():
     )
 
 
+@settings(deadline=None)
 @given(_msg_strategy(), st.integers(0, SEQ_MOD - 1))
 def test_message_roundtrip(msg, seq):
     frame = decode_frame(encode_frame(m.encode(msg, seq)))
     assert m.decode(frame) == msg
 
 
+@settings(deadline=None)
 @given(st.integers(0, 255), st.binary(max_size=MAX_PAYLOAD))
 def test_payload_decode_raises_only_payload_error(mtype, payload):
     try:

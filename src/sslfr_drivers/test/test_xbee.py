@@ -11,7 +11,7 @@ from digi.xbee.models.mode import OperatingMode
 from digi.xbee.packets.base import XBeePacket
 from digi.xbee.packets.factory import build_frame
 from digi.xbee.packets.raw import RX64Packet, TX64Packet, TXStatusPacket
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sslfr_drivers import messages as m
@@ -36,6 +36,7 @@ def wait_for(pred, timeout, step=0.01):
     return pred()
 
 
+@settings(deadline=None)
 @given(st.binary(min_size=8, max_size=8), st.binary(max_size=100), st.integers(1, 255))
 def test_api_codec_matches_digi_xbee(addr, data, frame_id):
     """Our escaped API codec and digi-xbee's packet classes agree both ways."""
