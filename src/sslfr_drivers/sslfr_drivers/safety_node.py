@@ -31,6 +31,7 @@ from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, Paramet
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
@@ -85,6 +86,7 @@ PARAMS: dict[str, tuple] = {
                             (0.0, 4.0e9)),
 }
 
+RCLError = _rclpy_impl.RCLError
 _BEST_EFFORT = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 _DIAG_LEVEL = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
                Level.STOW: DiagnosticStatus.ERROR, Level.ESTOP: DiagnosticStatus.ERROR}
@@ -330,6 +332,10 @@ def main(args=None):
         rclpy.logging.get_logger('safety').fatal(f'invalid configuration, not starting: {exc}')
         rclpy.try_shutdown()
         raise SystemExit(2) from None
+    except (KeyboardInterrupt, ExternalShutdownException, RCLError):
+        if rclpy.ok():
+            raise
+        return              # SIGINT/SIGTERM arrived while the node was being built
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
