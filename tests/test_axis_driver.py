@@ -10,9 +10,9 @@ No sim time: ROS time is wall time, the simulated board runs in real time.
 What is compressed, honestly: the "10-minute trajectory" is ten minutes of the
 real mirror motion (beta_0 = theta_t / 2 for Almeria on the summer solstice from
 10:00 solar time, closed-form projected angle of a horizontal N-S axis) replayed
-40x faster, i.e. in 15 s of wall time; the mirror speed is then ~0.09 deg/s
-(~15 steps/s), far inside the axis' speed limit (the seed's own tracking speed is
-0.006 deg/s). The board's step resolution (0.006 deg) and sensor noise
+60x faster, i.e. in 10 s of wall time; the mirror speed is then ~0.14 deg/s
+(~23 steps/s), far inside the axis' speed limit (the seed's own tracking speed is
+0.006 deg/s). The other tests replay sun trajectories 40x faster. The board's step resolution (0.006 deg) and sensor noise
 (0.003 deg 1-sigma) are not scaled.
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ pytestmark = pytest.mark.timeout(120)
 STEP = math.radians(0.006)             # [rad] seed 000 step
 NOISE = math.radians(0.003)            # [rad] sim sensor noise, 1 sigma
 TOL = STEP + 4 * NOISE                 # one step + the sensor noise (4 sigma bound)
-SPEEDUP = 40.0                         # sun seconds per wall second in the tracking test
+SPEEDUP = 60.0                         # sun seconds per wall second in the tracking test
 
 
 def beta0_almeria(t_solar_h: float) -> float:
@@ -197,7 +197,7 @@ def test_follows_ten_minute_sun_trajectory_within_one_step_plus_noise(rig, ros):
     ros.spin_for(t_end + 0.5 - time.time())
 
     errs = _errors(r.status, ideal, t0 + 1.0, t_end)
-    assert len(errs) > 50, (len(r.status), r.driver.output())
+    assert len(errs) > 0.8 * 5.0 * (t_end - t0 - 1.0), (len(errs), r.driver.output())   # 5 Hz status
     worst = max(abs(e) for e, _ in errs)
     print(f'\n10-min sun trajectory (x{SPEEDUP:.0f}): {len(errs)} samples, max |measured - ideal| '
           f'= {math.degrees(worst) * 3600:.1f} arcsec = {worst / STEP:.2f} steps '
@@ -241,7 +241,7 @@ def test_link_cut_then_restored_resumes_tracking_and_reset_uses_sensor(rig, ros)
     after = [s for s in r.status if _stamp(s) > t_cut + 5 + resumed]
     assert max(abs(s.measured - ideal(_stamp(s))) for s in after) <= TOL
     truth = r.board()
-    assert truth['homed']
+    assert truth['homed'] and abs(truth['angle'] - truth['counter'] * STEP) <= STEP, truth
     print(f'\nlink cut 5 s: tracking within one step + noise {resumed:.2f} s after restoration')
 
     # board reset (sensor present): position re-established from the sensor, no NOT_HOMED move
@@ -252,7 +252,9 @@ def test_link_cut_then_restored_resumes_tracking_and_reset_uses_sensor(rig, ros)
     ros.spin_for(1.0)
     b = r.board()
     assert abs(b['angle'] - b['counter'] * STEP) <= STEP + 4 * NOISE, b
-    assert r.diag().get('nacks_not_homed') == '0', r.diag()
+    d = r.diag()
+    assert d.get('nacks_not_homed') == '0' and int(d['board_resets']) >= 1, d
+    assert int(d['set_zero_sent']) >= 2 and b['resets'] == 1, (d, b)   # start-up + after the reset
     print(f'board reset (sensor): re-referenced and following {_stamp(back) - t_reset:.2f} s later')
 
 
@@ -305,13 +307,13 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
         d = r.diag()
         return r.board()['frames_out'], int(d['frames_received']) + int(d['frames_lost']), int(d['frames_lost'])
 
-    ros.spin_for(2.0)
+    ros.spin_for(1.0)
     out0, host0, lost0 = frozen_counts()
-    ros.spin_for(1.5)
+    ros.spin_for(1.0)
     r.sim.cmd('corrupt 0.01')
     t_c = time.time()
     truth = []                         # (wall time, true joint angle): no sensor noise
-    while time.time() < t_c + 8.0:
+    while time.time() < t_c + 6.0:
         truth.append((time.time(), r.board()['angle']))
         ros.spin_for(0.05)
     lag = max(ideal(t) - a for t, a in truth)
@@ -321,7 +323,7 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     out1, host1, lost1 = frozen_counts()
     board = r.board()
     lost = lost1 - lost0
-    print(f'\n1% byte corruption for 8 s: board sent {out1 - out0} frames, host counted '
+    print(f'\n1% byte corruption for 6 s: board sent {out1 - out0} frames, host counted '
           f'{host1 - host0} received+lost, {lost} lost, {board["bytes_corrupted"]} bytes corrupted; '
           f'truth lags the ideal by <= {lag / STEP:.1f} steps, ahead by <= {ahead / STEP:.1f} steps')
     assert board['bytes_corrupted'] > 10
@@ -348,20 +350,20 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     assert r.wait_state('holding', 20), r.driver.output()
     t0 = time.time() + 0.3
     r.publish_trajectory(t0, [0.0, 30.0], [0.0, 0.3])             # 0.01 rad/s
-    ros.spin_for(2.0)
+    ros.spin_for(1.2)
     assert r.board()['speed'] != 0.0
     r.heartbeat = False
     t_last = r.last_heartbeat
-    stopped_at = None
-    while time.monotonic() < t_last + 3.0:
-        b = r.board()
-        if b['speed'] == 0.0 and b['counter'] == b['target']:
-            stopped_at = time.monotonic()
-            break
+    track = []                                   # (steady time, step counter) of the board
+    while time.monotonic() < t_last + 2.6:
+        track.append((time.monotonic(), r.board()['counter']))
         time.sleep(0.01)
-    assert stopped_at is not None
-    print(f'\nsafety silent: motor stopped {stopped_at - t_last:.3f} s after the last heartbeat')
-    assert stopped_at - t_last <= 1.2
+    # the last instant the counter still changed = when the motor stopped for good
+    last_move = max(t for (t, c), (_, c0) in zip(track[1:], track) if c != c0)
+    print(f'\nsafety silent: motor stopped {last_move - t_last:.3f} s after the last heartbeat')
+    assert last_move - t_last > 0.8            # it kept following while the heartbeat was fresh
+    assert last_move - t_last <= 1.2
+    assert track[-1][0] - last_move >= 1.3     # and stayed stopped
     assert r.ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
 
     # stow required: mirrors go to the sleeping position
@@ -395,3 +397,43 @@ def test_old_protocol_board_is_refused_with_a_clear_message(rig, ros):
     assert r.status[-1].state == 'unconfigured' and r.status[-1].link_state == 3   # LINK_FAULT
     assert r.driver.output().count('configure refused') == 1     # retried, logged once
     assert r.board()['frames_in'] == 0 or r.board()['counter'] == 0
+
+
+def test_lifecycle_transitions_and_stall_fault(rig, ros):
+    """Driven by sslfr_drivers.lifecycle_util (what bringup uses), no autostart:
+    deactivate stops the motor, cleanup closes the link; a stalled joint (steps
+    counted, sensor still) latches a fault that stops the axis."""
+    from sslfr_drivers.lifecycle_util import bring_to, get_state
+
+    r = rig(sim_args=['--opt', 'initial_angle_deg=0'], params={'autostart': False})
+    name = 'mirrors_driver'
+    assert ros.spin_until(lambda: bool(r.status) and r.status[-1].state == 'unconfigured', 15)
+    assert get_state(ros.node, name, executor=ros.executor) == 'unconfigured'
+    ok, msg = bring_to(ros.node, name, 'active', executor=ros.executor)
+    assert ok, msg + r.driver.output()
+    t0 = time.time() + 0.3
+    r.publish_trajectory(t0, [0.0, 30.0], [0.0, 0.6])          # 0.02 rad/s
+    assert ros.spin_until(lambda: r.status[-1].state == 'following' and r.board()['speed'] != 0, 5)
+
+    ok, msg = bring_to(ros.node, name, 'inactive', executor=ros.executor)
+    assert ok, msg
+    assert ros.spin_until(lambda: r.board()['speed'] == 0.0, 0.5)
+    ros.spin_for(0.5)
+    assert r.board()['speed'] == 0.0 and r.status[-1].state == 'inactive'
+
+    ok, msg = bring_to(ros.node, name, 'active', executor=ros.executor)
+    assert ok, msg
+    assert ros.spin_until(lambda: r.board()['speed'] != 0.0, 3)
+    r.sim.cmd('stall on')
+    t_stall = time.time()
+    assert ros.spin_until(lambda: r.status[-1].state == 'fault', 5), [s.state for s in r.status[-5:]]
+    print(f'\nstall injected: fault after {time.time() - t_stall:.2f} s')
+    assert ros.spin_until(lambda: r.board()['speed'] == 0.0, 1)
+    ros.spin_for(1.2)
+    assert r.board()['speed'] == 0.0                          # stays stopped (latched)
+    d = r.diag()
+    assert int(d['faults']) >= 1 and ('lost steps' in d['reason'] or 'stall' in d['reason']), d
+
+    ok, msg = bring_to(ros.node, name, 'unconfigured', executor=ros.executor)
+    assert ok, msg
+    assert ros.spin_until(lambda: r.status[-1].state == 'unconfigured' and r.status[-1].link_state == 0, 3)
