@@ -108,6 +108,7 @@ class Recorder(Node):
         self._subs: dict[str, object] = {}
         self._bad_types: set[str] = set()
         self.received = 0
+        self.no_clock = 0
         self._discover_timer = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._restart_discovery()
@@ -238,6 +239,9 @@ class Recorder(Node):
         def callback(data: bytes, info) -> None:
             session_ref.received += 1
             now = clock.now().nanoseconds
+            if now <= 0:  # use_sim_time and no /clock yet: no valid log time
+                session_ref.no_clock += 1
+                return
             src = None
             if isinstance(info, dict):
                 src = info.get('source_timestamp')
@@ -269,7 +273,7 @@ class Recorder(Node):
             st.message = f'recording {len(s.topics)} topics'
         kv = {'bag': str(s.bag_dir or ''), 'topics': len(s.topics), 'received': self.received,
               'written': s.stats.written, 'dropped_disk_full': s.stats.dropped_disk,
-              'write_errors': s.stats.write_errors,
+              'write_errors': s.stats.write_errors, 'dropped_no_clock': self.no_clock,
               'free_bytes': s.disk.free_bytes if s.disk else -1}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in kv.items()]
         arr = DiagnosticArray(status=[st])

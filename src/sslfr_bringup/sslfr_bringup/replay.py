@@ -123,6 +123,11 @@ class Player:
         self.stop_event.set()
         self._thread.join(5.0)
 
+    def publish_start_clock(self) -> None:
+        """Publish /clock at the start time (used while waiting for subscribers)."""
+        self._last_clock_ns = None
+        self._clock(self.start_ns)
+
     def _clock(self, t_ns: int) -> None:
         if self.clock_pub is None or t_ns == self._last_clock_ns:
             return
@@ -139,7 +144,31 @@ class Player:
         t_ns = self.start_ns
         try:
             self._clock(self.start_ns)
-            for raw in self.reader.messages(list(self.publishers), self.start_ns, self.end_ns):
+            pubs = self.publishers
+            messages = self.reader.messages(list(pubs), self.start_ns, self.end_ns)
+            if self.rate <= 0:
+                # As fast as possible: no timing; /clock and progress every few ms of wall.
+                monotonic = time.monotonic
+                count = 0
+                for raw in messages:
+                    if count & 255 == 0:
+                        now = monotonic()
+                        if self.stop_event.is_set():
+                            break
+                        if now >= next_clock:
+                            self._clock(raw.log_time)
+                            next_clock = now + self.clock_period
+                        if self.progress and now >= next_progress:
+                            sys.stderr.write('\r' + progress_line(raw.log_time, self.start_ns,
+                                                                  self.end_ns, count, now - wall0))
+                            sys.stderr.flush()
+                            next_progress = now + 0.5
+                    pubs[raw.topic].publish(raw.data)
+                    count += 1
+                    t_ns = raw.log_time
+                self.count = count
+                messages = ()
+            for raw in messages:
                 if self.stop_event.is_set():
                     break
                 due = timeline.due(raw.log_time)
@@ -157,11 +186,8 @@ class Player:
                 if self.stop_event.is_set():
                     break
                 t_ns = raw.log_time
-                now = time.monotonic()
-                if self.rate > 0 or now >= next_clock:
-                    self._clock(t_ns)
-                    next_clock = now + self.clock_period
-                self.publishers[raw.topic].publish(raw.data)
+                self._clock(t_ns)
+                pubs[raw.topic].publish(raw.data)
                 self.count += 1
                 if self.progress and now >= next_progress:
                     sys.stderr.write('\r' + progress_line(t_ns, self.start_ns, self.end_ns,
@@ -202,6 +228,7 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
             before_play(node, executor)
         deadline = time.monotonic() + wait_subscribers
         while time.monotonic() < deadline:
+            player.publish_start_clock()  # sim-time subscribers get a clock before any data
             pubs = [p for t, p in player.publishers.items() if wait_for is None or t in wait_for]
             if pubs and all(p.get_subscription_count() > 0 for p in pubs):
                 break
