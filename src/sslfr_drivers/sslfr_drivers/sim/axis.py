@@ -181,6 +181,9 @@ class AxisSim(SimBoard):
         return super().handle(msg, frame)
 
     # ---------------------------------------------------------------- dynamics
+    def busy(self) -> bool:
+        return self.speed != 0.0 or self.counter != self.target or self.homing is not None
+
     def watchdog_expired(self) -> None:
         if self.speed != 0.0 or self.counter != self.target or self.homing is not None:
             self.faults |= m.FaultBits.WATCHDOG

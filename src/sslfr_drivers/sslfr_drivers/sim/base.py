@@ -119,6 +119,12 @@ class SimBoard:
     def update(self, dt: float) -> None:
         """Advance the model by ``dt`` [s]. Override."""
 
+    def busy(self) -> bool:
+        """True while the model needs fine time steps (the runner then ticks every
+        5 ms instead of 20 ms; incoming bytes are always handled at once). Default
+        True; models override it to save CPU when idle."""
+        return True
+
     def watchdog_expired(self) -> None:
         """Nothing heard for 1 s. Override (axis: stop the motor, latch the fault)."""
 

@@ -163,10 +163,11 @@ class Runner:
     """Select loop: pty bytes <-> boards, ticks, control socket."""
 
     def __init__(self, endpoint: PtyEndpoint, host, control: str | None = None,
-                 tick: float = 0.005):
+                 tick: float = 0.005, idle_tick: float = 0.02):
         self.endpoint = endpoint
         self.host = host
         self.tick = tick
+        self.idle_tick = idle_tick
         self.sel = selectors.DefaultSelector()
         self.control_path = control
         self._ctl = None
@@ -196,8 +197,10 @@ class Runner:
             self.sel.register(self.endpoint.master, selectors.EVENT_READ, 'pty')
 
     def step(self, timeout: float | None = None) -> None:
-        now = time.monotonic()
-        for key, _ in self.sel.select(self.tick if timeout is None else timeout):
+        if timeout is None:
+            busy = any(b.busy() for _, b, _ in self.host.boards)
+            timeout = self.tick if busy else self.idle_tick
+        for key, _ in self.sel.select(timeout):
             if key.data == 'pty':
                 data = self.endpoint.read()
                 if data:
