@@ -16,7 +16,8 @@ Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
   With ``collector.tracking_step`` > 0 the commands are those of the middle of the
   current step interval (kept inside [sunrise, sunset]): seed 003's 15-min steps.
 * PRE_DAWN (1): less than ``pre_dawn_lead`` before the next sunrise: the initial
-  position, i.e. the TRACKING commands at the sunrise instant (seed 000 section 4.2).
+  position, i.e. the TRACKING commands at the sunrise instant (seed 000 section 4.2;
+  evaluated :data:`RISE_EPSILON` after it, clear of the refraction switch).
 * STOWING (3): less than ``stow_duration`` after the last sunset: mirrors to the
   sleeping position (section 4.4); longitudinal axes as at NIGHT.
 * NIGHT (0): mirrors sleeping (+pi/2); the longitudinal axes at their rest position
@@ -39,6 +40,8 @@ from .events import SCAN_STEP, SunEvents, crossings, events_around, local_mean_n
 from .site import Site
 
 NIGHT, PRE_DAWN, TRACKING, STOWING = 0, 1, 2, 3
+#: the PRE_DAWN initial position is the TRACKING command this long after sunrise [s]
+RISE_EPSILON = 0.01
 PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
                6: 'MAINTENANCE'}
 
@@ -103,6 +106,10 @@ def _commands(zenith, longitudinal, transversal, t, site: Site, c: Collector):
 
 
 def _longitudinal(zenith, longitudinal, t, site: Site, c: Collector):
+    """(beta_M, beta_a) [rad] of the collector's law at instants ``t`` (clipped to tilt_max).
+
+    ``zenith`` [rad] and ``longitudinal`` theta_l [rad] are the sun's at ``t``.
+    """
     n = np.shape(t)
     if c.law == 'continuous':
         bm, ba = laws.continuous(zenith, longitudinal)
@@ -117,10 +124,15 @@ def _longitudinal(zenith, longitudinal, t, site: Site, c: Collector):
 
 
 def _resting(t, site: Site, c: Collector):
-    """Longitudinal commands at NIGHT / STOWING [rad]."""
+    """Longitudinal commands (beta_M, beta_a) at NIGHT / STOWING [rad] (module docstring)."""
     if c.law == 'continuous':
         return np.full(np.shape(t), c.structure_rest), np.full(np.shape(t), c.reflector_rest)
     return _longitudinal(np.zeros(np.shape(t)), np.ones(np.shape(t)), t, site, c)
+
+
+#: public names of the law helpers (used by the planner node and the analysis tools)
+longitudinal_commands = _longitudinal
+resting_commands = _resting
 
 
 def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = None) -> DayTable:
@@ -203,6 +215,9 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
     pd_idx = np.nonzero(pre_dawn)[0]
     if pd_idx.size:
         rises, inv = np.unique(next_rise[pd_idx], return_inverse=True)
+        # 10 ms after the crossing: e_0 is then 4e-5 deg above h0, clear of the refraction
+        # switch of eq. 42 (the crossing itself is only known to ~1e-8 deg in e_0)
+        rises = rises + RISE_EPSILON
         r_sun = spa.sun_position(rises, site, collector_azimuth=c.azimuth, grid=grid)
         m, b1, b2 = _commands(r_sun.zenith, r_sun.longitudinal, r_sun.transversal, rises, site, c)
         inv = inv.reshape(-1)

@@ -121,8 +121,9 @@ def hour_angle(t, site: Site, grid: spa.GeocentricGrid | None = None):
     t = np.atleast_1d(np.asarray(t, dtype=float))
     if grid is None:
         grid = spa.GeocentricGrid(float(t.min()), float(t.max()), site.delta_t)
-    gha = grid(t)[3]
-    return (np.degrees(gha) + math.degrees(site.longitude) + 180.0) % 360.0 - 180.0
+    g = grid(t)[3]
+    h = spa._nu0_linear(spa.julian_day(t)) + np.degrees(g) + math.degrees(site.longitude)
+    return (h + 180.0) % 360.0 - 180.0
 
 
 def solar_transit(t_guess: float, site: Site, grid: spa.GeocentricGrid | None = None) -> float:

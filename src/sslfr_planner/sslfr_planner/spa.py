@@ -18,11 +18,12 @@ Two evaluation paths
     multiples of NODE_STEP since the Unix epoch, so the result of an instant never
     depends on the batch it is in) and interpolated linearly to each instant: the
     quantities interpolated are sin(delta), cos(delta), sin(xi) (xi: equatorial
-    horizontal parallax, eq. 33) and the sun's apparent Greenwich hour angle
-    nu - alpha (eqs. 28-30), which is linear in time but for the slow variation of
-    alpha and of the nutation. With NODE_STEP = 600 s the interpolation error is
-    ~1e-8 deg (h^2/8 |d2 alpha/dt2| with |d2 alpha/dt2| < 0.004 deg/day^2;
-    test_spa.py measures it against the exact path). The topocentric
+    horizontal parallax, eq. 33) and g = nu - alpha - nu0_lin, the sun's apparent
+    Greenwich hour angle (eqs. 28-30) minus the part of eq. 28 linear in JD, which is
+    evaluated at each instant from its own JD as the report does. With NODE_STEP =
+    600 s the interpolation error is ~1e-8 deg (h^2/8 |d2 alpha/dt2| with
+    |d2 alpha/dt2| < 0.004 deg/day^2; test_spa.py measures it against the exact path
+    and pvlib). The topocentric
     part (eqs. 32-46) is evaluated per instant in the algebraically equivalent vector
     form of :func:`_topocentric_fast` (same geometry, fewer transcendental calls).
 
@@ -475,18 +476,27 @@ _TWO_PI = 2.0 * np.pi
 _NODE_FIELDS = 4  # sin(delta), cos(delta), sin(xi), Greenwich hour angle of the sun
 
 
+def _nu0_linear(jd):
+    """The part of eq. 28 linear in JD [deg] (not reduced to 0..360)."""
+    return 280.46061837 + 360.98564736629 * (jd - _J2000)
+
+
 def _node_values(k, delta_t):
     """Exact geocentric values at the nodes k*NODE_STEP (eqs. 5-31, 33).
 
-    Returns sin(delta), cos(delta), sin(xi) and the sun's apparent Greenwich hour
-    angle nu - alpha [rad] (eqs. 29-30; H = nu - alpha + sigma, eq. 32), 0..2 pi.
+    Returns sin(delta), cos(delta), sin(xi) and g = nu - alpha - nu0_lin(JD) [rad]
+    (eqs. 28-30, with nu0_lin the part of eq. 28 linear in JD), so that the local hour
+    angle is H = nu0_lin(JD) + g + sigma (eq. 32). g varies slowly (alpha, nutation,
+    the JC^2 and JC^3 terms of eq. 28); nu0_lin is evaluated at each instant from the
+    instant's own JD, exactly as eq. 28 does (float64 JD quantisation included).
     """
     tn = k * NODE_STEP
     dt = delta_t_model(tn) if delta_t is None else np.broadcast_to(np.asarray(delta_t, float), tn.shape)
-    g = geocentric(julian_day(tn), dt)
+    jd = julian_day(tn)
+    g = geocentric(jd, dt)
     dr = np.radians(g['delta'])
-    gha = np.radians((g['nu'] - g['alpha']) % 360.0)
-    return np.sin(dr), np.cos(dr), np.sin(np.radians(equatorial_horizontal_parallax(g['R']))), gha
+    gg = np.radians((g['nu'] - g['alpha'] - _nu0_linear(jd)) % 360.0)
+    return np.sin(dr), np.cos(dr), np.sin(np.radians(equatorial_horizontal_parallax(g['R']))), gg
 
 
 def _slopes(v0, v1):
@@ -516,7 +526,7 @@ class GeocentricGrid:
         self.slopes = _slopes([x[:-1] for x in v], [x[1:] for x in v])
 
     def __call__(self, t):
-        """Interpolated (sin d, cos d, sin xi, Greenwich hour angle [rad]) at ``t``."""
+        """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
         s = np.asarray(t, dtype=float) / NODE_STEP - self.k0
         k = np.floor(s)
         f = s - k
@@ -577,11 +587,13 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     tan e), which gives the projection angles of :mod:`sslfr_planner.geometry`.
     ``projections=False`` skips theta_t, theta_l (returned as None).
     """
-    sd, cd, sx, gha = _interpolated_geocentric(t, delta_t) if grid is None else grid(t)
+    sd, cd, sx, g = _interpolated_geocentric(t, delta_t) if grid is None else grid(t)
     x, y = _observer_terms(lat_deg, elevation)
-    h = gha  # (owned temporary: modified in place)
-    h += np.radians(lon_deg)
-    h *= 0.5
+    h = _nu0_linear(julian_day(t))          # eq. 28 from the instant's JD [deg]
+    h += lon_deg
+    h *= np.pi / 360.0                      # H/2 [rad] ...
+    g *= 0.5
+    h += g                                  # ... + g/2
     th = np.tan(h)
     t2 = th * th
     den = t2 + 1.0

@@ -58,7 +58,7 @@ def test_axis_commands_per_phase(june):
     np.testing.assert_allclose(np.abs(june.mobile_structure[tr]), june.zenith[tr] / 2)  # seed 000 eq. 16
     np.testing.assert_allclose(june.mobile_structure[tr], june.secondary_reflector[tr])
     # PRE_DAWN holds the commands of the sunrise instant
-    at_rise = evaluate(np.array([june.events.sunrise + 1e-3]), ALMERIA, c)
+    at_rise = evaluate(np.array([june.events.sunrise + 0.01]), ALMERIA, c)
     pdw = p == PRE_DAWN
     np.testing.assert_allclose(june.mirrors[pdw], at_rise.mirrors[0], atol=1e-6)
     np.testing.assert_allclose(june.mobile_structure[pdw], at_rise.mobile_structure[0], atol=1e-6)
