@@ -6,8 +6,8 @@
   (the same Fourier family as eq. 3); transversal angle: seed 000 eq. 9. Accuracy is a
   few tenths of a degree, adequate for the simulators only (the planner uses SPA).
   Beam irradiance: ``sslfr_planner.beam.clear_sky_dni`` (Ineichen-Perez with the
-  Linke turbidity climatology, the model the planner's analysis uses), cached per
-  simulated minute and linearly interpolated.
+  Linke turbidity climatology, the model the planner's analysis uses), computed for
+  a whole day at a time at one-minute steps, cached and linearly interpolated.
 * :class:`GpsReceiver` - a u-blox-like receiver emitting RMC, GGA, GSA and GSV each
   second: position noise (first-order Gauss-Markov), satellites, fix loss and
   re-acquisition, and a clock offset to provoke time jumps.
@@ -26,6 +26,8 @@ import datetime as _dt
 import math
 import random
 from dataclasses import dataclass
+
+import numpy as np
 
 from . import nmea
 
@@ -116,14 +118,26 @@ class Sky:
         key = (self.latitude_deg, self.longitude_deg, self.elevation, minute)
         v = self._cache.get(key)
         if v is None:
+            # one vectorised model call for the whole UTC day (1441 minutes): a cache
+            # miss costs ~10 ms once per simulated day, not once per simulated minute
             from sslfr_planner.beam import clear_sky_dni
-            t = minute * 60.0
-            v = float(clear_sky_dni([t], [self.sun(t).zenith], self.latitude_deg,
-                                    self.longitude_deg, self.elevation)[0])
-            if len(self._cache) > 4096:
+            day0 = (minute // 1440) * 1440
+            minutes = range(day0, day0 + 1441)
+            ts = [m_ * 60.0 for m_ in minutes]
+            zen = [self.sun(t).zenith for t in ts]
+            with np.errstate(divide='ignore', invalid='ignore'):  # night: zenith > 90 deg
+                dni = clear_sky_dni(ts, zen, self.latitude_deg, self.longitude_deg, self.elevation)
+            if len(self._cache) > 20000:
                 self._cache.clear()
-            self._cache[key] = v
+            for m_, d in zip(minutes, dni):
+                self._cache[(self.latitude_deg, self.longitude_deg, self.elevation, m_)] = float(d)
+            v = self._cache[key]
         return v
+
+    def prepare(self, utc: float) -> None:
+        """Load the irradiance model and fill the cache for the day of ``utc`` now
+        (the simulators call it before opening their pty, so no tick stalls later)."""
+        self.dni(utc)
 
     def dni(self, utc: float) -> float:
         """Beam normal irradiance [W/m^2] (clear sky x ``cloud_factor``), >= 0."""

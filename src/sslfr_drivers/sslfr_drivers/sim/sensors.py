@@ -53,6 +53,7 @@ import math
 import os
 import random
 import tempfile
+import time
 
 from .. import max6675, veml7700
 from .. import messages as m
@@ -155,7 +156,6 @@ class _SensorSim(SimBoard):
     def utc(self) -> float:
         """Simulated UTC [s since epoch] at the board's current steady time."""
         if self.start_utc is None:
-            import time
             return time.time()
         if self._t0 is None:
             self._t0 = self.anchor if self.anchor is not None else self.now
@@ -279,6 +279,7 @@ class AbsorberSim(_SensorSim):
             self.thermal.temperature = float(o['temperature'])
         self.sky = Sky(self.site['latitude_deg'], self.site['longitude_deg'], self.site['elevation'])
         self.sky.cloud_factor = float(o.get('cloud', 1.0))
+        self.sky.prepare(self.start_utc if self.start_utc is not None else time.time())
         self.thermo_period = float(o.get('thermo_period', 0.25))
         self.switch_period = float(o.get('switch_period', 0.05))
         self.noise = float(o.get('noise', 0.2))
@@ -404,6 +405,7 @@ class IrradianceSim(_SensorSim):
         o = self.options
         self.sky = Sky(self.site['latitude_deg'], self.site['longitude_deg'], self.site['elevation'])
         self.sky.cloud_factor = float(o.get('cloud', 1.0))
+        self.sky.prepare(self.start_utc if self.start_utc is not None else time.time())
         self.efficacy = float(o.get('efficacy', veml7700.LUMINOUS_EFFICACY))
         self.lux_override = float(o['lux']) if o.get('lux') not in (None, '') else None
         self.period = float(o.get('period', 1.0))
