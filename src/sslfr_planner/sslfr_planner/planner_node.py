@@ -33,7 +33,7 @@ from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-from rclpy.clock import Clock, ClockType, JumpThreshold
+from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterException)
@@ -138,9 +138,11 @@ class PlannerNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
+        # Every ROS-time update (each /clock message with use_sim_time) runs the tick at
+        # once: simulated days advance in steps of any size and the ROS-time timer
+        # below alone would see them late; jumps beyond time_jump_threshold replan.
         self._jump_handle = self.get_clock().create_jump_callback(
-            JumpThreshold(min_forward=Duration(seconds=self.cfg['time_jump_threshold']),
-                          min_backward=Duration(seconds=-self.cfg['time_jump_threshold']),
+            JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=Duration(nanoseconds=-1),
                           on_clock_change=True),
             post_callback=self._on_ros_jump)
         self.create_timer(TICK_PERIOD, self._tick)                 # ROS time
@@ -219,12 +221,6 @@ class PlannerNode(Node):
             gps = self.selector.gps
             self.selector = self._make_selector(self.cfg)
             self.selector.gps = gps
-        if 'time_jump_threshold' in changed:
-            self._jump_handle.unregister()
-            thr = self.cfg['time_jump_threshold']
-            self._jump_handle = self.get_clock().create_jump_callback(
-                JumpThreshold(min_forward=Duration(seconds=thr), min_backward=Duration(seconds=-thr),
-                              on_clock_change=True), post_callback=self._on_ros_jump)
         self._replan_reason = 'parameters changed: ' + ', '.join(changed)
 
     def _make_selector(self, cfg: dict) -> SiteSelector:
@@ -293,10 +289,16 @@ class PlannerNode(Node):
 
     # ------------------------------------------------------------------ time jumps
     def _on_ros_jump(self, jump) -> None:
+        """ROS time was set (a /clock message) or switched between system and sim time."""
         try:
             delta = jump.delta.nanoseconds * 1e-9
-            self.counters['time_jumps'] += 1
-            self._replan_reason = f'ROS time jumped by {delta:+.1f} s'
+            if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
+                                     ClockChange.ROS_TIME_DEACTIVATED):
+                self._replan_reason = f'clock source changed ({jump.clock_change.name})'
+                self._jump.reset()
+            elif abs(delta) >= self.cfg['time_jump_threshold']:
+                self.counters['time_jumps'] += 1
+                self._replan_reason = f'ROS time jumped by {delta:+.1f} s'
             self._tick()
         except Exception as exc:  # noqa: BLE001 - must never escape into rcl
             self._note_error(f'time-jump handling failed: {exc!r}')
