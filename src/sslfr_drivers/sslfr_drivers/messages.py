@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
-from .protocol import Frame, PayloadError
+from .protocol import FLAG_RESPONSE, Frame, PayloadError
 
 DEFAULT_STEP_RAD = math.radians(0.006)
 
@@ -148,7 +148,6 @@ class Message:
 
 def encode(msg: Message, seq: int, ref: int | None = None) -> Frame:
     """Build the :class:`Frame` carrying ``msg`` (``ref`` set makes it a response)."""
-    from .protocol import FLAG_RESPONSE
     if ref is None:
         return Frame(msg.TYPE, seq, msg.pack())
     return Frame(msg.TYPE, seq, msg.pack(), ref, FLAG_RESPONSE)

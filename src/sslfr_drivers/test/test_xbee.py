@@ -14,7 +14,6 @@ from digi.xbee.packets.raw import RX64Packet, TX64Packet, TXStatusPacket
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers import messages as m
 from sslfr_drivers.link import BoardLink, LinkState
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
