@@ -32,12 +32,14 @@ Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
     > ``silent_timeout`` [s] (default 2 s) while TRACKING. Cleared by reset (or
     auto-reset) once the sensor delivers fresh valid samples (and, for *stuck*, a change).
 ``switch:<name>``  ESTOP for the switch's axis (:data:`SWITCH_AXIS`), latched. A
-    switch closing while its axis is not homing and not at the switch's nominal
-    position (``switch_positions`` +/- ``switch_window`` [rad], from the axis' status)
-    is a trip. The seed's switches are position references the mechanism reaches in
-    normal operation (mirrors at the sleeping switch every night), hence the position
-    test; without a fresh axis status the position is unknown and a closure trips
-    (after ``startup_grace``). Reset acknowledges a trip even while the switch is
+    switch closing while its axis is not homing and its nominal angle
+    (``switch_positions``) is not on the axis' path, i.e. not between the measured and
+    the commanded angle (+/- ``switch_window`` [rad], from a fresh axis status), is a
+    trip. The seed's switches are position references the mechanism reaches or passes
+    in normal operation (mirrors on the sleeping switch every night, passing the
+    ``last`` switch on the way), hence the path test. With the position unknown (no
+    fresh status, or NaN: no board, the axis cannot move) the closure is judged as
+    soon as a position is known. Reset acknowledges a trip even while the switch is
     still closed (so the axis can be jogged off it); it re-arms when the switch opens.
 ``stuck_switch:<name>``  ESTOP for the axis, latched: detected at homing, when the
     switch stays closed while the axis travels more than ``stuck_switch_travel``
@@ -269,6 +271,7 @@ class _Axis:
     arrival: float | None = None
     homing: bool = False
     measured: float | None = None
+    commanded: float | None = None
     #: switch -> (min, max) measured angle [rad] while homing with the switch continuously closed
     closed_travel: dict = field(default_factory=dict)
 
@@ -307,7 +310,7 @@ class SafetyCore:
                          'transitions': 0, 'bad_inputs': 0}
         self._state = SafetyState(Level.OK, (), (), False, self.start)
         self._pending: list[Transition] = []
-        self._pending_closure = False   # a closure seen in start-up grace, position unknown
+        self.pending_switches: set[str] = set()   # closed while the axis position was unknown
         self.evaluate(self.start)
 
     # ----------------------------------------------------------------- helpers
@@ -385,22 +388,28 @@ class SafetyCore:
             self.switch_closed[name] = closed
             if not closed:
                 self.switch_ack.discard(name)
+                self.pending_switches.discard(name)
             if closed and was is not True:
                 self._judge_closure(name, now)
         self._check_homing(now)
 
-    def on_axis_status(self, axis: str, homing: bool, measured: float, arrival: float | None = None) -> None:
-        """An ``axes/<axis>/status``: homing flag and measured angle [rad]."""
+    def on_axis_status(self, axis: str, homing: bool, measured: float, arrival: float | None = None,
+                       commanded: float = math.nan) -> None:
+        """An ``axes/<axis>/status``: homing flag, measured and commanded angles [rad]
+        (NaN = unknown, e.g. no board)."""
         now = self._now(arrival)
         ax = self.axes[axis]
         self.heartbeat(f'{axis}_driver', now)
         ax.arrival = now
-        measured = float(measured)
+        measured, commanded = float(measured), float(commanded)
         ax.measured = measured if math.isfinite(measured) else None
+        ax.commanded = commanded if math.isfinite(commanded) else None
         ax.homing = bool(homing)
         if not homing:
             ax.closed_travel = {}
         self._check_homing(now)
+        for name in [n for n in self.pending_switches if SWITCH_AXIS[n] == axis]:
+            self._judge_closure(name, now)
 
     def on_phase(self, phase: int, site_source: str = '', arrival: float | None = None) -> None:
         """A ``tracker/phase``: phase code and the planner's site source."""
@@ -429,31 +438,31 @@ class SafetyCore:
             self.counters['bad_inputs'] += 1
 
     # ----------------------------------------------------------------- switches
-    def _axis_position(self, axis: str, now: float) -> tuple[bool, float | None]:
-        """(homing, measured [rad] or None) from a fresh axis status."""
-        ax = self.axes[axis]
-        if ax.arrival is None or now - ax.arrival > self.config.status_max_age:
-            return False, None
-        return ax.homing, ax.measured
-
     def _judge_closure(self, name: str, now: float) -> None:
-        if name in self.switch_ack:
+        """Judge a closed switch: a trip unless acknowledged, its axis homing, or its
+        nominal angle on the axis' path (between the measured and the commanded angle,
+        +/- ``switch_window``) per a fresh axis status. Position unknown: judged later,
+        when one is known (an axis without a board cannot move)."""
+        self.pending_switches.discard(name)
+        if name in self.switch_ack or self.switch_closed[name] is not True:
             return
         axis = SWITCH_AXIS[name]
-        homing, measured = self._axis_position(axis, now)
-        if homing:
+        ax = self.axes[axis]
+        fresh = ax.arrival is not None and now - ax.arrival <= self.config.status_max_age
+        if fresh and ax.homing:
+            return
+        if not fresh or ax.measured is None:
+            self.pending_switches.add(name)
             return
         nominal = self.config.switch_positions[name]
-        if measured is not None and abs(measured - nominal) <= self.config.switch_window:
+        ends = [ax.measured] + ([ax.commanded] if ax.commanded is not None else [])
+        w = self.config.switch_window
+        if min(ends) - w <= nominal <= max(ends) + w:
             return
-        if measured is None and now - self.start < self.config.startup_grace:
-            self._pending_closure = True
-            return
-        where = ('axis position unknown' if measured is None
-                 else f'{axis} at {measured:.3f} rad, switch at {nominal:.3f} rad')
         self._latch(Condition(f'switch:{name}', Level.ESTOP,
-                              f'limit switch {name} tripped outside homing ({where}): {axis} stopped',
-                              axes=(axis,), latched=True))
+                              f'limit switch {name} tripped outside homing ({axis} at {ax.measured:.3f} rad, '
+                              f'commanded {ax.commanded if ax.commanded is not None else math.nan:.3f} rad, '
+                              f'switch at {nominal:.3f} rad): {axis} stopped', axes=(axis,), latched=True))
 
     def _check_homing(self, now: float) -> None:
         """Stuck-closed switches, judged while an axis homes: a switch that stays
@@ -585,12 +594,6 @@ class SafetyCore:
                                           f'{name} thermocouple stuck at {st.value:.2f} degC for > '
                                           f'{cfg.stuck_timeout:.0f} s with the sun on the receiver',
                                           latched=True))
-        # pending switch closures seen during start-up without an axis position
-        if self._pending_closure and now - self.start >= cfg.startup_grace:
-            self._pending_closure = False
-            for name in SWITCHES:
-                if self.switch_closed[name] and f'switch:{name}' not in self.latched:
-                    self._judge_closure(name, now)
         # heartbeat watchdogs
         for node, (timeout, action) in cfg.watchdogs.items():
             last = self.heard.get(node)

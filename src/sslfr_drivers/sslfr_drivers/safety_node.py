@@ -225,7 +225,7 @@ class SafetyNode(Node):
         self.core.heartbeat('planner')
 
     def _on_axis(self, axis: str, msg: AxisStatus) -> None:
-        self.core.on_axis_status(axis, msg.state == 'homing', msg.measured)
+        self.core.on_axis_status(axis, msg.state == 'homing', msg.measured, commanded=msg.commanded)
         self._evaluate(publish_on_change=True)
 
     def _on_fix(self, msg: NavSatFix) -> None:

@@ -180,15 +180,33 @@ def test_switch_closed_at_its_nominal_position_or_while_homing_is_not_a_trip(swi
     assert any(f'limit switch {switch} tripped' in r for r in core.state.reasons)
 
 
-def test_switch_closure_with_unknown_axis_position_trips_after_startup_grace():
+def test_switch_closure_with_unknown_axis_position_is_judged_once_a_position_is_known():
     clock = FakeClock()
-    core = SafetyCore(SafetyConfig(), clock)
-    core.on_limit_switches({**OPEN, 'last': True})      # no axis status yet
-    assert core.evaluate().level != Level.ESTOP          # judged after the grace
-    clock.advance(10.5)
+    core = SafetyCore(SafetyConfig(watchdogs={}, require_site_and_time=False), clock)
+    core.on_limit_switches({**OPEN, 'last': True, 'longitudinal_2': True})   # no axis status yet
+    clock.advance(30.0)
+    core.on_axis_status('mirrors', False, math.nan)      # driver up, no board: cannot move
+    assert core.evaluate().level == Level.OK
+    core.on_limit_switches({**OPEN, 'last': True})      # longitudinal_2 opened meanwhile
+    core.on_axis_status('mirrors', False, 0.3, commanded=0.3)
+    core.on_axis_status('secondary_reflector', False, 0.6, commanded=0.6)
     state = core.evaluate()
     assert state.level == Level.ESTOP and state.stopped_axes == ('mirrors',)
-    assert any('last tripped outside homing (axis position unknown)' in r for r in state.reasons)
+    assert [r.split(' (')[0] for r in state.reasons] == ['limit switch last tripped outside homing']
+
+
+def test_switch_on_the_commanded_path_is_expected_even_with_a_stale_measurement():
+    """Stowing at 2 rad/s (sim speed): the 5 Hz status lags, but the sleeping switch
+    (the target) and the last switch (passed on the way) are on the path."""
+    core, clock = make()
+    feed(core, clock, steps=120)
+    core.on_axis_status('mirrors', False, 0.4, commanded=math.pi / 2)
+    for name in ('last', 'sleeping'):
+        core.on_limit_switches({**OPEN, name: True})
+        assert core.evaluate().level == Level.OK, name
+    core.on_limit_switches(OPEN)
+    core.on_limit_switches({**OPEN, 'initial': True})     # behind the axis: a trip
+    assert core.evaluate().level == Level.ESTOP
 
 
 def test_stuck_closed_switch_detected_at_homing():
