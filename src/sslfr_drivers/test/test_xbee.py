@@ -159,3 +159,22 @@ def test_hub_gives_each_remote_board_a_pty(xbee_sim, tmp_path):
         hub.running = False
         t.join(2)
         hub.close()
+
+
+def test_coordinator_port_lost_and_reopened(tmp_path):
+    host = XBeeSimCoordinator()
+    host.add_board(bytes.fromhex(ADDR_B), AxisSim(AxisConfig.for_axis('mirrors'),
+                                                  rng=random.Random(1)), FaultInjector())
+    port = str(tmp_path / 'xbee')
+    with SimThread(host, link=port) as sim:
+        lk = BoardLink(make_transport(f'xbee:{port}?addr={ADDR_B}'), heartbeat=0.25,
+                       backoff_max=0.5).start()
+        try:
+            assert lk.wait_up(5)
+            lk.set_zero(0)
+            sim.command('unplug 1.0')                 # the coordinator's USB adapter vanishes
+            assert wait_for(lambda: lk.state == LinkState.DOWN, 3)
+            assert wait_for(lambda: lk.state == LinkState.UP, 6)
+            assert lk.reconnects == 1 and lk.get_status().homed
+        finally:
+            lk.stop()
