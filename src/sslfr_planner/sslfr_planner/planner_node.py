@@ -246,12 +246,11 @@ class PlannerNode(Node):
             self.get_logger().error(err)
         planned = self.planner.site_fix
         cur = self.selector.current()
-        if (planned.source != 'gps' and distance_m(planned, cur) <= self.cfg['site.replan_distance']):
-            self.planner.site_fix = cur        # same place, now confirmed by GPS: label only
-            return
-        if distance_m(planned, cur) > self.cfg['site.replan_distance']:
-            self._replan_reason = (f'gps fix {distance_m(planned, cur):.0f} m from the planned '
-                                   f'site ({planned.source})')
+        moved = distance_m(planned, cur)
+        # the first fix of a run always replans (the plan then says it is the GPS
+        # site); later fixes only when the site moved beyond site.replan_distance
+        if planned.source != 'gps' or moved > self.cfg['site.replan_distance']:
+            self._replan_reason = f'gps fix {moved:.0f} m from the planned site ({planned.source})'
             self._tick()
 
     def _on_safety(self, msg: SafetyState) -> None:
