@@ -40,7 +40,7 @@ GRAPH_RATES = {
     'limit_switches': ('sslfr_interfaces/msg/LimitSwitches', 10),
     'irradiance/illuminance': ('sensor_msgs/msg/Illuminance', 1),
     'irradiance/beam': ('sslfr_interfaces/msg/Irradiance', 1),
-    'safety/state': ('sslfr_interfaces/msg/SafetyState', 10),
+    'safety/state': ('sslfr_interfaces/msg/SafetyState', 20),
     'diagnostics': ('diagnostic_msgs/msg/DiagnosticArray', 8),
 }
 

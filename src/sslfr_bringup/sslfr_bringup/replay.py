@@ -31,10 +31,13 @@ from .bag.metadata import BagError
 from .bag.playback import Timeline, absolute, parse_remaps, parse_time_spec, progress_line
 from .bag.reader import BagReader
 
-#: Sensor inputs played in what-if mode (relative names).
+#: Inputs played in what-if mode (relative names): the sensors (GPS, absorber
+#: temperatures, irradiance, limit switches) and the axes' measured state, which the
+#: safety supervisor watches (heartbeat watchdogs) and the planner does not produce.
 WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
                  'absorber/outlet_temperature', 'irradiance/beam', 'irradiance/illuminance',
-                 'limit_switches']
+                 'limit_switches', 'joint_states', 'axes/mirrors/status',
+                 'axes/mobile_structure/status', 'axes/secondary_reflector/status']
 #: Decisions compared in what-if mode.
 WHATIF_DECISIONS = ['tracker/phase', 'safety/state', 'tracker/trajectory']
 

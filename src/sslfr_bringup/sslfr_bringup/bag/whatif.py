@@ -139,10 +139,24 @@ class StepComparison:
     matched: list[tuple[float, int, int, float]]      # (t recorded, from, to, dt new - rec [s])
     unmatched_recorded: list[tuple[float, int, int]]
     unmatched_new: list[tuple[float, int, int]]
+    reasons: dict = field(default_factory=dict)   # ('rec'|'new', t) -> reason text
+
+
+def _reason_map(tag, t, reasons, trans) -> dict:
+    out = {}
+    if not reasons:
+        return out
+    t = np.asarray(t)
+    for tt, _, _ in trans:
+        i = int(np.searchsorted(t, tt, side='left'))
+        if i < len(reasons):
+            r = reasons[i]
+            out[(tag, tt)] = '; '.join(r) if isinstance(r, list) else str(r)
+    return out
 
 
 def compare_steps(name: str, rec_t, rec_v, new_t, new_v, grid: np.ndarray,
-                  tolerance_s: float = 300.0) -> StepComparison:
+                  tolerance_s: float = 300.0, rec_reasons=None, new_reasons=None) -> StepComparison:
     """Compare two step functions on ``grid`` [s] and match their transitions.
 
     A recorded transition a->b is matched with the nearest new transition a->b no
@@ -183,8 +197,10 @@ def compare_steps(name: str, rec_t, rec_v, new_t, new_v, grid: np.ndarray,
         else:
             used[best] = True
             matched.append((t, f, to, float(best_dt)))
+    reasons = _reason_map('rec', rec_t, rec_reasons, rec_tr)
+    reasons.update(_reason_map('new', new_t, new_reasons, new_tr))
     return StepComparison(name, agree, int(valid.sum()), diffs, matched, unmatched,
-                          [x for k, x in enumerate(new_tr) if not used[k]])
+                          [x for k, x in enumerate(new_tr) if not used[k]], reasons)
 
 
 def trajectory_setpoints(trajs: list[Trajectory], joint: str, tq: np.ndarray) -> np.ndarray:
@@ -234,9 +250,13 @@ class WhatIfResult:
             for t, f, to, d in comp.matched:
                 lines.append(f'  {hhmm(t)} {names.get(f, f)} -> {names.get(to, to)}: new run {d:+.1f} s')
             for t, f, to in comp.unmatched_recorded:
-                lines.append(f'  {hhmm(t)} {names.get(f, f)} -> {names.get(to, to)}: recorded only')
+                why = comp.reasons.get(('rec', t))
+                lines.append(f'  {hhmm(t)} {names.get(f, f)} -> {names.get(to, to)}: recorded only'
+                             + (f' ({why})' if why else ''))
             for t, f, to in comp.unmatched_new:
-                lines.append(f'  {hhmm(t)} {names.get(f, f)} -> {names.get(to, to)}: new run only')
+                why = comp.reasons.get(('new', t))
+                lines.append(f'  {hhmm(t)} {names.get(f, f)} -> {names.get(to, to)}: new run only'
+                             + (f' ({why})' if why else ''))
             for t0, t1, a, b in comp.differences[:10]:
                 lines.append(f'  differ {hhmm(t0)}..{hhmm(t1)}: recorded {names.get(a, a)}, '
                              f'new {names.get(b, b)}')
@@ -276,10 +296,11 @@ def compare(recorded: Decisions, new: Decisions, grid_s: float = 1.0,
         start, end = max(starts), min(ends)
     grid = np.arange(start, end + 1e-9, grid_s) if end > start else np.array([start])
     phase = compare_steps('tracker/phase', recorded.phase_t, recorded.phase, new.phase_t,
-                          new.phase, grid, tolerance_s) \
+                          new.phase, grid, tolerance_s, recorded.phase_reason, new.phase_reason) \
         if len(recorded.phase) and len(new.phase) else None
     safety = compare_steps('safety/state', recorded.safety_t, recorded.safety, new.safety_t,
-                           new.safety, grid, tolerance_s) \
+                           new.safety, grid, tolerance_s, recorded.safety_reasons,
+                           new.safety_reasons) \
         if len(recorded.safety) and len(new.safety) else None
     traj = {}
     for j in joints:
