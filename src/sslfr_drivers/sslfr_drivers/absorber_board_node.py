@@ -93,7 +93,6 @@ class AbsorberBoardNode(Node):
         self._fault_counts = {'inlet': 0, 'outlet': 0}
         self._last_temp = {'inlet': math.nan, 'outlet': math.nan}
         self._changed_ros: dict[str, object] = {}
-        self._board_now = 0.0
         self._bad_samples = 0
         self._pub_t = {s: self.create_publisher(Temperature, f'absorber/{s}_temperature', 10)
                        for s in ('inlet', 'outlet')}
@@ -147,16 +146,17 @@ class AbsorberBoardNode(Node):
             else:
                 self._switch_meter.tick()
                 t = self._board_clock.seconds(msg.board_ms)
-                self._board_now = t
+                first = self._debouncer.states is None
                 changed = self._debouncer.update(msg.bits, t)
-                for name in changed:
-                    st = self._debouncer.states[name]
-                    back = max(0.0, t - st.changed)
-                    self._changed_ros[name] = stamp - Duration(seconds=back)
-                    self.get_logger().info(f'limit switch {name} {"closed" if st.closed else "open"}')
-                if not self._changed_ros and self._debouncer.states is not None:
+                if first:  # initial states: "changed" at the first sample
                     self._changed_ros = {n: stamp for n in SWITCH_NAMES}
                     changed = list(SWITCH_NAMES)
+                else:
+                    for name in changed:
+                        st = self._debouncer.states[name]
+                        # ROS time of the first raw sample of the new state
+                        self._changed_ros[name] = stamp - Duration(seconds=max(0.0, t - st.changed))
+                        self.get_logger().info(f'limit switch {name} {"closed" if st.closed else "open"}')
                 if changed:
                     self._publish_switches()
 

@@ -213,9 +213,8 @@ class GpsSim(_SensorSim):
         self._next_epoch += 1.0
         if self._next_epoch < self.now:
             self._next_epoch = self.now + 1.0
-        # the receiver's epoch time: whole simulated second (u-blox aligns to UTC)
-        utc = self.utc()
-        data = self.receiver.epoch(math.floor(utc * 100) / 100.0 if self.speed != 1 else math.floor(utc))
+        # epoch time to the 10 ms the NMEA time fields carry
+        data = self.receiver.epoch(math.floor(self.utc() * 100.0) / 100.0)
         self.epochs += 1
         if self.framing == 'raw_nmea':
             self._out += data
