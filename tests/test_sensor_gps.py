@@ -105,3 +105,10 @@ def test_raw_nmea_garbage_and_time_jump(gps_sim, launch, ros, tmp_path):
     n = len(fixes)
     assert ros.spin_until(lambda: len(fixes) > n + 1, 5) and node.running()
     assert fixes[-1].status.status == NavSatStatus.STATUS_FIX
+
+
+def test_invalid_startup_parameters_refused(launch):
+    node = launch('sslfr_drivers', 'gps', params={'framing': 'ubx'})
+    assert node.wait_for_output('invalid parameters', 20)
+    assert node.proc.wait(20) == 2
+    assert 'framing' in node.output() and 'Traceback' not in node.output()
