@@ -88,7 +88,12 @@ def _local_day_index(t, site: Site):
 def _declination_at_noons(t, site: Site, collector: Collector):
     """Declination at the solar noon of each instant's local date [rad] ('daily' law)."""
     days = _local_day_index(t, site)
-    uniq, inv = np.unique(days, return_inverse=True)
+    dmin, dmax = float(days.min()), float(days.max())
+    if dmax - dmin < 16:  # a few days: no sort needed
+        uniq = np.arange(dmin, dmax + 1.0)
+        inv = (days - dmin).astype(np.intp)
+    else:
+        uniq, inv = np.unique(days, return_inverse=True)
     decl = np.empty(uniq.size)
     for n, d in enumerate(uniq):
         anchor = d * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0
@@ -160,71 +165,75 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
         raise ValueError('evaluate needs at least one instant')
     if not np.all(np.isfinite(t)):
         raise ValueError('instants must be finite numbers of seconds')
+    if t.size > 1 and not np.all(t[1:] >= t[:-1]):  # evaluate in time order, return in the given order
+        order = np.argsort(t, kind='stable')
+        tab = evaluate(t[order], site, collector, events)
+        back = np.empty_like(order)
+        back[order] = np.arange(order.size)
+        cols = {name: getattr(tab, name)[back] for name in _COLUMNS}
+        return DayTable(events=tab.events, **cols)
     c = collector
-    lo = float(t.min()) - max(c.stow_duration, c.tracking_step) - 2 * SCAN_STEP
-    hi = float(t.max()) + max(c.pre_dawn_lead, c.tracking_step) + 2 * SCAN_STEP
-    dense = (hi - lo) / spa.NODE_STEP <= 2 * t.size + 300
-    grid = spa.GeocentricGrid(lo, hi, site.delta_t) if dense else None
+    lo = float(t[0]) - max(c.stow_duration, c.tracking_step) - 2 * SCAN_STEP
+    hi = float(t[-1]) + max(c.pre_dawn_lead, c.tracking_step) + 2 * SCAN_STEP
+    if (hi - lo) / spa.NODE_STEP > 2 * t.size + 300:  # sparse instants over a long span
+        return _evaluate_sparse(t, site, c, events)
+    grid = spa.GeocentricGrid(lo, hi, site.delta_t)
     sun = spa.sun_position(t, site, collector_azimuth=c.azimuth, grid=grid)
 
-    # --- day cycle from the crossings around the instants
-    if dense:
-        ct, rising, up0 = crossings(lo, hi, site, grid)
-        n_before = np.searchsorted(ct, t, side='right')
-        up = up0 ^ (n_before % 2 == 1)
-    else:  # sparse instants over a long span: crossings instant by instant (slower, exact)
-        return _evaluate_sparse(t, site, c, events)
+    # --- day cycle: segments of t between consecutive sunrise/sunset crossings
+    ct, rising, up0 = crossings(lo, hi, site, grid)
+    b = np.searchsorted(t, ct, side='left')          # first instant at/after each crossing
+    starts = np.concatenate([[0], b])
+    ends = np.concatenate([b, [t.size]])
     phase = np.full(t.size, NIGHT, dtype=np.uint8)
-    phase[up] = TRACKING
-    nxt = np.minimum(n_before, ct.size - 1)
-    prv = np.maximum(n_before - 1, 0)
-    has_next = (n_before < ct.size) & ~up
-    has_prev = (n_before > 0) & ~up
-    if ct.size:
-        next_rise = np.where(has_next & rising[nxt], ct[nxt], np.inf)
-        prev_set = np.where(has_prev & ~rising[prv], ct[prv], -np.inf)
-    else:
-        next_rise = np.full(t.size, np.inf)
-        prev_set = np.full(t.size, -np.inf)
-    stowing = ~up & (t - prev_set < c.stow_duration)
-    pre_dawn = ~up & (next_rise - t <= c.pre_dawn_lead) & (c.pre_dawn_lead > 0)
-    phase[stowing] = STOWING
-    phase[pre_dawn] = PRE_DAWN
-
-    # --- commands
     mirrors = np.full(t.size, c.sleeping)
     bm, ba = _resting(t, site, c)
-    track_idx = np.nonzero(up)[0]
-    if track_idx.size:
+    track_slices, pre_dawn = [], []
+    for j in range(ct.size + 1):
+        i0, i1 = int(starts[j]), int(ends[j])
+        if i1 <= i0:
+            continue
+        if up0 ^ (j % 2 == 1):
+            phase[i0:i1] = TRACKING
+            track_slices.append((j, i0, i1))
+            continue
+        if j > 0 and not rising[j - 1] and c.stow_duration > 0:      # after a sunset
+            k = min(int(np.searchsorted(t, ct[j - 1] + c.stow_duration, side='left')), i1)
+            phase[i0:k] = STOWING
+        if j < ct.size and rising[j] and c.pre_dawn_lead > 0:         # before a sunrise
+            k = max(int(np.searchsorted(t, ct[j] - c.pre_dawn_lead, side='left')), i0)
+            if k < i1:
+                phase[k:i1] = PRE_DAWN
+                pre_dawn.append((j, k, i1))
+
+    # --- commands while TRACKING
+    for j, i0, i1 in track_slices:
         if c.tracking_step > 0:
-            tt = t[track_idx]
+            tt = t[i0:i1]
             sample = np.floor(tt / c.tracking_step) * c.tracking_step + c.tracking_step / 2.0
-            k = np.searchsorted(ct, tt, side='right')
-            rise_before = np.where(k > 0, ct[np.maximum(k - 1, 0)], -np.inf)
-            set_after = np.where(k < ct.size, ct[np.minimum(k, ct.size - 1)], np.inf)
-            sample = np.clip(sample, rise_before, set_after)
+            lo_j = ct[j - 1] + RISE_EPSILON if j > 0 else -np.inf
+            hi_j = ct[j] if j < ct.size else np.inf
+            sample = np.clip(sample, lo_j, hi_j)
             us, inv = np.unique(sample, return_inverse=True)
             s_sun = spa.sun_position(us, site, collector_azimuth=c.azimuth, grid=grid)
             m, b1, b2 = _commands(s_sun.zenith, s_sun.longitudinal, s_sun.transversal, us, site, c)
             inv = inv.reshape(-1)
-            mirrors[track_idx], bm[track_idx], ba[track_idx] = m[inv], b1[inv], b2[inv]
+            mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m[inv], b1[inv], b2[inv]
         else:
-            m, b1, b2 = _commands(sun.zenith[track_idx], sun.longitudinal[track_idx],
-                                  sun.transversal[track_idx], t[track_idx], site, c)
-            mirrors[track_idx], bm[track_idx], ba[track_idx] = m, b1, b2
-    pd_idx = np.nonzero(pre_dawn)[0]
-    if pd_idx.size:
-        rises, inv = np.unique(next_rise[pd_idx], return_inverse=True)
-        # 10 ms after the crossing: e_0 is then 4e-5 deg above h0, clear of the refraction
-        # switch of eq. 42 (the crossing itself is only known to ~1e-8 deg in e_0)
-        rises = rises + RISE_EPSILON
+            m, b1, b2 = _commands(sun.zenith[i0:i1], sun.longitudinal[i0:i1], sun.transversal[i0:i1],
+                                  t[i0:i1], site, c)
+            mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m, b1, b2
+    # --- PRE_DAWN: the commands of the sunrise instant (10 ms after the crossing: e_0 is
+    # then 4e-5 deg above h0, clear of the refraction switch of eq. 42)
+    if pre_dawn:
+        rises = np.array([ct[j] for j, _, _ in pre_dawn]) + RISE_EPSILON
         r_sun = spa.sun_position(rises, site, collector_azimuth=c.azimuth, grid=grid)
         m, b1, b2 = _commands(r_sun.zenith, r_sun.longitudinal, r_sun.transversal, rises, site, c)
-        inv = inv.reshape(-1)
-        mirrors[pd_idx], bm[pd_idx], ba[pd_idx] = m[inv], b1[inv], b2[inv]
+        for n, (_, i0, i1) in enumerate(pre_dawn):
+            mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m[n], b1[n], b2[n]
 
     if events is None:
-        mid = float(np.median(t))
+        mid = float(t[t.size // 2])
         day = _local_day_index(mid, site)
         noon = solar_transit(float(day) * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0, site)
         events = events_around(noon, site)
@@ -232,12 +241,14 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
                     mirrors, bm, ba, events)
 
 
+_COLUMNS = ('t', 'phase', 'zenith', 'azimuth', 'transversal', 'longitudinal', 'mirrors', 'mobile_structure',
+            'secondary_reflector')
+
+
 def _evaluate_sparse(t, site: Site, c: Collector, events):
     """evaluate() for instants spread over a long span: one dense evaluation per instant."""
     parts = [evaluate(np.array([x]), site, c, events) for x in t]
-    cat = {name: np.concatenate([getattr(p, name) for p in parts])
-           for name in ('t', 'phase', 'zenith', 'azimuth', 'transversal', 'longitudinal', 'mirrors',
-                        'mobile_structure', 'secondary_reflector')}
+    cat = {name: np.concatenate([getattr(p, name) for p in parts]) for name in _COLUMNS}
     return DayTable(events=parts[len(parts) // 2].events, **cat)
 
 

@@ -525,8 +525,9 @@ class GeocentricGrid:
         self.values = [x[:-1].copy() for x in v]
         self.slopes = _slopes([x[:-1] for x in v], [x[1:] for x in v])
 
-    def __call__(self, t):
-        """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
+        self._site_cache = {}
+
+    def _interp(self, t, values, slopes):
         s = np.asarray(t, dtype=float) / NODE_STEP - self.k0
         k = np.floor(s)
         f = s - k
@@ -534,12 +535,40 @@ class GeocentricGrid:
         if i.size and (i.min() < 0 or i.max() >= self.values[0].size):
             raise ValueError('instant outside the geocentric grid')
         out = []
-        for v, d in zip(self.values, self.slopes):
+        for v, d in zip(values, slopes):
             r = d[i]
             r *= f
             r += v[i]
             out.append(r)
         return out
+
+    def __call__(self, t):
+        """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
+        return self._interp(t, self.values, self.slopes)
+
+    def site_fields(self, t, x: float, y: float, lon_deg: float):
+        """Interpolated observer-combined fields at ``t`` (see :func:`_site_fields`).
+
+        The combination is linear in the node quantities, so it is applied to the
+        nodes once per site (cached) instead of to every instant.
+        """
+        key = (x, y, lon_deg)
+        if key not in self._site_cache:
+            self._site_cache[key] = (_site_fields(self.values, x, y, lon_deg),
+                                     _site_fields(self.slopes, x, y, 0.0))
+        values, slopes = self._site_cache[key]
+        return self._interp(t, values, slopes)
+
+
+def _site_fields(fields, x: float, y: float, lon_deg: float):
+    """(cos d, x sin xi, sin d - y sin xi, (g + sigma)/2 [rad]) from (sin d, cos d, sin xi, g).
+
+    x, y: the observer terms of eqs. 35-36; sigma: the longitude. With them the local
+    hour angle is H = nu0_lin(JD) + g + sigma (eq. 32) and the topocentric vector of
+    :func:`_topocentric_fast` is (cos d cos H - x sin xi, cos d sin H, sin d - y sin xi).
+    """
+    sd, cd, sx, g = fields
+    return [cd, x * sx, sd - y * sx, 0.5 * g + np.radians(lon_deg) * 0.5]
 
 
 def _interpolated_geocentric(t, delta_t):
@@ -587,26 +616,25 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     tan e), which gives the projection angles of :mod:`sslfr_planner.geometry`.
     ``projections=False`` skips theta_t, theta_l (returned as None).
     """
-    sd, cd, sx, g = _interpolated_geocentric(t, delta_t) if grid is None else grid(t)
     x, y = _observer_terms(lat_deg, elevation)
+    if grid is None:
+        cd, xsx, Z, half_g = _site_fields(_interpolated_geocentric(t, delta_t), x, y, lon_deg)
+    else:
+        cd, xsx, Z, half_g = grid.site_fields(t, x, y, lon_deg)
     h = _nu0_linear(julian_day(t))          # eq. 28 from the instant's JD [deg]
-    h += lon_deg
-    h *= np.pi / 360.0                      # H/2 [rad] ...
-    g *= 0.5
-    h += g                                  # ... + g/2
+    h *= np.pi / 360.0
+    h += half_g                             # H/2 [rad] (eq. 32)
     th = np.tan(h)
     t2 = th * th
     den = t2 + 1.0
     np.divide(cd, den, out=den)             # cos d / (1 + tan^2(H/2))
     X = 1.0 - t2
     X *= den
-    X -= x * sx                             # cos d cos H - x sin xi
+    X -= xsx                                # cos d cos H - x sin xi
     Y = th
     Y *= 2.0
     Y *= den                                # cos d sin H
-    Z = sx
-    Z *= -y
-    Z += sd                                 # sin d - y sin xi
+    # Z = sin d - y sin xi (interpolated directly)
     phi = np.radians(lat_deg)
     sphi, cphi = np.sin(phi), np.cos(phi)
     up = sphi * Z
@@ -617,16 +645,16 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     hor += Y * Y
     np.sqrt(hor, out=hor)
     e0 = np.arctan2(up, hor)
-    # refraction, eq. 42 (degrees inside), zero below -(0.26667 + atmos_refract) deg
-    e0d = e0 * (180.0 / np.pi)
-    safe = np.maximum(e0d, -2.0)
-    arg = safe + 5.11
-    np.divide(10.3, arg, out=arg)
+    # refraction, eq. 42 (e0 in degrees inside), zero below -(0.26667 + atmos_refract) deg;
+    # in radians: tan(e0 + (10.3 pi/180) / (e0 180/pi + 5.11))
+    safe = np.maximum(e0, -2.0 * np.pi / 180.0)
+    arg = safe * (180.0 / np.pi)
+    arg += 5.11
+    np.divide(10.3 * np.pi / 180.0, arg, out=arg)
     arg += safe
-    arg *= np.pi / 180.0
     de = np.tan(arg)
     np.divide(pressure / 1010.0 * 283.0 / (273.0 + temperature) * 1.02 / 60.0 * np.pi / 180.0, de, out=de)
-    de *= e0d >= -(SUN_RADIUS + atmos_refract)
+    de *= e0 >= np.radians(-(SUN_RADIUS + atmos_refract))
     e = e0 + de                             # eq. 43
     zenith = np.pi / 2 - e                  # eq. 44
     Y_neg = -Y
@@ -641,9 +669,9 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     else:
         trans, longi = Y, south
     # the apparent sun vector is (trans, longi, hor tan e) up to the factor cos e > 0
-    np.tan(e, out=e0d)
-    e0d *= hor
-    return e0, zenith, az, np.arctan2(trans, e0d), np.arctan2(longi, e0d)
+    vert = np.tan(e)
+    vert *= hor
+    return e0, zenith, az, np.arctan2(trans, vert), np.arctan2(longi, vert)
 
 
 @dataclass
