@@ -200,9 +200,11 @@ def test_nan_speed_refused_at_decode():
 
 
 def test_registry_ranges_and_uniqueness():
-    reg = m.registry()
-    for code in reg:
-        assert code not in m.SENSOR_REQUEST_RANGE and code not in m.SENSOR_REPLY_RANGE
+    import sslfr_drivers.messages_sensors  # noqa: F401 - registers the sensor messages
+    for code, cls in m.registry().items():
+        in_sensor_range = code in m.SENSOR_REQUEST_RANGE or code in m.SENSOR_REPLY_RANGE
+        assert in_sensor_range == (cls.__module__ != 'sslfr_drivers.messages'), cls
+        assert cls.TYPE == code
     with pytest.raises(ValueError):
         @m.register
         class Clash(m.Message):  # noqa: F811 - deliberately reuses PING's code
