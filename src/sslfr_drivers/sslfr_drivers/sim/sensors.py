@@ -161,6 +161,10 @@ class _SensorSim(SimBoard):
             self._t0 = self.anchor if self.anchor is not None else self.now
         return self.start_utc + self.speed * max(0.0, self.now - self._t0)
 
+    def busy(self) -> bool:
+        """Sensor boards sample at <= 20 Hz: the runner's 20 ms idle tick is enough."""
+        return False
+
     def handle(self, msg, frame):
         if isinstance(msg, m.GetStatus):
             raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
