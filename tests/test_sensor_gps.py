@@ -105,6 +105,12 @@ def test_raw_nmea_garbage_and_time_jump(gps_sim, launch, ros, tmp_path):
     n = len(fixes)
     assert ros.spin_until(lambda: len(fixes) > n + 1, 5) and node.running()
     assert fixes[-1].status.status == NavSatStatus.STATUS_FIX
+    # a bare module unplugged and plugged back: the raw reader reopens the port
+    gps_sim.command('unplug 1.5')
+    ros.spin_for(2.0)
+    n = len(fixes)
+    assert ros.spin_until(lambda: len(fixes) > n + 1, 10), node.output()
+    assert ros.spin_until(lambda: int(_diag(diags, 'gps: board')[1].get('reconnects', '0')) >= 1, 3)
 
 
 def test_invalid_startup_parameters_refused(launch):
