@@ -222,7 +222,11 @@ class DayPlanner:
         table.phase = phase
 
     def _rest(self, t: np.ndarray) -> np.ndarray:
-        """NIGHT / STOW pose at instants t: mirrors sleeping, longitudinal axes at rest [rad]."""
+        """NIGHT / STOW pose at instants t: mirrors sleeping, longitudinal axes at rest [rad].
+
+        The longitudinal values are the core's own NIGHT commands (``daytable._resting``:
+        the rest position under the 'continuous' law, the fixed/day's value otherwise).
+        """
         bm, ba = daytable._resting(t, self.site, self.collector)
         return np.stack([np.full(t.size, self.collector.sleeping), bm, ba], axis=1)
 
@@ -258,30 +262,13 @@ class DayPlanner:
                     pos[sel, 1] = tab.mobile_structure[idx]
                     pos[sel, 2] = tab.secondary_reflector[idx]
                     continue
-            tab = self._evaluate(ts)
+            tab = evaluate(ts, self.site, self.collector)
             if self.window is not None:
                 ev = sun_events(_EPOCH + datetime.timedelta(days=int(day)), self.site)
                 self._apply_window(tab, self._window(ev, self.day_start(int(day))))
             phase[sel] = tab.phase
             pos[sel] = np.stack([tab.mirrors, tab.mobile_structure, tab.secondary_reflector], axis=1)
         return phase, pos
-
-    def _evaluate(self, ts: np.ndarray) -> DayTable:
-        """Core evaluate() at arbitrary instants.
-
-        With stepped tracking the core needs a sunrise/sunset crossing near the
-        instants; a few instants far from both are padded with instants 13 h away
-        (evaluate() is per-instant deterministic, so the padding does not change the
-        values of the instants asked for) and the padding is dropped.
-        """
-        if self.collector.tracking_step <= 0:
-            return evaluate(ts, self.site, self.collector)
-        pad = np.array([ts.min() - 13 * 3600.0, ts.max() + 13 * 3600.0])
-        tab = evaluate(np.concatenate([ts, pad]), self.site, self.collector)
-        n = ts.size
-        return DayTable(tab.t[:n], tab.phase[:n], tab.zenith[:n], tab.azimuth[:n],
-                        tab.transversal[:n], tab.longitudinal[:n], tab.mirrors[:n],
-                        tab.mobile_structure[:n], tab.secondary_reflector[:n], tab.events)
 
     def auto_phase(self, now: float) -> int:
         """Day-cycle phase at ``now`` (the table row of the current second)."""
