@@ -145,3 +145,22 @@ def test_bad_sensor_payloads_raise_payload_error():
     with pytest.raises(PayloadError):
         m.decode(Frame(AlsSample.TYPE, 1, b'\x00\x01'))
     assert all(0xC0 <= c.TYPE <= 0xDF for c in (NmeaChunk, ThermocoupleSample, SwitchSample, AlsSample))
+
+
+def test_simulator_sun_against_pvlib():
+    """Seed 000 eqs. 2-6 + Spencer's equation of time: within 0.6 deg of pvlib's SPA."""
+    import numpy as np
+    import pandas as pd
+    import pvlib
+    lat, lon = 36.8352778, -2.4022222
+    times = pd.date_range('2026-01-01', '2026-12-31', freq='733min', tz='UTC')
+    ref = pvlib.solarposition.get_solarposition(times, lat, lon, method='nrel_numpy')
+    up = ref['apparent_zenith'].to_numpy() < 85.0
+    mine = [sun_position(t.timestamp(), lat, lon) for t in times]
+    dz = np.degrees([s.zenith for s in mine]) - ref['zenith'].to_numpy()
+    daz = (np.degrees([s.azimuth for s in mine]) - ref['azimuth'].to_numpy() + 180.0) % 360.0 - 180.0
+    assert np.abs(dz[up]).max() < 0.6 and np.abs(daz[up]).max() < 0.8
+    # transversal angle (seed 000 eq. 9): negative in the morning, positive in the afternoon
+    am = sun_position(NOON - 3 * 3600, lat, lon).transversal
+    pm = sun_position(NOON + 3 * 3600, lat, lon).transversal
+    assert am < 0 < pm
