@@ -51,23 +51,37 @@ def test_default_node_set_is_the_tracker():
             assert board.device.startswith('/dev/sslfr/') and board.sim_executable
 
 
-def test_ros_args_order_port_precedence_and_sim_time(site):
+def test_overrides_port_precedence_sim_time_and_args(site):
     ns = nodeset.load()
     params = nodeset.read_params(site)
-    gps = nodeset.ros_args(ns, ns.node('gps'), site, params=params)
-    assert 'port:=' not in ' '.join(gps), 'the site config sets the gps port: it wins'
-    m = nodeset.ros_args(ns, ns.node('mirrors_driver'), site, params=params, use_sim_time=True,
-                         extra={'home_on_activate': False})
-    assert m[:3] == ['--ros-args', '-r', '__node:=mirrors_driver']
-    i = m.index('--params-file')
-    assert m[i + 1] == str(site)
-    joined = ' '.join(m)
-    assert '-p axis:=mirrors -p port:=/dev/sslfr/mirrors -p use_sim_time:=true -p home_on_activate:=false' in joined
-    assert i < m.index('axis:=mirrors'), 'role parameters after the params file (later wins in rcl)'
-    sim = nodeset.ros_args(ns, ns.node('gps'), site, params=params, sim_ports={'gps': '/tmp/x/gps.pty'})
-    assert 'port:=/tmp/x/gps.pty' in sim, 'in simulation the pty always wins'
-    ns2 = nodeset.ros_args(ns, ns.node('planner'), site, params=params, namespace='/sslfr1')
-    assert '__ns:=/sslfr1' in ns2
+    assert 'port' not in nodeset.node_overrides(ns, ns.node('gps'), params), 'the site config sets the gps port'
+    m = nodeset.node_overrides(ns, ns.node('mirrors_driver'), params, use_sim_time=True,
+                               extra={'max_speed': 2.0, 'axis': 'mirrors'})
+    assert m == {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors', 'use_sim_time': True, 'max_speed': 2.0}
+    sim = nodeset.node_overrides(ns, ns.node('gps'), params, sim_ports={'gps': '/tmp/x/gps.pty'})
+    assert sim == {'port': '/tmp/x/gps.pty'}, 'in simulation the pty always wins'
+    doc = nodeset.overrides_document(ns, ns.node('mirrors_driver'), m, namespace='/sslfr1')
+    assert doc == {'/sslfr1/mirrors_driver': {'ros__parameters': m}}
+    assert list(nodeset.overrides_document(ns, ns.node('planner'), {'a': 1})) == ['/planner']
+    args = nodeset.ros_args(ns, ns.node('mirrors_driver'), site, overrides_file='/r/m.yaml', namespace='/sslfr1')
+    assert args == ['--ros-args', '-r', '__node:=mirrors_driver', '-r', '__ns:=/sslfr1',
+                    '--params-file', str(site), '--params-file', '/r/m.yaml'], 'overrides file after the config'
+
+
+def test_overrides_file_beats_the_config_node_section_in_a_real_node(launch, ros, tmp_path):
+    """Why overrides go in a node-specific params file: rclpy treats `-p` as `/**`,
+    which the config's node section overrides; a later file naming the node wins."""
+    from rcl_interfaces.srv import GetParameters
+    site = tmp_path / 'site.yaml'
+    site.write_text('recorder:\n  ros__parameters:\n    output_dir: /tmp/from_config\n'
+                    '    max_file_size: 1000000\n')
+    over = tmp_path / 'over.yaml'
+    over.write_text('/recorder:\n  ros__parameters:\n    output_dir: %s\n' % (tmp_path / 'bags'))
+    proc = launch('sslfr_bringup', 'recorder', ros_args=['--params-file', str(site), '--params-file', str(over)])
+    res = ros.call(GetParameters, 'recorder/get_parameters',
+                   GetParameters.Request(names=['output_dir', 'max_file_size']), timeout=20)
+    assert res.values[0].string_value == str(tmp_path / 'bags'), proc.output()
+    assert res.values[1].integer_value == 1000000
 
 
 def test_node_params_overlays_wildcard_and_node_section(site):

@@ -286,29 +286,52 @@ def node_port(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = No
     return ns.boards[node.board].device
 
 
-def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
-             params: Mapping[str, Any] | None = None, sim_ports: Mapping[str, str] | None = None,
-             use_sim_time: bool = False, namespace: str | None = None,
-             extra: Mapping[str, Any] | None = None, log_level: str | None = None) -> list[str]:
-    """The ``--ros-args ...`` part of ``node``'s command line.
+def node_overrides(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = None,
+                   sim_ports: Mapping[str, str] | None = None, use_sim_time: bool = False,
+                   extra: Mapping[str, Any] | None = None) -> dict:
+    """Parameters the node set imposes on ``node`` on top of the site config, in
+    increasing precedence: role parameters, ``port``, ``use_sim_time``, ``extra``."""
+    out = dict(node.parameters)
+    port = node_port(ns, node, params, sim_ports)
+    if port:
+        out[PORT_PARAM] = port
+    if use_sim_time:
+        out['use_sim_time'] = True
+    out.update(extra or {})
+    return out
 
-    Order matters (later wins in rcl): params file, role parameters, port,
-    ``use_sim_time``, ``extra``.
+
+def fully_qualified_name(node: NodeSpec, namespace: str = '') -> str:
+    """``/ns/name`` as rcl matches it against params-file keys."""
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    return f'{ns}/{node.name}'
+
+
+def overrides_document(ns: NodeSet, node: NodeSpec, overrides: Mapping[str, Any],
+                       namespace: str | None = None) -> dict:
+    """A params-file document giving ``overrides`` to ``node`` alone.
+
+    They must be a node-specific params file passed AFTER the site config: rclpy
+    applies ``-p`` command-line values as ``/**`` (wildcard) parameters, which the
+    config's node section would override, whereas between two files naming the same
+    node the later one wins.
     """
+    nsp = ns.namespace if namespace is None else namespace
+    return {fully_qualified_name(node, nsp): {'ros__parameters': dict(overrides)}}
+
+
+def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
+             overrides_file: str | os.PathLike | None = None, namespace: str | None = None,
+             log_level: str | None = None) -> list[str]:
+    """The ``--ros-args ...`` part of ``node``'s command line: name, namespace, the
+    site config, then the node's overrides file (see :func:`overrides_document`)."""
     nsp = ns.namespace if namespace is None else namespace
     args = ['--ros-args', '-r', f'__node:={node.name}']
     if nsp:
         args += ['-r', f'__ns:={nsp}']
     args += ['--params-file', str(config)]
-    for key, value in node.parameters.items():
-        args += ['-p', f'{key}:={format_param(value)}']
-    port = node_port(ns, node, params, sim_ports)
-    if port:
-        args += ['-p', f'{PORT_PARAM}:={port}']
-    if use_sim_time:
-        args += ['-p', 'use_sim_time:=true']
-    for key, value in (extra or {}).items():
-        args += ['-p', f'{key}:={format_param(value)}']
+    if overrides_file:
+        args += ['--params-file', str(overrides_file)]
     for src, dst in node.remaps.items():
         args += ['-r', f'{src}:={dst}']
     if log_level:
@@ -329,10 +352,7 @@ def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | N
     nsp = ns.namespace if namespace is None else namespace
     out = []
     for node in ns.start_order():
-        overrides = dict(node.parameters)
-        port = node_port(ns, node, params)
-        if port:
-            overrides[PORT_PARAM] = port
+        overrides = node_overrides(ns, node, params)
         out.append({'package': node.package, 'executable': node.executable, 'name': node.name,
                     'namespace': nsp, 'parameters': [str(config), overrides] if overrides else [str(config)],
                     'remappings': list(node.remaps.items()), 'lifecycle': node.lifecycle,

@@ -106,6 +106,26 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
     return [json.dumps(cmd)]
 
 
+DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
+
+
+def acquire_domain(candidates=tuple(range(215, 233)) + tuple(range(102, 0, -1))):
+    """A ROS domain id nobody else on this machine holds (file lock in
+    /tmp/sslfr-ros-domains, the lock the test fixtures take too); returns
+    ``(domain_id, open lock file)`` -- keep the file open while the domain is used.
+    215..232 first: valid DDS port ranges outside the tests' 1..101."""
+    import fcntl
+    DOMAIN_LOCK_DIR.mkdir(exist_ok=True)
+    for i in candidates:
+        fh = open(DOMAIN_LOCK_DIR / f'{i}.lock', 'w')  # noqa: SIM115 - held by the caller
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return i, fh
+        except OSError:
+            fh.close()
+    raise RuntimeError('no free ROS domain id: pass --domain-id')
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog='sslfr sim', description=__doc__.split('\n\n')[0],
@@ -123,7 +143,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
-    p.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 42)')
+    p.add_argument('--domain-id', type=int, default=None,
+                   help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else a free id of 215..232 held for the run)')
     p.add_argument('--seed', type=int, default=1, help='random seed of the simulated boards')
     p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
     return p
@@ -182,6 +203,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     out = Path(args.out or f'out/sim-{date}').resolve()
     out.mkdir(parents=True, exist_ok=True)
     bag_root = Path(args.record).resolve() if args.record else out / 'bags'
+    if not args.record and bag_root.exists():   # the sim's own output: a new run replaces it
+        shutil.rmtree(bag_root)
     bag_root.mkdir(parents=True, exist_ok=True)
     logs = out / 'logs'
     if logs.exists():
@@ -190,6 +213,13 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     run = Path(tempfile.mkdtemp(prefix='sslfr-sim-'))   # short paths: UNIX sockets <= 107 bytes
     clock = SimClock(day0 + start_s, speed)
     site = site_of(params)
+    domain_lock = None
+    if args.domain_id is None and not os.environ.get('ROS_DOMAIN_ID'):
+        try:   # a simulation must never share its domain (and /clock) with anything else
+            args.domain_id, domain_lock = acquire_domain()
+        except RuntimeError as exc:
+            print(f'sslfr sim: {exc}', file=sys.stderr)
+            return 1
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     env['SSLFR_SIM_WORLD'] = str(run / 'world.json')
     domain = int(env['ROS_DOMAIN_ID'])
@@ -224,7 +254,7 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     if any(n.name == 'planner' for n in ns.nodes):   # persisted site: per run, not ~/.local/state
         extra.setdefault('planner', {})['state_dir'] = str(out / 'state')
     sim_ports = {b: str(p) for b, p in links.items()}
-    node_progs, missing_nodes = _node_programs(ns, config, sim_ports, extra)
+    node_progs, missing_nodes = _node_programs(ns, config, sim_ports, extra, run)
     missing += missing_nodes
     for node in ns.nodes:
         if node.board and node.board not in links and any(p.name == node.name for p in node_progs):
@@ -362,9 +392,9 @@ def _supervise(sup: Supervisor, tick, until) -> None:
             signal.signal(s, h)
 
 
-def _node_programs(ns, config, sim_ports, extra):
+def _node_programs(ns, config, sim_ports, extra, run_dir):
     from sslfr_bringup.up import build_programs
-    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra)
+    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra, run_dir=run_dir)
 
 
 def _report(bag_root: Path, out: Path) -> int:

@@ -17,6 +17,7 @@ import argparse
 import os
 import shlex
 import sys
+import tempfile
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
@@ -42,19 +43,33 @@ def find_executable(package: str, exe: str) -> Path | None:
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, sim_ports: dict | None = None,
                    use_sim_time: bool = False, extra: dict | None = None,
-                   namespace: str | None = None, finder=find_executable) -> tuple[list[Program], list[str]]:
+                   namespace: str | None = None, finder=find_executable,
+                   run_dir: Path | None = None) -> tuple[list[Program], list[str]]:
     """Programs for every node of ``ns`` whose executable is installed, and the list
-    of missing ``package/executable`` (reported, never replaced by anything else)."""
+    of missing ``package/executable`` (reported, never replaced by anything else).
+
+    Each node's overrides (role parameters, port, use_sim_time, ``extra[name]``) are
+    written to ``run_dir/<node>.params.yaml`` (default: a new temporary directory),
+    passed after the site config so they win over its node section.
+    """
+    import yaml
+
     params = nodeset_mod.read_params(config)
+    run_dir = Path(run_dir) if run_dir else Path(tempfile.mkdtemp(prefix='sslfr-up-'))
+    run_dir.mkdir(parents=True, exist_ok=True)
     programs, missing = [], []
     for node in ns.start_order():
         exe = finder(node.package, node.executable)
         if exe is None:
             missing.append(f'{node.name} ({node.package}/{node.executable})')
             continue
-        argv = [str(exe), *nodeset_mod.ros_args(ns, node, config, params=params, sim_ports=sim_ports,
-                                                use_sim_time=use_sim_time, namespace=namespace,
-                                                extra=(extra or {}).get(node.name))]
+        overrides = nodeset_mod.node_overrides(ns, node, params, sim_ports, use_sim_time,
+                                               (extra or {}).get(node.name))
+        ofile = None
+        if overrides:
+            ofile = run_dir / f'{node.name}.params.yaml'
+            ofile.write_text(yaml.safe_dump(nodeset_mod.overrides_document(ns, node, overrides, namespace)))
+        argv = [str(exe), *nodeset_mod.ros_args(ns, node, config, overrides_file=ofile, namespace=namespace)]
         programs.append(Program(name=node.name, argv=argv, start=node.start, stop=node.stop,
                                 critical=node.critical, lifecycle=node.lifecycle))
     return programs, missing
@@ -95,7 +110,8 @@ def main(argv: list[str]) -> int:
         ns = nodeset_mod.load(args.nodeset)
         ns = select(ns, args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
-        programs, missing = build_programs(ns, config, namespace=args.namespace)
+        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-up-'))
+        programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
         return 2
@@ -105,9 +121,15 @@ def main(argv: list[str]) -> int:
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}', file=sys.stderr)
     for m in missing:
         print(f'sslfr up: MISSING executable, node not started: {m} (run make setup?)', file=sys.stderr)
+    import atexit
+    import shutil
+    atexit.register(shutil.rmtree, run_dir, True)
     if args.print_only:
         for prog in programs:
             print(f'{prog.name}: ' + ' '.join(shlex.quote(a) for a in prog.argv))
+            files = [a for a in prog.argv if a.endswith('.params.yaml')]
+            for f in files:
+                print('    ' + Path(f).read_text().strip().replace('\n', '\n    '))
         return 0 if not missing else 1
     if not programs:
         print('sslfr up: nothing to run', file=sys.stderr)
