@@ -599,9 +599,39 @@ def _observer_terms(lat_deg, elevation):
     return x_term(u, lat_deg, elevation), y_term(u, lat_deg, elevation)
 
 
+#: instants per block of the fast path (the block's temporaries stay in the CPU cache)
+CHUNK = 8192
+
+
 def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, delta_t,
                       atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None, projections=True):
     """Fast path: e0, zenith, azimuth, theta_t, theta_l [rad] at instants ``t``.
+
+    Evaluated in blocks of :data:`CHUNK` instants (about twice as fast on long arrays:
+    the ~40 temporaries of a block stay in the cache). See :func:`_topocentric_block`.
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size <= 2 * CHUNK:
+        return _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, delta_t,
+                                  atmos_refract, collector_azimuth, grid, projections)
+    if grid is None and np.ndim(delta_t) == 0:
+        kmin, kmax = np.floor(t.min() / NODE_STEP), np.floor(t.max() / NODE_STEP)
+        if kmax - kmin + 2 <= 2 * t.size + 2:
+            grid = GeocentricGrid(float(t.min()), float(t.max()), delta_t)
+    n_out = 5 if projections else 3
+    outs = [np.empty(t.shape) for _ in range(n_out)]
+    for i in range(0, t.size, CHUNK):
+        dt_i = delta_t if np.ndim(delta_t) == 0 else np.asarray(delta_t)[i:i + CHUNK]
+        part = _topocentric_block(t[i:i + CHUNK], lat_deg, lon_deg, elevation, pressure, temperature, dt_i,
+                                  atmos_refract, collector_azimuth, grid, projections)
+        for o, x in zip(outs, part):
+            o[i:i + CHUNK] = x
+    return tuple(outs) if projections else (*outs, None, None)
+
+
+def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, delta_t,
+                       atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None, projections=True):
+    """One block of the fast path: e0, zenith, azimuth, theta_t, theta_l [rad].
 
     Equations 32-46 in vector form. With H the local hour angle (eq. 32), the sun seen
     from the observer, in units of the sun's distance and in the equatorial frame
