@@ -61,3 +61,15 @@ def test_sunset_hour_angle_eq8():
     assert solar_simple.sunset_hour_angle(0.0, 0.7) == pytest.approx(math.pi / 2)
     assert solar_simple.sunset_hour_angle(math.radians(23.44), math.radians(80)) == pytest.approx(math.pi)
     assert solar_simple.sunset_hour_angle(math.radians(-23.44), math.radians(80)) == pytest.approx(0.0)
+
+
+def test_selectable_seed_models_share_the_spa_interface():
+    site = Site.from_degrees(7.1254, -73.1198)
+    t = dt.datetime(2026, 3, 20, 17, tzinfo=dt.timezone.utc).timestamp() + np.arange(0, 3600.0, 600.0)
+    ref = spa.sun_position(t, site)
+    for model in solar_simple.MODELS:
+        s = solar_simple.sun_position(t, site, model)
+        assert s.zenith.shape == ref.zenith.shape
+        assert np.degrees(np.abs(s.transversal - ref.transversal)).max() < 3.0
+    with pytest.raises(ValueError):
+        solar_simple.sun_position(t, site, 'ptolemy')
