@@ -9,7 +9,7 @@ from hypothesis import given, strategies as st
 from sslfr_drivers import max6675, messages as m, nmea, veml7700
 from sslfr_drivers.messages_sensors import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
 from sslfr_drivers.protocol import Framer, PayloadError
-from sslfr_drivers.sensor_world import sun_position
+from sslfr_drivers.sensor_world import Sky
 from sslfr_drivers.sim.sensors import (AbsorberSim, GpsSim, IrradianceSim, WorldPublisher,
                                        read_axis_angles, write_axis_angle)
 
@@ -34,7 +34,7 @@ def _outlets(msgs):
 def test_heating_depends_on_mirror_focus(tmp_path):
     """Focused mirrors heat the tube; the same sun with stowed mirrors does not."""
     lat, lon = 36.8381, -2.4597
-    ideal = sun_position(NOON, lat, lon).transversal / 2
+    ideal = Sky(lat, lon, 60.0).sun(NOON + 60.0).transversal / 2   # mid-window
     temps = {}
     for name, angle in (('focused', ideal), ('off_by_1deg', ideal + math.radians(1.0)),
                         ('stowed', math.pi / 2)):
@@ -147,20 +147,20 @@ def test_bad_sensor_payloads_raise_payload_error():
     assert all(0xC0 <= c.TYPE <= 0xDF for c in (NmeaChunk, ThermocoupleSample, SwitchSample, AlsSample))
 
 
-def test_simulator_sun_against_pvlib():
-    """Seed 000 eqs. 2-6 + Spencer's equation of time: within 0.6 deg of pvlib's SPA."""
+def test_simulator_sky_against_pvlib():
+    """The simulators' interpolated sun (the planner's SPA) agrees with pvlib's SPA."""
     import numpy as np
     import pandas as pd
     import pvlib
     lat, lon = 36.8352778, -2.4022222
-    times = pd.date_range('2026-01-01', '2026-12-31', freq='733min', tz='UTC')
-    ref = pvlib.solarposition.get_solarposition(times, lat, lon, method='nrel_numpy')
+    times = pd.date_range('2026-01-01', '2026-12-31', freq='7333min', tz='UTC')
+    ref = pvlib.solarposition.get_solarposition(times, lat, lon, altitude=22.0, method='nrel_numpy')
     up = ref['apparent_zenith'].to_numpy() < 85.0
-    mine = [sun_position(t.timestamp(), lat, lon) for t in times]
-    dz = np.degrees([s.zenith for s in mine]) - ref['zenith'].to_numpy()
+    sky = Sky(lat, lon, 22.0)
+    mine = [sky.sun(t.timestamp()) for t in times]
+    dz = np.degrees([s.zenith for s in mine]) - ref['apparent_zenith'].to_numpy()
     daz = (np.degrees([s.azimuth for s in mine]) - ref['azimuth'].to_numpy() + 180.0) % 360.0 - 180.0
-    assert np.abs(dz[up]).max() < 0.6 and np.abs(daz[up]).max() < 0.8
+    assert np.abs(dz[up]).max() < 0.02 and np.abs(daz[up]).max() < 0.05
     # transversal angle (seed 000 eq. 9): negative in the morning, positive in the afternoon
-    am = sun_position(NOON - 3 * 3600, lat, lon).transversal
-    pm = sun_position(NOON + 3 * 3600, lat, lon).transversal
-    assert am < 0 < pm
+    assert sky.sun(NOON - 3 * 3600).transversal < 0 < sky.sun(NOON + 3 * 3600).transversal
+    assert sky.dni(NOON - 12 * 3600) == 0.0 and 850.0 < sky.dni(NOON) < 1050.0
