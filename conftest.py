@@ -89,8 +89,9 @@ class NodeProcess:
         return self.proc.poll() is None
 
     def output(self) -> str:
-        """Everything the process printed so far."""
-        self._log.flush()
+        """Everything the process printed so far (also after :meth:`stop`)."""
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors='replace')
 
     def wait_for_output(self, text: str, timeout: float = 15.0) -> bool:
