@@ -36,7 +36,7 @@ import numpy as np
 
 from . import laws, spa
 from .collector import Collector
-from .events import SCAN_STEP, SunEvents, crossings, events_around, local_mean_noon, solar_transit
+from .events import SCAN_STEP, SunEvents, crossings, events_around, events_from_crossings, solar_transit
 from .site import Site
 
 NIGHT, PRE_DAWN, TRACKING, STOWING = 0, 1, 2, 3
@@ -232,11 +232,14 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
         for n, (_, i0, i1) in enumerate(pre_dawn):
             mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m[n], b1[n], b2[n]
 
-    if events is None:
+    if events is None:  # the local day of the middle instant (= sun_events of that date)
         mid = float(t[t.size // 2])
         day = _local_day_index(mid, site)
-        noon = solar_transit(float(day) * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0, site)
-        events = events_around(noon, site)
+        noon = solar_transit(float(day) * 86400.0 + 43200.0 - math.degrees(site.longitude) * 240.0, site, grid)
+        if lo <= noon - 43200.0 and noon + 43200.0 <= hi:
+            events = events_from_crossings(noon, ct, rising, site, grid)
+        else:
+            events = events_around(noon, site)
     return DayTable(t, phase, sun.zenith, sun.azimuth, sun.transversal, sun.longitudinal,
                     mirrors, bm, ba, events)
 
@@ -264,7 +267,11 @@ def day_grid(day: datetime.date, step: float = 1.0) -> np.ndarray:
 def plan_day(day: datetime.date, site: Site, collector: Collector, step: float = 1.0) -> DayTable:
     """The whole UTC day of ``day`` every ``step`` seconds: ``evaluate(day_grid(day, step))``.
 
-    ``events`` of the result are those of ``day`` (:func:`events.sun_events`).
+    ``events`` of the result are those of ``day`` (:func:`events.sun_events`; for
+    |longitude| < 180 deg the middle instant's local date is ``day``).
     """
+    t = day_grid(day, step)
+    if abs(math.degrees(site.longitude)) < 179.0:
+        return evaluate(t, site, collector)
     from .events import sun_events
-    return evaluate(day_grid(day, step), site, collector, sun_events(day, site))
+    return evaluate(t, site, collector, sun_events(day, site))

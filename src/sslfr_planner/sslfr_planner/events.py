@@ -128,7 +128,7 @@ def hour_angle(t, site: Site, grid: spa.GeocentricGrid | None = None):
 
 def solar_transit(t_guess: float, site: Site, grid: spa.GeocentricGrid | None = None) -> float:
     """The transit (H = 0) nearest to ``t_guess`` [s, UTC], to < 1 ms (Newton on H)."""
-    if grid is None:
+    if grid is None or not grid.covers(t_guess - 2 * 3600.0, t_guess + 2 * 3600.0):
         grid = spa.GeocentricGrid(t_guess - 4 * 3600.0, t_guess + 4 * 3600.0, site.delta_t)
     t = float(t_guess)
     for _ in range(6):
@@ -170,6 +170,16 @@ def sun_events(day: datetime.date, site: Site) -> SunEvents:
 def events_around(noon: float, site: Site, grid: spa.GeocentricGrid | None = None) -> SunEvents:
     """Events of the solar day whose transit is ``noon`` [s] (see :func:`sun_events`)."""
     times, rising, _ = crossings(noon - 43200.0, noon + 43200.0, site, grid)
+    return events_from_crossings(noon, times, rising, site, grid)
+
+
+def events_from_crossings(noon: float, times, rising, site: Site,
+                          grid: spa.GeocentricGrid | None = None) -> SunEvents:
+    """SunEvents of the transit ``noon`` from a crossing list covering noon +/- 12 h.
+
+    ``times``/``rising`` as returned by :func:`crossings` (any window that contains
+    [noon - 12 h, noon + 12 h] gives the same events: the search grid is absolute).
+    """
     before = times[(times <= noon) & (times >= noon - 43200.0) & rising]
     after = times[(times > noon) & (times <= noon + 43200.0) & ~rising]
     inside = times[(times >= noon - 43200.0) & (times <= noon + 43200.0)]

@@ -542,6 +542,11 @@ class GeocentricGrid:
             out.append(r)
         return out
 
+    def covers(self, t0: float, t1: float) -> bool:
+        """Whether instants t0..t1 [s] can be interpolated on this grid."""
+        return (np.floor(t0 / NODE_STEP) >= self.k0
+                and np.floor(t1 / NODE_STEP) - self.k0 + 1 < self.nodes.size)
+
     def __call__(self, t):
         """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
         return self._interp(t, self.values, self.slopes)
