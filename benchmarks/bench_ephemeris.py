@@ -64,7 +64,9 @@ def main(argv=None):
     fz = np.abs(np.degrees(table.zenith - ex.zenith))
     fa = np.abs(np.degrees((table.azimuth - ex.azimuth + math.pi) % (2 * math.pi) - math.pi))
 
+    import os
     print(f'day table {day} at 1 s, {t.size} instants, Almeria (36.84 N, 2.40 W), all `sslfr plan` columns')
+    print(f'  machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} (1 min) at the end of the runs')
     print(f'  plan_day (ours, in-process)     median {med_ours * 1e3:8.2f} ms  '
           f'(min {min(ours) * 1e3:.2f}, max {max(ours) * 1e3:.2f}, n={len(ours)})   goal <= 20 ms: '
           f'{"OK" if med_ours <= 0.020 else "MISSED"}')

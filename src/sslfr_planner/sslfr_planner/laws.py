@@ -16,7 +16,10 @@ import numpy as np
 
 def _side(x):
     """+1 where x >= 0, -1 elsewhere (the sun's side; a tie goes to +p)."""
-    return np.where(np.asarray(x, dtype=float) >= 0.0, 1.0, -1.0)
+    side = (np.asarray(x, dtype=float) >= 0.0).astype(float)
+    side *= 2.0
+    side -= 1.0
+    return side
 
 
 def continuous(zenith, longitudinal):
@@ -39,7 +42,9 @@ def continuous(zenith, longitudinal):
     (numpy.ndarray, numpy.ndarray)
         beta_M, beta_a [rad].
     """
-    b = np.asarray(zenith, dtype=float) / 2.0 * _side(longitudinal)
+    b = _side(longitudinal)
+    b *= np.asarray(zenith, dtype=float)
+    b *= 0.5
     return b, b.copy()
 
 
