@@ -628,15 +628,15 @@ def _topocentric_fast(t, lat_deg, lon_deg, elevation, pressure, temperature, del
     outs = [np.empty(t.shape) for _ in range(n_out)]
     for i in range(0, t.size, CHUNK):
         dt_i = delta_t if np.ndim(delta_t) == 0 else np.asarray(delta_t)[i:i + CHUNK]
-        part = _topocentric_block(t[i:i + CHUNK], lat_deg, lon_deg, elevation, pressure, temperature, dt_i,
-                                  atmos_refract, collector_azimuth, grid, projections)
-        for o, x in zip(outs, part):
-            o[i:i + CHUNK] = x
+        _topocentric_block(t[i:i + CHUNK], lat_deg, lon_deg, elevation, pressure, temperature, dt_i,
+                           atmos_refract, collector_azimuth, grid, projections,
+                           out=[o[i:i + CHUNK] for o in outs])
     return tuple(outs) if projections else (*outs, None, None)
 
 
 def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, delta_t,
-                       atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None, projections=True):
+                       atmos_refract=ATMOS_REFRACT, collector_azimuth=0.0, grid=None, projections=True,
+                       out=None):
     """One block of the fast path: e0, zenith, azimuth, theta_t, theta_l [rad].
 
     Equations 32-46 in vector form. With H the local hour angle (eq. 32), the sun seen
@@ -650,7 +650,8 @@ def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, de
     (eq. 42) raises the vector in its vertical plane to the apparent elevation e, so
     the apparent sun vector is proportional to (horizontal components, |horizontal|
     tan e), which gives the projection angles of :mod:`sslfr_planner.geometry`.
-    ``projections=False`` skips theta_t, theta_l (returned as None).
+    ``projections=False`` skips theta_t, theta_l (returned as None). ``out``: arrays
+    (e0, zenith, azimuth[, theta_t, theta_l]) to write the results into.
     """
     x, y = _observer_terms(lat_deg, elevation)
     if grid is None:
@@ -680,7 +681,7 @@ def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, de
     hor = south * south
     hor += Y * Y
     np.sqrt(hor, out=hor)
-    e0 = np.arctan2(up, hor)
+    e0 = np.arctan2(up, hor, out=None if out is None else out[0])
     # refraction, eq. 42 (e0 in degrees inside), zero below -(0.26667 + atmos_refract) deg;
     # in radians: tan(e0 + (10.3 pi/180) / (e0 180/pi + 5.11))
     safe = np.maximum(e0, -2.0 * np.pi / 180.0)
@@ -692,9 +693,9 @@ def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, de
     np.divide(pressure / 1010.0 * 283.0 / (273.0 + temperature) * 1.02 / 60.0 * np.pi / 180.0, de, out=de)
     de *= e0 >= np.radians(-(SUN_RADIUS + atmos_refract))
     e = e0 + de                             # eq. 43
-    zenith = np.pi / 2 - e                  # eq. 44
+    zenith = np.subtract(np.pi / 2, e, out=None if out is None else out[1])  # eq. 44
     Y_neg = -Y
-    az = np.arctan2(Y_neg, south)           # -Gamma (eq. 45)
+    az = np.arctan2(Y_neg, south, out=None if out is None else out[2])  # -Gamma (eq. 45)
     np.subtract(np.pi, az, out=az)          # eq. 46: Gamma + 180 deg, in [0, 2 pi)
     if not projections:
         return e0, zenith, az, None, None
@@ -707,7 +708,8 @@ def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, de
     # the apparent sun vector is (trans, longi, hor tan e) up to the factor cos e > 0
     vert = np.tan(e)
     vert *= hor
-    return e0, zenith, az, np.arctan2(trans, vert), np.arctan2(longi, vert)
+    return (e0, zenith, az, np.arctan2(trans, vert, out=None if out is None else out[3]),
+            np.arctan2(longi, vert, out=None if out is None else out[4]))
 
 
 @dataclass
