@@ -118,7 +118,9 @@ class GpsNode(Node):
     def _drain(self) -> None:
         while self._queue:
             data, stamp = self._queue.popleft()
-            for rec in self._stream.feed(data, stamp.nanoseconds * 1e-9):
+            # ROS time 0: use_sim_time before the first /clock; no time-jump reference
+            received = stamp.nanoseconds * 1e-9 if stamp.nanoseconds > 0 else math.nan
+            for rec in self._stream.feed(data, received):
                 self._meter.tick()
                 if isinstance(rec, nmea.FixRecord):
                     self._publish_fix(rec, stamp)

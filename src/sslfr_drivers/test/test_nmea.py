@@ -152,3 +152,13 @@ def test_fuzz_wellformed_garbage_sentences(kind, parts):
             assert all(math.isfinite(v) for v in r.covariance)
     c = s.counters
     assert c.sentences + c.truncated + c.bad_checksum >= 1
+
+
+def test_unknown_receive_time_is_no_jump_reference():
+    """RMCs received before the local clock is known (NaN) do not count as time jumps."""
+    s = nmea.NmeaStream(time_jump_threshold=2.0)
+    t = 1774094400.0
+    (r0,) = s.feed(nmea.format_rmc(t, 1.0, 1.0, True), received=math.nan)
+    (r1,) = s.feed(nmea.format_rmc(t + 1, 1.0, 1.0, True), received=500.0)
+    (r2,) = s.feed(nmea.format_rmc(t + 2, 1.0, 1.0, True), received=501.0)
+    assert r0.jump == r1.jump == r2.jump == 0.0 and s.counters.time_jumps == 0
