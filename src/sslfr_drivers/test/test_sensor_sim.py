@@ -164,3 +164,24 @@ def test_simulator_sky_against_pvlib():
     # transversal angle (seed 000 eq. 9): negative in the morning, positive in the afternoon
     assert sky.sun(NOON - 3 * 3600).transversal < 0 < sky.sun(NOON + 3 * 3600).transversal
     assert sky.dni(NOON - 12 * 3600) == 0.0 and 850.0 < sky.dni(NOON) < 1050.0
+
+
+def test_runner_publishes_axis_angles_to_the_world_file(tmp_path, monkeypatch):
+    """A sim_board runner with an axis board writes its joint angle where the absorber
+    simulator reads it (SSLFR_SIM_WORLD)."""
+    import time
+    from sslfr_drivers.sim.axis import AxisSim
+    from sslfr_drivers.sim.runner import SimThread
+    world = tmp_path / 'world.json'
+    monkeypatch.setenv('SSLFR_SIM_WORLD', str(world))
+    with SimThread.plain(AxisSim.from_options({'axis': 'mirrors', 'initial_angle_deg': '30'},
+                                              None)) as sim:
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and 'mirrors' not in read_axis_angles(str(world)):
+            time.sleep(0.05)
+        with sim.locked():
+            true_angle = sim.board.angle
+    assert read_axis_angles(str(world))['mirrors'] == pytest.approx(true_angle)
+    assert true_angle == pytest.approx(math.radians(30.0))
+    b = AbsorberSim({'start_utc': NOON, 'world': str(world)})
+    assert b.axis_angles()['mirrors'] == pytest.approx(math.radians(30.0))
