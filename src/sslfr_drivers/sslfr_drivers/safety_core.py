@@ -25,12 +25,14 @@ Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
     :meth:`SafetyCore.reset` only when the sensor is fresh and has stayed below
     ``temperature_limit - hysteresis`` for ``cool_hold`` [s]; with ``auto_reset`` the
     same condition clears it without a call (off by default).
-``thermocouple:<sensor>``  STOW, latched: open circuit / NaN / out of the physical
-    range (immediate); *stuck*: no change > ``stuck_tolerance`` [K] for
-    ``stuck_timeout`` [s] while the sun is on the receiver (phase TRACKING and beam
-    irradiance, when known, >= ``stuck_min_beam`` [W/m^2]); *silent*: no sample for
-    > ``silent_timeout`` [s] (default 2 s) while TRACKING. Cleared by reset (or
-    auto-reset) once the sensor delivers fresh valid samples (and, for *stuck*, a change).
+``thermocouple:<sensor>``  STOW: open circuit / NaN / out of the physical range
+    (immediate); *stuck*: no change > ``stuck_tolerance`` [K] for ``stuck_timeout``
+    [s] while the sun is on the receiver (phase TRACKING and beam irradiance, when
+    known, >= ``stuck_min_beam`` [W/m^2]); *silent*: no sample for > ``silent_timeout``
+    [s] (default 2 s) while TRACKING. Held until the sensor has recovered: fresh valid
+    samples for ``sensor_recover_hold`` [s] (and, for *stuck*, a change), whatever the
+    phase does meanwhile, so the stow it causes cannot clear it (no stow/track
+    oscillation). With ``sensor_fault_latched`` it also needs :meth:`SafetyCore.reset`.
 ``switch:<name>``  ESTOP for the switch's axis (:data:`SWITCH_AXIS`), latched. A
     switch closing while its axis is not homing and its nominal angle
     (``switch_positions``) is not on the axis' path, i.e. not between the measured and
@@ -152,6 +154,8 @@ class SafetyConfig:
     cool_hold: float = 60.0               # [s] ... for this long before reset
     auto_reset: bool = False              # clear temperature latches without a call
     silent_timeout: float = 2.0           # [s] thermocouple silent while TRACKING
+    sensor_recover_hold: float = 2.0      # [s] valid samples before a sensor fault clears
+    sensor_fault_latched: bool = False    # thermocouple faults also need safety/reset
     stuck_timeout: float = 300.0          # [s] no change while the sun is on the receiver
     stuck_tolerance: float = 0.0          # [K] a change must exceed this
     stuck_min_beam: float = 200.0         # [W/m^2] beam at which the sun counts as on
@@ -187,6 +191,7 @@ class SafetyConfig:
         pos('hysteresis', self.hysteresis, zero_ok=True)
         pos('cool_hold', self.cool_hold, zero_ok=True)
         pos('silent_timeout', self.silent_timeout)
+        pos('sensor_recover_hold', self.sensor_recover_hold, zero_ok=True)
         pos('stuck_timeout', self.stuck_timeout)
         pos('stuck_tolerance', self.stuck_tolerance, zero_ok=True)
         pos('stuck_min_beam', self.stuck_min_beam, zero_ok=True)
@@ -264,6 +269,7 @@ class _Sensor:
     ref_value: float | None = None    # value the change is measured from
     cool_since: float | None = None   # steady time it went below limit - hysteresis
     changed_since_fault: bool = False
+    valid_since: float | None = None  # steady time of the first of the current valid run
 
 
 @dataclass
@@ -306,6 +312,7 @@ class SafetyCore:
         self.gps_fix_seen = False
         self.site_source = ''
         self.latched: dict[str, Condition] = {}
+        self.sensor_faults: dict[str, Condition] = {}   # held until the sensor recovers
         self.counters = {'samples': 0, 'invalid_samples': 0, 'refused_requests': 0,
                          'transitions': 0, 'bad_inputs': 0}
         self._state = SafetyState(Level.OK, (), (), False, self.start)
@@ -336,7 +343,7 @@ class SafetyCore:
         """A thermocouple sample [degC] (``sensor`` in :data:`SENSORS`).
 
         NaN, +/-inf, a value outside ``valid_min..valid_max`` or ``open_circuit``
-        mark the thermocouple faulty (STOW, latched). A valid value above
+        mark the thermocouple faulty (STOW). A valid value above
         ``temperature_limit`` latches over-temperature (seed 000 section 3.5.3).
         """
         now = self._now(arrival)
@@ -344,6 +351,8 @@ class SafetyCore:
         cfg = self.config
         self.heartbeat('absorber_board', now)
         self.counters['samples'] += 1
+        if st.arrival is None or now - st.arrival > cfg.silent_timeout:
+            st.valid_since = None          # a gap: the valid run starts again
         st.arrival = now
         try:
             value = float(value)
@@ -352,14 +361,16 @@ class SafetyCore:
         if open_circuit or not math.isfinite(value) or not (cfg.valid_min <= value <= cfg.valid_max):
             self.counters['invalid_samples'] += 1
             st.valid = False
+            st.valid_since = None
             st.cool_since = None
             what = 'open circuit' if open_circuit else (
                 'NaN' if math.isnan(value) else f'{value} degC outside {cfg.valid_min}..{cfg.valid_max} degC')
-            self._latch(Condition(f'thermocouple:{sensor}', Level.STOW,
-                                  f'{sensor} thermocouple invalid ({what}): temperature not watched',
-                                  latched=True))
+            self._sensor_fault(Condition(f'thermocouple:{sensor}', Level.STOW,
+                                         f'{sensor} thermocouple invalid ({what}): temperature not watched'))
             return
         st.valid = True
+        if st.valid_since is None:
+            st.valid_since = now
         if st.ref_value is None or abs(value - st.ref_value) > cfg.stuck_tolerance:
             if st.ref_value is not None:
                 st.changed_since_fault = True
@@ -514,6 +525,27 @@ class SafetyCore:
         self.evaluate(now)
         return True, 'e-stop released: tracker stows until safety/reset'
 
+    def _sensor_fault(self, cond: Condition) -> None:
+        """Raise a thermocouple fault (held until recovery, or latched by config)."""
+        if self.config.sensor_fault_latched:
+            self._latch(replace(cond, latched=True))
+        elif cond.key not in self.latched:
+            self.sensor_faults.setdefault(cond.key, cond)
+
+    def _sensor_blocker(self, name: str, reason: str, now: float) -> str | None:
+        """Why the thermocouple ``name`` has not recovered (None: it has)."""
+        cfg, st = self.config, self.sensors[name]
+        if st.arrival is None or now - st.arrival > cfg.silent_timeout:
+            return f'{name} thermocouple still silent'
+        if not st.valid or st.valid_since is None:
+            return f'{name} thermocouple still invalid'
+        if now - st.valid_since < cfg.sensor_recover_hold:
+            return (f'{name} thermocouple valid for {now - st.valid_since:.1f} s of '
+                    f'{cfg.sensor_recover_hold:.1f} s')
+        if 'stuck' in reason and not st.changed_since_fault:
+            return f'{name} thermocouple still stuck at {st.value:.2f} degC'
+        return None
+
     def _reset_blocker(self, key: str, now: float) -> str | None:
         """Why the latched condition ``key`` cannot be cleared now (None: it can)."""
         cfg = self.config
@@ -530,14 +562,7 @@ class SafetyCore:
                 return f'{name} cooling: below {threshold:.1f} degC for {held:.1f} s of {cfg.cool_hold:.1f} s'
             return None
         if kind == 'thermocouple':
-            st = self.sensors[name]
-            if st.arrival is None or now - st.arrival > cfg.silent_timeout:
-                return f'{name} thermocouple still silent'
-            if not st.valid:
-                return f'{name} thermocouple still invalid'
-            if 'stuck' in self.latched[key].reason and not st.changed_since_fault:
-                return f'{name} thermocouple still stuck at {st.value:.2f} degC'
-            return None
+            return self._sensor_blocker(name, self.latched[key].reason, now)
         if kind == 'stuck_switch':
             if self.switch_closed[name]:
                 return f'limit switch {name} still reads closed'
@@ -551,7 +576,8 @@ class SafetyCore:
         now = self._now(arrival)
         if not self.latched:
             self.counters['refused_requests'] += 1
-            return False, 'refused: nothing latched to reset'
+            held = ''.join(f'; {k} clears by itself once the sensor has recovered' for k in self.sensor_faults)
+            return False, 'refused: nothing latched to reset' + held
         blockers = [b for k in self.latched if (b := self._reset_blocker(k, now))]
         if blockers:
             self.counters['refused_requests'] += 1
@@ -583,17 +609,16 @@ class SafetyCore:
             if tracking:
                 ref = max(st.arrival if st.arrival is not None else -math.inf, self.tracking_since or now)
                 if now - ref > cfg.silent_timeout:
-                    self._latch(Condition(f'thermocouple:{name}', Level.STOW,
-                                          f'{name} thermocouple silent > {cfg.silent_timeout:.1f} s while '
-                                          'tracking: temperature not watched', latched=True))
+                    self._sensor_fault(Condition(f'thermocouple:{name}', Level.STOW,
+                                                 f'{name} thermocouple silent > {cfg.silent_timeout:.1f} s '
+                                                 'while tracking: temperature not watched'))
             if sun_on and st.valid and st.last_change is not None:
                 ref = max(st.last_change, self.sun_on_since)
                 if now - ref > cfg.stuck_timeout:
                     st.changed_since_fault = False
-                    self._latch(Condition(f'thermocouple:{name}', Level.STOW,
-                                          f'{name} thermocouple stuck at {st.value:.2f} degC for > '
-                                          f'{cfg.stuck_timeout:.0f} s with the sun on the receiver',
-                                          latched=True))
+                    self._sensor_fault(Condition(f'thermocouple:{name}', Level.STOW,
+                                                 f'{name} thermocouple stuck at {st.value:.2f} degC for > '
+                                                 f'{cfg.stuck_timeout:.0f} s with the sun on the receiver'))
         # heartbeat watchdogs
         for node, (timeout, action) in cfg.watchdogs.items():
             last = self.heard.get(node)
@@ -611,12 +636,16 @@ class SafetyCore:
             if not self.gps_fix_seen and not wall_ok:
                 out.append(Condition('time', Level.STOW, 'no time: no GPS fix since boot and no trusted '
                                      'system clock: staying in the sleeping position'))
+        # thermocouple faults clear once the sensor has recovered
+        for key, cond in list(self.sensor_faults.items()):
+            if self._sensor_blocker(key.partition(':')[2], cond.reason, now) is None:
+                del self.sensor_faults[key]
         # auto-reset of temperature latches
         if cfg.auto_reset:
             for key in [k for k in self.latched if k.startswith(('overtemp:', 'thermocouple:'))]:
                 if self._reset_blocker(key, now) is None:
                     del self.latched[key]
-        return list(self.latched.values()) + out
+        return list(self.latched.values()) + list(self.sensor_faults.values()) + out
 
     def evaluate(self, now: float | None = None) -> SafetyState:
         """Apply every rule at steady time ``now`` [s] and return the verdict.

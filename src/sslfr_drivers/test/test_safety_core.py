@@ -95,18 +95,36 @@ def test_auto_reset_policy_clears_after_the_hold_time_when_enabled():
 
 @pytest.mark.parametrize('value,flag,word', [(math.nan, False, 'NaN'), (25.0, True, 'open circuit'),
                                              (math.inf, False, 'outside'), (-200.0, False, 'outside')])
-def test_invalid_thermocouple_stows_immediately(value, flag, word):
+def test_invalid_thermocouple_stows_immediately_until_it_recovers(value, flag, word):
     core, clock = make()
     feed(core, clock, steps=120)
     core.on_temperature('inlet', value, open_circuit=flag)
     state = core.evaluate()
     assert state.level == Level.STOW
     assert any(r.startswith('inlet thermocouple invalid') and word in r for r in state.reasons)
+    feed(core, clock, steps=30, temps=(math.nan if flag else value, 80.0))   # still invalid: held
+    assert core.state.level == Level.STOW
+    ok, msg = core.reset()                                      # nothing to reset: it is not latched
+    assert not ok and 'clears by itself' in msg
+    feed(core, clock, steps=19)                                 # valid for 1.9 s < 2 s recovery hold
+    assert core.state.level == Level.STOW
+    feed(core, clock, steps=2)
+    assert core.state.level == Level.OK
+    assert core.counters['invalid_samples'] == 31
+
+
+def test_latched_thermocouple_policy_needs_a_reset():
+    core, clock = make(sensor_fault_latched=True)
+    feed(core, clock, steps=120)
+    feed(core, clock, steps=2, temps=(60.0, math.nan))
     ok, msg = core.reset()
-    assert not ok and 'inlet thermocouple still invalid' in msg
-    feed(core, clock, steps=5)
+    assert not ok and 'outlet thermocouple still invalid' in msg
+    feed(core, clock, steps=10)
+    ok, msg = core.reset()
+    assert not ok and 'outlet thermocouple valid for 0.9 s of 2.0 s' in msg
+    feed(core, clock, steps=30)
+    assert core.state.level == Level.STOW                      # recovered, but latched
     assert core.reset()[0] and core.state.level == Level.OK
-    assert core.counters['invalid_samples'] == 1
 
 
 def test_silent_thermocouple_stows_within_two_seconds_only_while_tracking():
@@ -118,11 +136,14 @@ def test_silent_thermocouple_stows_within_two_seconds_only_while_tracking():
     feed(core, clock, steps=2, phase=TRACKING, temps=(60.0, None))
     assert core.state.level == Level.STOW
     assert any('outlet thermocouple silent > 2.0 s while tracking' in r for r in core.state.reasons)
-    # latched: the planner stows (phase STOW), the sensor still silent -> reset refused
-    feed(core, clock, steps=5, phase=STOW_PHASE, temps=(60.0, None))
-    assert core.state.level == Level.STOW and not core.reset()[0]
-    feed(core, clock, steps=5, phase=STOW_PHASE)
-    assert core.reset()[0] and core.state.level == Level.OK
+    # the planner stows (phase STOW): not tracking any more, but the sensor is still
+    # silent, so the stow holds (no stow/track oscillation) until it speaks again
+    feed(core, clock, steps=50, phase=STOW_PHASE, temps=(60.0, None))
+    assert core.state.level == Level.STOW
+    feed(core, clock, steps=19, phase=STOW_PHASE)
+    assert core.state.level == Level.STOW                       # valid for < 2 s
+    feed(core, clock, steps=2, phase=STOW_PHASE)
+    assert core.state.level == Level.OK
 
 
 def test_stuck_thermocouple_while_sun_on_receiver():
@@ -139,10 +160,10 @@ def test_stuck_thermocouple_while_sun_on_receiver():
     assert core.state.level == Level.STOW
     assert any('outlet thermocouple stuck at 80.00 degC' in r for r in core.state.reasons)
     assert not any(r.startswith('inlet') for r in core.state.reasons)
-    ok, msg = core.reset()
-    assert not ok and 'still stuck' in msg
-    feed(core, clock, steps=2, phase=STOW_PHASE, temps=(60.0, 80.25))
-    assert core.reset()[0]
+    feed(core, clock, steps=50, phase=STOW_PHASE, temps=(60.0, 80.0))
+    assert core.state.level == Level.STOW                       # still frozen: held
+    feed(core, clock, steps=1, phase=STOW_PHASE, temps=(60.0, 80.25))
+    assert core.state.level == Level.OK
 
 
 def test_limit_switch_outside_homing_stops_its_axis_and_names_the_switch():
