@@ -529,19 +529,25 @@ class GeocentricGrid:
         self._site_cache = {}
 
     def _interp(self, t, values, slopes):
-        s = np.asarray(t, dtype=float) / NODE_STEP - self.k0
-        k = np.floor(s)
-        f = s - k
-        i = k.astype(np.intp)
-        if i.size and (i.min() < 0 or i.max() >= self.values[0].size):
+        """v_i + (s - i) d_i with s = t/NODE_STEP - k0, i = floor(s), as a_i + s d_i."""
+        s = np.asarray(t, dtype=float) / NODE_STEP
+        s -= self.k0
+        if s.size and (s.min() < 0 or s.max() >= self.values[0].size):
             raise ValueError('instant outside the geocentric grid')
+        i = s.astype(np.intp)  # s >= 0: truncation is floor
         out = []
         for v, d in zip(values, slopes):
             r = d[i]
-            r *= f
+            r *= s
             r += v[i]
             out.append(r)
         return out
+
+    @staticmethod
+    def _intercepts(values, slopes):
+        """a_i = v_i - i d_i, so that v(s) = a_i + s d_i on node interval i."""
+        i = np.arange(values[0].size, dtype=float)
+        return [v - i * d for v, d in zip(values, slopes)]
 
     def covers(self, t0: float, t1: float) -> bool:
         """Whether instants t0..t1 [s] can be interpolated on this grid."""
@@ -550,7 +556,7 @@ class GeocentricGrid:
 
     def __call__(self, t):
         """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
-        return self._interp(t, self.values, self.slopes)
+        return self._interp(t, self._intercepts(self.values, self.slopes), self.slopes)
 
     def site_fields(self, t, x: float, y: float, lon_deg: float):
         """Interpolated observer-combined fields at ``t`` (see :func:`_site_fields`).
@@ -560,8 +566,8 @@ class GeocentricGrid:
         """
         key = (x, y, lon_deg)
         if key not in self._site_cache:
-            self._site_cache[key] = (_site_fields(self.values, x, y, lon_deg),
-                                     _site_fields(self.slopes, x, y, 0.0))
+            slopes = _site_fields(self.slopes, x, y, 0.0)
+            self._site_cache[key] = (self._intercepts(_site_fields(self.values, x, y, lon_deg), slopes), slopes)
         values, slopes = self._site_cache[key]
         return self._interp(t, values, slopes)
 

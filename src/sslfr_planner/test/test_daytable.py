@@ -187,11 +187,12 @@ def test_property_no_nan_and_inside_mechanical_ranges(lat, lon, t, law, gc):
 def test_property_transversal_antisymmetric_about_noon(lat, lon, doy, tau):
     """theta_t(noon + tau) = -theta_t(noon - tau), to the drift of the sun over the day.
 
-    The sun's declination changes by up to 0.4 deg/day and the equation of time by up
-    to 30 s/day; over +/-4 h this moves the symmetric positions by < 0.1 deg.
+    The sun's declination changes by up to 0.4 deg/day (0.13 deg between noon - 4 h and
+    noon + 4 h) and the equation of time by up to 30 s/day; at |latitude| <= 60 deg that
+    moves the two positions apart by < 0.2 deg (0.100003 deg found at 56 S at an equinox).
     """
     site = Site.from_degrees(lat, lon)
     ev = sun_events(dt.date(1950, 1, 1) + dt.timedelta(days=doy), site)
     tab = evaluate(np.array([ev.solar_noon - tau, ev.solar_noon + tau]), site, Collector())
     if np.all(tab.zenith < math.radians(85.0)):
-        assert abs(tab.transversal[0] + tab.transversal[1]) < math.radians(0.1)
+        assert abs(tab.transversal[0] + tab.transversal[1]) < math.radians(0.2)
