@@ -69,26 +69,11 @@ def test_beam_saturation_and_unplug(sim, launch, ros, tmp_path):
     assert _diag(diags)[0].level == DiagnosticStatus.OK
 
 
-def test_efficacy_parameter_and_refusal(sim, launch, ros, tmp_path):
+def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
+    """The same node reaches its board through a (simulated) XBee 802.15.4 coordinator;
+    the luminous efficacy is a parameter, validated at runtime."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
-    beam = ros.collect(Irradiance, 'irradiance/beam')
-    launch('sslfr_drivers', 'irradiance', params={'port': str(tmp_path / 'irr0'),
-                                                  'luminous_efficacy': 120.0})
-    assert ros.spin_until(lambda: len(beam) >= 2, 15)
-    assert beam[-1].luminous_efficacy == 120.0
-    assert beam[-1].beam == pytest.approx(beam[-1].illuminance / 120.0)
-    req = SetParameters.Request()
-    req.parameters = [Parameter(name='luminous_efficacy', value=ParameterValue(
-        type=ParameterType.PARAMETER_DOUBLE, double_value=-5.0))]
-    res = ros.call(SetParameters, 'irradiance/set_parameters', req)
-    assert not res.results[0].successful
-    n = len(beam)
-    assert ros.spin_until(lambda: len(beam) > n, 3) and beam[-1].luminous_efficacy == 120.0
-
-
-def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
-    """The same node reaches its board through a (simulated) XBee 802.15.4 coordinator."""
     from sslfr_drivers.sim.base import FaultInjector
     from sslfr_drivers.sim.xbee import XBeeSimCoordinator
     host = XBeeSimCoordinator()
@@ -97,6 +82,17 @@ def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
     with SimThread(host, link=str(tmp_path / 'xbee')):
         beam = ros.collect(Irradiance, 'irradiance/beam')
         node = launch('sslfr_drivers', 'irradiance',
-                      params={'port': f'xbee:{tmp_path / "xbee"}?addr=0013A20040000012'})
+                      params={'port': f'xbee:{tmp_path / "xbee"}?addr=0013A20040000012',
+                              'luminous_efficacy': 120.0})
         assert ros.spin_until(lambda: len(beam) >= 3, 25), node.output()
-        assert 800.0 < beam[-1].beam < 1100.0 and not beam[-1].saturated
+        b = beam[-1]
+        assert not b.saturated and b.luminous_efficacy == 120.0
+        assert b.beam == pytest.approx(b.illuminance / 120.0)
+        assert 690.0 < b.beam < 960.0          # clear-sky DNI * 104 / 120
+        # an invalid runtime value is refused; the node keeps its last good efficacy
+        req = SetParameters.Request()
+        req.parameters = [Parameter(name='luminous_efficacy', value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=-5.0))]
+        assert not ros.call(SetParameters, 'irradiance/set_parameters', req).results[0].successful
+        n = len(beam)
+        assert ros.spin_until(lambda: len(beam) > n, 3) and beam[-1].luminous_efficacy == 120.0

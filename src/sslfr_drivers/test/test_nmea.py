@@ -123,7 +123,7 @@ def test_no_fix_rmc_without_date_is_not_a_time():
     assert s.counters.times == 0 and s.counters.parsed == 1
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.binary(max_size=600), st.lists(st.integers(1, 64), min_size=1, max_size=8))
 def test_fuzz_random_bytes_never_crash(data, cuts):
     s = nmea.NmeaStream()
@@ -139,7 +139,7 @@ def test_fuzz_random_bytes_never_crash(data, cuts):
 _fields = st.lists(st.text(alphabet='0123456789.,-NSEWAVMabc*$', max_size=12), max_size=16)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.sampled_from(['GPGGA', 'GPRMC', 'GPGSA', 'GNGGA', 'GNRMC', 'GPGSV']), _fields)
 def test_fuzz_wellformed_garbage_sentences(kind, parts):
     """Sentences with a correct checksum and random fields: a record or a count, no crash,
