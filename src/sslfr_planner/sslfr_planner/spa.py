@@ -529,25 +529,24 @@ class GeocentricGrid:
         self._site_cache = {}
 
     def _interp(self, t, values, slopes):
-        """v_i + (s - i) d_i with s = t/NODE_STEP - k0, i = floor(s), as a_i + s d_i."""
+        """v_i + f d_i, with s = t/NODE_STEP - k0, i = floor(s), f = s - i.
+
+        s - i is exact (Sterbenz), so an instant's result does not depend on where the
+        grid starts: evaluate() gives bit-identical numbers for an instant in any batch.
+        """
         s = np.asarray(t, dtype=float) / NODE_STEP
         s -= self.k0
         if s.size and (s.min() < 0 or s.max() >= self.values[0].size):
             raise ValueError('instant outside the geocentric grid')
         i = s.astype(np.intp)  # s >= 0: truncation is floor
+        f = s - i
         out = []
         for v, d in zip(values, slopes):
             r = d[i]
-            r *= s
+            r *= f
             r += v[i]
             out.append(r)
         return out
-
-    @staticmethod
-    def _intercepts(values, slopes):
-        """a_i = v_i - i d_i, so that v(s) = a_i + s d_i on node interval i."""
-        i = np.arange(values[0].size, dtype=float)
-        return [v - i * d for v, d in zip(values, slopes)]
 
     def covers(self, t0: float, t1: float) -> bool:
         """Whether instants t0..t1 [s] can be interpolated on this grid."""
@@ -556,7 +555,7 @@ class GeocentricGrid:
 
     def __call__(self, t):
         """Interpolated (sin d, cos d, sin xi, g [rad]) at ``t`` (g: see :func:`_node_values`)."""
-        return self._interp(t, self._intercepts(self.values, self.slopes), self.slopes)
+        return self._interp(t, self.values, self.slopes)
 
     def site_fields(self, t, x: float, y: float, lon_deg: float):
         """Interpolated observer-combined fields at ``t`` (see :func:`_site_fields`).
@@ -566,8 +565,7 @@ class GeocentricGrid:
         """
         key = (x, y, lon_deg)
         if key not in self._site_cache:
-            slopes = _site_fields(self.slopes, x, y, 0.0)
-            self._site_cache[key] = (self._intercepts(_site_fields(self.values, x, y, lon_deg), slopes), slopes)
+            self._site_cache[key] = (_site_fields(self.values, x, y, lon_deg), _site_fields(self.slopes, x, y, 0.0))
         values, slopes = self._site_cache[key]
         return self._interp(t, values, slopes)
 

@@ -196,3 +196,12 @@ def test_property_transversal_antisymmetric_about_noon(lat, lon, doy, tau):
     tab = evaluate(np.array([ev.solar_noon - tau, ev.solar_noon + tau]), site, Collector())
     if np.all(tab.zenith < math.radians(85.0)):
         assert abs(tab.transversal[0] + tab.transversal[1]) < math.radians(0.2)
+
+
+def test_evaluate_is_bit_identical_across_batches():
+    """The planner node relies on it: an instant gets the same numbers in any batch."""
+    t = dt.datetime(2026, 6, 21, 9, 59, 0, tzinfo=dt.timezone.utc).timestamp() + 0.3 + np.arange(121.0)
+    a = evaluate(t, ALMERIA, Collector())
+    b = evaluate(np.concatenate([[t[0] - 1.0], t, [t[-1] + 1.0]]), ALMERIA, Collector())
+    for name in ('zenith', 'azimuth', 'transversal', 'longitudinal', 'mirrors', 'mobile_structure'):
+        assert np.array_equal(getattr(a, name), getattr(b, name)[1:-1]), name
