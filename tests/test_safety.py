@@ -209,6 +209,13 @@ def test_thermocouple_nan_and_silence_while_tracking_stow_within_2s(launch, ros)
     print(f'valid inlet again -> OK after {time.monotonic() - back:.2f} s (recovery hold 1 s)')
     assert time.monotonic() - back > 0.9
 
+    # a malformed (undecodable) sample: counted, an invalid reading, the node survives
+    world.temp_pub['outlet'].publish(b'\x00\x01\x00\x00\xff\xff\xff\x7f garbage')
+    assert world.wait_level(SafetyState.STOW, 2.0), world.latest()
+    assert any('outlet thermocouple invalid (NaN)' in r for r in world.latest().reasons)
+    assert world.wait_level(SafetyState.OK, 3.0), world.latest()
+    assert world.proc.running() and 'undecodable message on absorber/outlet_temperature' in world.proc.output()
+
     # tracking, then the outlet thermocouple goes silent
     world.phase = 2
     ros.spin_for(0.5)

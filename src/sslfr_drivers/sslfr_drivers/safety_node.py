@@ -34,6 +34,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.time import Time
 from sensor_msgs.msg import NavSatFix, NavSatStatus, Temperature
 from std_srvs.srv import SetBool, Trigger
@@ -167,16 +168,16 @@ class SafetyNode(Node):
         self._pub = self.create_publisher(SafetyState, 'safety/state', 10)
         self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         for sensor in ('inlet', 'outlet'):
-            self.create_subscription(Temperature, f'absorber/{sensor}_temperature',
-                                     lambda m, s=sensor: self._on_temperature(s, m), _BEST_EFFORT)
-        self.create_subscription(LimitSwitches, 'limit_switches', self._on_switches, _BEST_EFFORT)
-        self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, _BEST_EFFORT)
-        self.create_subscription(JointTrajectory, 'tracker/trajectory', self._on_trajectory, _BEST_EFFORT)
+            self._subscribe(Temperature, f'absorber/{sensor}_temperature',
+                            lambda m, s=sensor: self._on_temperature(s, m),
+                            lambda s=sensor: self._on_temperature(s, None))
+        self._subscribe(LimitSwitches, 'limit_switches', self._on_switches)
+        self._subscribe(TrackerPhase, 'tracker/phase', self._on_phase)
+        self._subscribe(JointTrajectory, 'tracker/trajectory', self._on_trajectory)
         for axis in AXES:
-            self.create_subscription(AxisStatus, f'axes/{axis}/status',
-                                     lambda m, a=axis: self._on_axis(a, m), _BEST_EFFORT)
-        self.create_subscription(NavSatFix, 'gps/fix', self._on_fix, _BEST_EFFORT)
-        self.create_subscription(Irradiance, 'irradiance/beam', self._on_beam, _BEST_EFFORT)
+            self._subscribe(AxisStatus, f'axes/{axis}/status', lambda m, a=axis: self._on_axis(a, m))
+        self._subscribe(NavSatFix, 'gps/fix', self._on_fix)
+        self._subscribe(Irradiance, 'irradiance/beam', self._on_beam)
         self.create_service(SetBool, 'safety/estop', self._srv_estop)
         self.create_service(Trigger, 'safety/reset', self._srv_reset)
 
@@ -213,8 +214,26 @@ class SafetyNode(Node):
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ inputs
-    def _on_temperature(self, sensor: str, msg: Temperature) -> None:
-        value = msg.temperature
+    def _subscribe(self, msg_type, topic: str, handler, on_bad=None) -> None:
+        """Subscribe (best effort) to serialized messages and decode them here, so a
+        message that cannot be converted is counted and logged instead of raising
+        inside the executor (which would kill the supervisor). ``on_bad`` is called
+        for such a message (temperatures: an unreadable sample is an invalid one)."""
+        def receive(raw: bytes) -> None:
+            try:
+                msg = deserialize_message(raw, msg_type)
+            except Exception as exc:  # noqa: BLE001 - any decoding failure is bad input
+                self.core.counters['bad_inputs'] += 1
+                self.get_logger().error(f'undecodable message on {topic} ({len(raw)} bytes): {exc}',
+                                        throttle_duration_sec=5.0)
+                if on_bad is not None:
+                    on_bad()
+                return
+            handler(msg)
+        self.create_subscription(msg_type, topic, receive, _BEST_EFFORT, raw=True)
+
+    def _on_temperature(self, sensor: str, msg: Temperature | None) -> None:
+        value = math.nan if msg is None else msg.temperature
         self.core.on_temperature(sensor, value, open_circuit=False)
         self._evaluate(publish_on_change=True)
 
