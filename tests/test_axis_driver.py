@@ -411,6 +411,20 @@ def test_lifecycle_transitions_and_stall_fault(rig, ros):
     assert get_state(ros.node, name, executor=ros.executor) == 'unconfigured'
     ok, msg = bring_to(ros.node, name, 'active', executor=ros.executor)
     assert ok, msg + r.driver.output()
+
+    # invalid parameters are refused at run time with a reason; the last good ones stay
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    def set_param(pname, value):
+        req = SetParameters.Request(parameters=[Parameter(name=pname, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=value))])
+        return ros.call(SetParameters, f'{name}/set_parameters', req).results[0]
+    res = set_param('lower_limit', 1.6)                        # above upper_limit
+    assert not res.successful and 'soft limits' in res.reason, res.reason
+    res = set_param('max_speed', 5.0)                          # outside the declared range
+    assert not res.successful
+    assert set_param('max_speed', 0.25).successful
     t0 = time.time() + 0.3
     r.publish_trajectory(t0, [0.0, 30.0], [0.0, 0.6])          # 0.02 rad/s
     assert ros.spin_until(lambda: r.status[-1].state == 'following' and r.board()['speed'] != 0, 5)

@@ -44,6 +44,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -531,33 +532,44 @@ class _RosLogHandler(logging.Handler):
 
 def main(args=None):
     rclpy.init(args=args)
+    node = executor = None
+    code = 0
     try:
         node = AxisDriver()
         pkg_log = logging.getLogger('sslfr_drivers')
         pkg_log.addHandler(_RosLogHandler(node))
         pkg_log.setLevel(logging.INFO)
         pkg_log.propagate = False
-    except ValueError as exc:
-        print(f'axis_driver: invalid parameters: {exc}', flush=True)
-        rclpy.try_shutdown()
-        return 2
-    executor = MultiThreadedExecutor(num_threads=3)
-    executor.add_node(node)
-    try:
+        executor = MultiThreadedExecutor(num_threads=3)
+        executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, ParameterException) as exc:
+        if rclpy.ok():
+            print(f'axis_driver: invalid parameters: {exc}', flush=True)
+            code = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # SIGINT arrived while starting up: rclpy already shut the context down
     finally:
-        try:
-            if node.session is not None:
-                node._send_stop('exit')
-                node.session.close()
-        except Exception:  # noqa: BLE001 - best effort on the way out
-            pass
-        executor.shutdown()
-        node.destroy_node()
+        if node is not None:
+            try:
+                if node.session is not None:
+                    node._send_stop('exit')
+                    node.session.close()
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - context already gone
+                pass
         rclpy.try_shutdown()
-    return 0
+    return code
 
 
 if __name__ == '__main__':
