@@ -248,3 +248,25 @@ def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
     assert rec.running()                          # only recording stops
     assert not any((tmp_path / 'bags').glob('*/*.mcap'))
     assert rec.stop() == 0
+
+
+@pytest.mark.skipif(not (ROOT / 'ros_ws/install/sslfr_planner/lib/sslfr_planner/planner').exists()
+                    or not (ROOT / 'ros_ws/install/sslfr_drivers/lib/sslfr_drivers/safety').exists(),
+                    reason='planner/safety executables not installed')
+def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
+    """Inputs of a recorded stretch go to a fresh planner + safety; their decisions are
+    recorded (sim time of the recorded day) and compared with the bag's."""
+    from daybag import SUNRISE, write_day
+    write_day(tmp_path / 'day', SUNRISE - 60, SUNRISE + 60, traj_period=30)
+    out = _sslfr(['replay', str(tmp_path / 'day'), '--what-if', '--rate', '20', '--no-progress',
+                  '--out', str(tmp_path / 'wi')], ros_env, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert 'fresh nodes: planner, safety' in out.stdout
+    assert re.search(r'tracker/phase: agreement [\d.]+ % of \d+ samples', out.stdout)
+    assert re.search(r'safety/state: agreement [\d.]+ % of \d+ samples', out.stdout)
+    (bag,) = _bag_dirs(tmp_path / 'wi' / 'decisions')
+    topics = BagReader(bag).topics
+    assert topics['/tracker/phase'].message_count > 0 and topics['/safety/state'].message_count > 0
+    first = next(BagReader(bag).messages(['/safety/state']))
+    assert abs(first.log_time / 1e9 - (SUNRISE - 60)) < 60     # recorded on the bag's day (sim time)
+    assert (tmp_path / 'wi' / 'whatif.md').exists()
