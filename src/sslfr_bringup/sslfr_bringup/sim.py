@@ -7,13 +7,15 @@ every node on ``use_sim_time``, a simulated clock published on ``/clock`` at
 ``--speed`` times real time, the recorder writing an MCAP bag, and at the end the
 day report (``sslfr report``). Times are UTC.
 
-Time. Simulated time is ``start + speed * (t - anchor)`` with ``t`` the system-wide
-CLOCK_MONOTONIC (shared by every process), the same mapping the simulated sensor
-boards apply to their own steady clock (options ``start_utc`` and ``speed``). The
-anchor is the instant the simulated GPS board started (its pty link appeared), so
-GPS time and ``/clock`` agree. Axis boards run their steppers on the steady clock:
-at ``--speed X`` a joint must move X times faster than in reality, so the drivers
-get a raised ``max_speed`` in simulation (nodeset.yaml ``sim.node_parameters``).
+Time. Simulated time is ``start + speed * max(0, t - anchor)`` with ``t`` the
+system-wide CLOCK_MONOTONIC (shared by every process); the simulated sensor boards
+get the same ``start``, ``speed`` and ``anchor`` (options ``start_utc``, ``speed``,
+``anchor``), so GPS time, sun and ``/clock`` agree. The anchor is set after the node
+set has started (see the start-up sequence in :func:`main`): nothing of the simulated
+window is lost to start-up, however loaded the machine. Axis boards run their
+steppers on the steady clock: at ``--speed X`` a joint must move X times faster than
+in reality, so the drivers get a raised ``max_speed`` in simulation (nodeset.yaml
+``sim.node_parameters``).
 
 Faults (``--fault SPEC``, grammar in :mod:`sslfr_bringup.faults`) fire at their
 simulated time through the simulators' control sockets (``kill:NODE`` through the
@@ -53,6 +55,10 @@ class SimClock:
 
     def set_anchor(self, anchor: float) -> None:
         self.anchor = float(anchor)
+
+    def published(self) -> float | None:
+        """What /clock carries: None until the anchor is set (nothing published)."""
+        return None if self.anchor is None else self.now()
 
     def now(self, mono: float | None = None) -> float:
         if self.anchor is None:
@@ -107,6 +113,17 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
 
 
 DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
+#: [s] wall time between starting the time-dependent simulators and their clock anchor
+ANCHOR_MARGIN = 6.0
+
+
+def _watch_topics(ns) -> dict:
+    """Sensor topics whose first message tells the simulation that a node is fed."""
+    from sensor_msgs.msg import NavSatFix, Temperature
+    from sslfr_interfaces.msg import Irradiance
+    by_node = {'gps': ('gps/fix', NavSatFix), 'absorber_board': ('absorber/outlet_temperature', Temperature),
+               'irradiance': ('irradiance/beam', Irradiance)}
+    return dict(by_node[n.name] for n in ns.nodes if n.name in by_node)
 
 
 def acquire_domain(candidates=tuple(range(215, 233)) + tuple(range(102, 0, -1))):
@@ -243,7 +260,7 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
         links[bname] = run / f'{bname}.pty'
         controls[bname] = str(run / f'{bname}.sock')
         values = {'pty': links[bname], 'control': controls[bname], 'start': f'{clock.start:.3f}',
-                  'speed': f'{speed:g}', 'anchor': '', 'axis': bname, 'config': str(config),
+                  'speed': f'{speed:g}', 'anchor': '{anchor}', 'axis': bname, 'config': str(config),
                   'seed': args.seed + len(board_progs), 'world': run / 'world.json', **site}
         board_progs[bname] = Program(name=f'sim_{bname}', argv=nodeset_mod.sim_board_argv(board, exe, values),
                                      start=-1, stop=3, restart=False, kind='board')
@@ -266,8 +283,9 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
         print('sslfr sim: no node can run', file=sys.stderr)
         return 1
 
-    ros = RosSide(domain, namespace=ns.namespace, clock_fn=clock.now,
-                  clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim')
+    watch = _watch_topics(ns)
+    ros = RosSide(domain, namespace=ns.namespace, clock_fn=clock.published,
+                  clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim', watch=watch)
     ros.start()
     ros.ready.wait(30)
     if ros.error is not None:
@@ -283,21 +301,62 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     state = {'last_report': 0.0, 'last_rss': 0.0, 'peak_nodes': 0, 'peak_pss': 0, 'peak_boards': 0,
              'peak_detail': {}}
 
-    # start the boards first, anchor the clock on the GPS simulator, then the nodes
-    for p in board_progs.values():
-        sup._spawn(p)   # noqa: SLF001 - same supervisor, boards first
+    # Start-up (nothing of the simulated day is lost to it, however loaded the machine):
+    # 1. the time-dependent boards (sensors) with their clock anchored `anchor_margin` s
+    # ahead (frozen at --start until then) and the axis boards, 2. the nodes, 3. /clock
+    # starts (nothing is published before) when every node is in the ROS graph, the axes
+    # are active, the sensor topics flow and the anchor is reached.
+    timed = {b for b, p in board_progs.items() if any('{anchor}' in a for a in p.argv)}
+    ready = {'ok': True}
+
+    def wait_until(pred, timeout, what):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            sup.step()
+            if pred():
+                return True
+            time.sleep(0.02)
+        ready['ok'] = False
+        print(f'sslfr sim: start-up: {what} not ready after {timeout:.0f} s; going on', file=sys.stderr)
+        return False
+
+    def start_boards(names):
+        for b in names:
+            sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
+        return _wait_links({b: links[b] for b in names}, {b: board_progs[b] for b in names}, timeout=30.0)
+
+    anchor = None
+    margin = float(simcfg.get('anchor_margin', ANCHOR_MARGIN))
     try:
-        appeared = _wait_links(links, board_progs, timeout=30.0)
-    except RuntimeError as exc:
-        print(f'sslfr sim: {exc}', file=sys.stderr)
+        # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
+        anchor = time.monotonic() + margin
+        for b in sorted(timed):
+            board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
+            sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
+        start_boards([b for b in board_progs if b not in timed])
+        for p in node_progs:
+            sup._spawn(p)  # noqa: SLF001
+        sup.say(f'axis simulators up, nodes started at +{time.monotonic() - t_wall0:.1f} s: '
+                + ', '.join(p.name for p in node_progs))
+        _wait_links({b: links[b] for b in timed}, {b: board_progs[b] for b in timed}, timeout=60.0)
+        sup.say(f'sensor simulators up at +{time.monotonic() - t_wall0:.1f} s')
+        names = {p.name for p in node_progs}
+        wait_until(lambda: names <= ros.graph_nodes, 60.0, 'nodes in the ROS graph: ' + ', '.join(
+            sorted(names - ros.graph_nodes)))
+        lifecycle = [p for p in node_progs if p.lifecycle]
+        wait_until(lambda: all(p.lifecycle_state == 'active' for p in lifecycle)
+                   and all(ros.seen.get(t) for t in watch) and time.monotonic() >= anchor, 60.0,
+                   'axes active / sensor topics ' + ', '.join(t for t in watch if not ros.seen.get(t)))
+        sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
+    except (RuntimeError, KeyboardInterrupt) as exc:
+        print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
         sup.stop()
         ros.shutdown()
         return 1
-    anchor_board = 'gps' if 'gps' in appeared else (next(iter(appeared)) if appeared else None)
-    clock.set_anchor(appeared[anchor_board] if anchor_board else time.monotonic())
-    for b, t in appeared.items():
-        if b in ('absorber', 'irradiance'):
-            say(f'sslfr sim: {b} simulator clock offset vs /clock {speed * (clock.anchor - t):+.1f} s (sim)')
+    clock.set_anchor(max(anchor, time.monotonic()))
+    if clock.anchor - anchor > 0.05:
+        say(f'sslfr sim: sensor simulators run {speed * (clock.anchor - anchor):.0f} s (sim) ahead of /clock '
+            f'(the node set took {clock.anchor - anchor:.1f} s longer than the anchor margin)')
     t_nodes = time.monotonic()
 
     def tick():
@@ -333,10 +392,6 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
             state['last_report'] = time.monotonic()
             say(f'sslfr sim: {_hhmm(now_sim - day0)} UTC (wall {time.monotonic() - t_wall0:.0f} s)')
 
-    # the node programs join the supervisor now (boards are already running)
-    for p in node_progs:
-        sup._spawn(p)  # noqa: SLF001
-    sup.say('nodes started: ' + ', '.join(p.name for p in node_progs))
     stop_reason = 'end of the simulated window'
     try:
         _supervise(sup, tick, until=lambda: clock.now() >= end_epoch)

@@ -347,8 +347,8 @@ class RosSide(threading.Thread):
       published every ``1/clock_rate`` wall seconds on a steady timer.
     """
 
-    def __init__(self, domain_id: int, namespace: str = '', clock_fn: Callable[[], float] | None = None,
-                 clock_rate: float = 20.0, node_name: str = 'sslfr_supervisor'):
+    def __init__(self, domain_id: int, namespace: str = '', clock_fn: Callable[[], float | None] | None = None,
+                 clock_rate: float = 20.0, node_name: str = 'sslfr_supervisor', watch: dict | None = None):
         super().__init__(daemon=True, name='ros-side')
         self.domain_id = domain_id
         self.namespace = namespace
@@ -362,6 +362,9 @@ class RosSide(threading.Thread):
         self.ready = threading.Event()
         self.error: BaseException | None = None
         self.clock_published = 0
+        self.watch = dict(watch or {})          # topic -> message type: count arrivals
+        self.seen: dict[str, int] = {}
+        self.graph_nodes: set[str] = set()      # node names in the ROS graph (refreshed ~2 Hz)
 
     # called from the supervisor thread
     def request_active(self, name: str) -> None:
@@ -442,6 +445,13 @@ class RosSide(threading.Thread):
             diag_pub.publish(arr)
 
         node.create_timer(1.0, publish_diag, clock=steady)
+
+        def refresh_graph():
+            self.graph_nodes = set(node.get_node_names())
+        node.create_timer(0.5, refresh_graph, clock=steady)
+        for topic, msg_type in self.watch.items():
+            node.create_subscription(msg_type, topic,
+                                     lambda _m, t=topic: self.seen.__setitem__(t, self.seen.get(t, 0) + 1), 10)
         if self.clock_fn is not None:
             from rosgraph_msgs.msg import Clock as ClockMsg
             from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -450,6 +460,8 @@ class RosSide(threading.Thread):
 
             def publish_clock():
                 t = self.clock_fn()
+                if t is None:   # clock held back: nothing published yet
+                    return
                 msg = ClockMsg()
                 sec = int(t // 1)
                 msg.clock.sec, msg.clock.nanosec = sec, int(round((t - sec) * 1e9)) % 1_000_000_000
