@@ -610,7 +610,7 @@ class AxisSupervisor:
 
     # -- the decision -----------------------------------------------------------
     def tick(self, now_ros: float, now_steady: float, board: BoardState | None,
-             active: bool) -> Action:
+             active: bool, time_rate: float = 1.0) -> Action:
         """Decide the next board command.
 
         Parameters
@@ -623,6 +623,10 @@ class AxisSupervisor:
             Last STATUS, None when the link is down (nothing can be sent then).
         active : bool
             Lifecycle state is active (following allowed).
+        time_rate : float
+            ROS seconds per steady second (1 in real time; e.g. 400 in a simulated
+            day). The setpoint is taken ``lead * time_rate`` ROS seconds ahead so
+            the board (which moves in wall time) reaches it in one control period.
         """
         sp = self.store.setpoint(now_ros)
         self.setpoint = sp[0] if sp is not None else float('nan')
@@ -673,7 +677,7 @@ class AxisSupervisor:
             return self._hold(board, 'no trajectory yet')
         if sp[2] == 'starved':
             return self._move(board, sp[0], 'holding', 'trajectory starved: holding its last position')
-        ahead = self.store.setpoint(now_ros + self.cfg.lead)
+        ahead = self.store.setpoint(now_ros + self.cfg.lead * max(0.0, time_rate))
         return self._move(board, ahead[0], 'following' if sp[2] == 'following' else 'waiting')
 
     def _hold(self, board: BoardState, reason: str) -> Action:

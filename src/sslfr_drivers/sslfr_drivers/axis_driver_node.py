@@ -175,6 +175,8 @@ class AxisDriver(rclpy.lifecycle.Node):
 
         period = 1.0 / self.p['control_rate']
         self._tick_n = 0
+        self._clock_pair: tuple[float, float] | None = None
+        self._rate = 1.0
         self.create_timer(period, self._control_tick, callback_group=self._io_group, clock=self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         self._autostart_timer = None
@@ -408,7 +410,7 @@ class AxisDriver(rclpy.lifecycle.Node):
                     self.sup.position_lost()
                     self.get_logger().warning('link re-established')
             self.board = board
-            act = self.sup.tick(now_ros, now_steady, board, self.active)
+            act = self.sup.tick(now_ros, now_steady, board, self.active, self._time_rate(now_ros, now_steady))
             if self.sup.fault and self.sup.state == 'fault' and act.kind == 'stop':
                 self.counters['faults'] += 1
                 self.get_logger().error(f'axis fault: {self.sup.fault}')
@@ -419,6 +421,18 @@ class AxisDriver(rclpy.lifecycle.Node):
                 self._publish_status(now_ros)
             if board is not None and self._tick_n % max(1, round(rate / self.p['joint_state_rate'])) == 0:
                 self._publish_joint(board)
+
+    def _time_rate(self, now_ros: float, now_steady: float) -> float:
+        """ROS seconds per steady second, smoothed (1.0 without sim time)."""
+        last = self._clock_pair
+        self._clock_pair = (now_ros, now_steady)
+        if last is None or now_steady - last[1] <= 0.0:
+            return self._rate
+        inst = (now_ros - last[0]) / (now_steady - last[1])
+        if not (0.0 <= inst <= 1e5):           # clock jump (replay restart, time set): ignore
+            return self._rate
+        self._rate += 0.3 * (inst - self._rate)
+        return self._rate
 
     def _execute(self, session: AxisBoardSession, act) -> None:
         if act.kind == 'none':

@@ -251,3 +251,18 @@ def test_home_direction_toward_sleep_switch_inside_the_range():
     # a homing attempt that ended on the LOW switch goes back up
     act = sup.tick(0.0, 0.3, BoardState(0, 0, False, False, False, None, limit_bits=1), True)
     assert act.kind == 'home' and act.speed > 0
+
+
+def test_setpoint_lead_scales_with_the_ros_time_rate():
+    sup = _sup()
+    sup.store.offer([0.0, 1000.0], [0.0, 0.5], None, 0.0, MIRRORS)
+    cal = Calibration()
+    a1 = sup.tick(100.0, 0.5, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=1.0)
+    a40 = sup.tick(100.0, 0.6, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=40.0)
+    assert a1.steps == cal.steps(0.05 + 0.0005 * 0.05)
+    assert a40.steps == cal.steps(0.05 + 0.0005 * 0.05 * 40)
+    # the speed is per wall second: reach the target in one control period...
+    assert a40.speed == pytest.approx(cal.step_rate(0.0005 * 40), rel=0.02)
+    # ... but never above max_speed (0.05 rad/s)
+    a400 = sup.tick(100.0, 0.7, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=400.0)
+    assert a400.speed == pytest.approx(cal.step_rate(0.05))
