@@ -200,8 +200,16 @@ def analyse(reader: BagReader) -> DayReport:
     status = {a: Series() for a in AXES}
     joints = {a: Series() for a in AXES}
     last_phase = None
-    for raw, m in reader.decoded(wanted):
+    for raw in reader.messages(wanted):
         key = by_topic[raw.topic]
+        if key == 'gps/fix' and len(fix.t) >= 10:
+            continue  # the site needs only the first valid fixes: skip decoding the rest
+        try:
+            m = reader.decoder(raw.type)(raw.data)
+        except BagError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - decoder errors vary
+            raise BagError(f'cannot decode a {raw.type} message on {raw.topic}: {exc}') from exc
         if key == 'tracker/phase':
             phase.add(_t(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
             last_phase = m

@@ -124,7 +124,7 @@ class BagMetadata:
                  'duration': {'nanoseconds': f.duration_ns},
                  'message_count': f.message_count}
                 for f in self.files],
-            'custom_data': dict(self.custom_data) or None,
+            'custom_data': dict(self.custom_data),  # {} when empty: yaml-cpp needs a map
             'ros_distro': self.ros_distro,
         }
         return {'rosbag2_bagfile_information': info}
