@@ -12,7 +12,7 @@ file (``SSLFR_SIM_WORLD``): the absorber board closes the ``sleeping`` switch wh
 simulated mirrors really reach +pi/2.
 
 Compressed, honestly: one axis (the mirrors) instead of three; the mirrors' maximum
-speed is 0.3 rad/s (the seed's tracking speed is 0.006 deg/s) so the stow takes ~5 s.
+speed is 0.6 rad/s (the seed's tracking speed is 0.006 deg/s) so the stow takes ~2.5 s (the simulated board's step rate limit is raised to match).
 """
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ pytestmark = pytest.mark.timeout(150)
 STEP_ANGLE = math.radians(0.006)             # seed 000 step [rad]
 STOW_STEPS = round((math.pi / 2) / STEP_ANGLE)
 TRACK = 0.17                                 # [rad] mirror angle while "tracking"
-MAX_SPEED = 0.3                              # [rad/s] driver max_speed in this test
+MAX_SPEED = 0.6                              # [rad/s] driver max_speed in this test
 
 
 class WireTap:
@@ -133,7 +133,8 @@ class Plant:
         # the mirrors first, so the world file holds their true angle before the
         # absorber board reads it for its switches
         axis_link, self.axis_sim = sim('axis', 'mir', '--axis', 'mirrors',
-                                       '--opt', f'initial_angle_deg={math.degrees(TRACK):.3f}')
+                                       '--opt', f'initial_angle_deg={math.degrees(TRACK):.3f}',
+                                       '--opt', f'max_speed={MAX_SPEED / STEP_ANGLE * 1.05:.0f}')
         deadline = time.monotonic() + 10
         while not os.path.exists(env['SSLFR_SIM_WORLD']) and time.monotonic() < deadline:
             time.sleep(0.05)
