@@ -139,6 +139,7 @@ class RecordingSession:
     def write(self, topic: str, data: bytes, log_ns: int, publish_ns: int | None = None,
               sequence: int = 0) -> bool:
         """Record one message; return False when it was dropped (disk guard or error)."""
+        self._maybe_check_disk()  # also before the very first message is written
         if self.guard.stopped:
             self.stats.dropped_disk += 1
             return False
@@ -170,14 +171,21 @@ class RecordingSession:
             except OSError as exc:
                 self.stats.write_errors += 1
                 self.stats.last_error = str(exc)
+        self._maybe_check_disk()
+        return self.disk
+
+    def _maybe_check_disk(self) -> None:
         now = self._monotonic()
         if now >= self._next_disk_check:
             self._next_disk_check = now + self.disk_check_period_s
             was_stopped = self.guard.stopped
-            self.disk = self._disk_check(self.root)
+            try:
+                self.disk = self._disk_check(self.root)
+            except OSError as exc:
+                self.stats.last_error = f'free-space check failed: {exc}'
+                return
             if self.guard.stopped and not was_stopped:
                 self._close()  # leave a complete, readable bag behind
-        return self.disk
 
     def close(self) -> None:
         """Close the open bag (metadata.yaml written)."""
