@@ -295,6 +295,15 @@ def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros)
     assert world.call(Trigger, 'safety/reset', Trigger.Request()).success
     assert world.wait_level(SafetyState.OK, 1.0)
 
+    # a valid runtime change is applied: a lower limit makes 120 degC an over-temperature
+    good = SetParameters.Request(parameters=[Parameter(
+        name='temperature.limit', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=100.0))])
+    assert world.call(SetParameters, 'safety/set_parameters', good).results[0].successful
+    world.temperature('inlet', 120.0)
+    world.t['inlet'] = 120.0
+    assert world.wait_level(SafetyState.STOW, 1.0)
+    assert any('inlet over-temperature: 120.0 degC > 100.0 degC' in r for r in world.latest().reasons)
+
 
 def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
     from builtin_interfaces.msg import Time
