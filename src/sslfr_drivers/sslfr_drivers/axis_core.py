@@ -424,6 +424,9 @@ class StallDetector:
 
 # --------------------------------------------------------------------------- supervisor
 HOME_SWITCHES = {'low': 0, 'high': 1, 'sleep': 2}   # messages.Switch indices
+#: STATUS.fault_bits that make the driver latch a fault (docs/protocol.md FaultBits)
+BOARD_FAULT_STALL = 1 << 2
+BOARD_FAULT_DRIVER = 1 << 4
 
 
 @dataclass(frozen=True)
@@ -489,6 +492,8 @@ class AxisConfig:
         instead of a homing move, and report the sensor as the measured angle.
     auto_home : bool
         Home by itself when the board lost its position (else wait for the home service).
+    ref_samples : int
+        Sensor readings (at rest, one per tick) averaged for a SET_ZERO [-].
     """
 
     axis: str
@@ -503,6 +508,7 @@ class AxisConfig:
     home_speed: float
     use_sensor: bool = True
     auto_home: bool = True
+    ref_samples: int = 5
 
 
 class AxisSupervisor:
@@ -535,6 +541,7 @@ class AxisSupervisor:
         self.setpoint: float = float('nan')      # trajectory setpoint for now [rad]
         self.last_known: float | None = None      # last referenced joint angle [rad]
         self._cmd_steps: int | None = None       # last MOVE_TO target [steps]
+        self._ref: list[float] = []               # sensor samples for SET_ZERO [rad]
         self._cmd_speed: float = 0.0
 
     # -- helpers ------------------------------------------------------------
@@ -551,6 +558,7 @@ class AxisSupervisor:
     def position_lost(self) -> None:
         """The board reset / reconnected without its reference: forget commands."""
         self._cmd_steps = None
+        self._ref.clear()
         self.stall.reset()
 
     def _stop(self, board: BoardState, state: str, reason: str) -> Action:
@@ -562,10 +570,20 @@ class AxisSupervisor:
         return Action()
 
     def _home_action(self, board: BoardState) -> Action:
+        """Re-reference: SET_ZERO at the mean of ``ref_samples`` sensor readings taken
+        at rest (returns no action while collecting), else HOME toward the switch."""
         cfg, cal = self.cfg, self.cfg.calibration
         if cfg.use_sensor and board.sensor is not None:
-            self.state, self.reason = 'homing', 'position lost: re-established from the position sensor'
-            return Action('set_zero', cal.steps(board.sensor))
+            self.state, self.reason = 'homing', 'position lost: re-establishing it from the position sensor'
+            if board.moving:
+                self._ref.clear()
+                return Action('stop')
+            self._ref.append(board.sensor)
+            if len(self._ref) < cfg.ref_samples:
+                return Action()
+            mean = sum(self._ref) / len(self._ref)
+            self._ref.clear()
+            return Action('set_zero', cal.steps(mean))
         direction = self._home_direction(board)          # joint direction toward the switch
         rate = cal.step_rate(cfg.home_speed) * direction * (1.0 if cal.joint_per_step > 0 else -1.0)
         self.state, self.reason = 'homing', f'homing toward the {cfg.home_switch} switch'
@@ -650,13 +668,22 @@ class AxisSupervisor:
         if not board.homed:
             self._cmd_steps = None
             if self.cfg.auto_home or self.home_requested or (self.cfg.use_sensor and board.sensor is not None):
-                self.home_requested = False
-                return self._home_action(board)
+                act = self._home_action(board)
+                self.home_requested = self.home_requested and act.kind in ('none', 'stop')
+                return act
             self.state, self.reason = 'fault', 'position lost: call the home service'
             return Action()
         if self.home_requested:
-            self.home_requested = False
-            return self._home_action(board)
+            act = self._home_action(board)
+            self.home_requested = act.kind in ('none', 'stop')
+            return act
+        self._ref.clear()
+        hard = board.fault_bits & (BOARD_FAULT_STALL | BOARD_FAULT_DRIVER)
+        if hard:
+            self.fault = (f'board reports fault bits {board.fault_bits:#06x} '
+                          f'({"stall" if hard & BOARD_FAULT_STALL else ""}'
+                          f'{" driver" if hard & BOARD_FAULT_DRIVER else ""})').replace('( ', '(')
+            return self._stop(board, 'fault', self.fault)
         pending = self._cmd_steps is not None and abs(self._cmd_steps - board.steps) > 1
         cal = self.cfg.calibration
         problem = self.stall.update(now_steady, cal.angle(board.steps),

@@ -90,6 +90,7 @@ PARAMETERS: dict[str, tuple] = {
     'home_speed': (_F, 0.05, 'homing speed [rad/s]', (1e-5, 2.0)),
     'use_sensor': (_B, True, "use the board's position sensor (measured angle, re-referencing after a reset)", None),
     'auto_home': (_B, True, 'home by itself when the board lost its position', None),
+    'reference_samples': (_I, 5, 'sensor readings at rest averaged to re-reference (SET_ZERO) [-]', (1, 100)),
     'safety_timeout': (_F, 1.0, 'safety/state silence that stops the axis [s] (steady clock)', (0.05, 10.0)),
     'lost_step_tolerance': (_F, 0.005, 'step count vs sensor disagreement that faults [rad]', (1e-5, 1.0)),
     'stall_window': (_F, 1.0, 'stall observation window [s]', (0.1, 60.0)),
@@ -125,7 +126,7 @@ def build_config(axis: str, p: dict) -> tuple[AxisConfig, StallDetector]:
         raise ValueError('min_speed > max_speed')
     cfg = AxisConfig(axis, cal, limits, p['max_speed'], p['min_speed'], 1.0 / p['control_rate'],
                      p['stow_position'], p['home_switch'], p['home_position'], p['home_speed'],
-                     p['use_sensor'], p['auto_home'])
+                     p['use_sensor'], p['auto_home'], p['reference_samples'])
     stall = StallDetector(p['lost_step_tolerance'], p['stall_window'], p['stall_min_motion'])
     return cfg, stall
 

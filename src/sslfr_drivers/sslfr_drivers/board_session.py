@@ -37,10 +37,11 @@ class BoardRefused(RuntimeError):
 def board_state(status: m.Status) -> BoardState:
     """Convert a STATUS message into the core's :class:`BoardState`.
 
-    ``sensor`` is the sensor angle [rad] when the board flags HAS_SENSOR and the
-    value is finite, else None.
+    ``sensor`` is the sensor angle [rad] when the board flags HAS_SENSOR, the value
+    is finite and the SENSOR fault bit is clear, else None (steps are used).
     """
-    has = bool(status.flags & m.StatusFlags.HAS_SENSOR) and math.isfinite(status.sensor_angle)
+    has = (bool(status.flags & m.StatusFlags.HAS_SENSOR) and math.isfinite(status.sensor_angle)
+           and not status.fault_bits & m.FaultBits.SENSOR)
     return BoardState(int(status.position), int(status.target), status.moving, status.homed,
                       status.homing, float(status.sensor_angle) if has else None,
                       int(status.limit_bits), int(status.fault_bits))

@@ -198,8 +198,10 @@ def test_supervisor_never_moves_when_position_lost():
     assert act.kind == 'home' and act.speed > 0 and act.steps == Calibration().steps(math.pi / 2)
     sup2 = _sup(use_sensor=True)
     sup2.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
-    act = sup2.tick(150.0, 0.5, _board(steps=5, homed=False, sensor=0.0123), True)
-    assert act == Action('set_zero', Calibration().steps(0.0123))
+    acts = [sup2.tick(150.0, 0.5 + 0.05 * k, _board(steps=5, homed=False, sensor=0.0123 + d), True)
+            for k, d in enumerate([1e-5, -1e-5, 2e-5, -2e-5, 0.0])]
+    assert [a.kind for a in acts] == ['none'] * 4 + ['set_zero']          # 5 samples averaged
+    assert acts[-1] == Action('set_zero', Calibration().steps(0.0123))
     sup3 = _sup(use_sensor=False, auto_home=False)
     sup3.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     assert sup3.tick(150.0, 0.5, _board(homed=False, sensor=None), True).kind == 'none'
@@ -266,3 +268,25 @@ def test_setpoint_lead_scales_with_the_ros_time_rate():
     # ... but never above max_speed (0.05 rad/s)
     a400 = sup.tick(100.0, 0.7, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=400.0)
     assert a400.speed == pytest.approx(cal.step_rate(0.05))
+
+
+def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
+    from sslfr_drivers import messages as m
+    from sslfr_drivers.axis_core import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
+    assert BOARD_FAULT_STALL == m.FaultBits.STALL and BOARD_FAULT_DRIVER == m.FaultBits.DRIVER
+    sup = _sup()
+    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    b = BoardState(0, 10, True, True, False, 0.0, 0, int(m.FaultBits.DRIVER))
+    assert sup.tick(150.0, 0.5, b, True).kind == 'stop'
+    assert sup.state == 'fault' and 'driver' in sup.fault
+
+
+def test_sensor_fault_bit_drops_the_sensor():
+    from sslfr_drivers import messages as m
+    from sslfr_drivers.board_session import board_state
+    st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR | m.StatusFlags.HOMED), 0, 0, 0.5, 1)
+    assert board_state(st).sensor == pytest.approx(0.5)
+    st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR), 0, int(m.FaultBits.SENSOR), 0.5, 1)
+    assert board_state(st).sensor is None
+    st = m.Status(100, 100, 0.0, 0, 0, 0, float('nan'), 1)
+    assert board_state(st).sensor is None
