@@ -4,7 +4,7 @@ A summary a person reads in a minute, as text on stdout and as ``report.md`` wit
 PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 
 - site and date; sunrise / solar noon / sunset (from ``tracker/phase``);
-- time spent in each phase;
+- time spent in each phase (a phase holds until the next tracker/phase message);
 - per-axis tracking error, RMS / max / 95th percentile [mrad] during TRACKING:
   measured vs the commanded setpoint (``axes/<axis>/status``: measured - setpoint,
   or ``joint_states`` positions when there is no status) and measured vs the ideal
@@ -126,11 +126,21 @@ def _find(topics, name: str) -> str | None:
     return None
 
 
-def step_durations(t: np.ndarray, v: np.ndarray, end: float, max_gap: float = MAX_GAP_S) -> dict:
-    """Seconds spent at each value of a step function sampled at ``t`` (held up to ``max_gap``)."""
+def gap_limit(t: np.ndarray, floor: float = MAX_GAP_S) -> float:
+    """Longest interval [s] bridged between samples: max(``floor``, 5 x the median spacing)
+    (a recording at reduced rate, e.g. a fast simulation, is still integrated)."""
+    if len(t) < 3:
+        return floor
+    return max(floor, 5.0 * float(np.median(np.diff(t))))
+
+
+def step_durations(t: np.ndarray, v: np.ndarray, end: float, max_gap: float | None = None) -> dict:
+    """Seconds spent at each value of a step function sampled at ``t`` (held up to
+    ``max_gap`` [s], default :func:`gap_limit`)."""
     out: dict[int, float] = {}
     if len(t) == 0:
         return out
+    max_gap = gap_limit(t) if max_gap is None else max_gap
     nxt = np.append(t[1:], end)
     d = np.clip(nxt - t, 0.0, max_gap)
     for val in np.unique(v):
@@ -155,12 +165,14 @@ def intervals(t: np.ndarray, active: np.ndarray, end: float) -> list[tuple[int, 
     return out
 
 
-def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float = MAX_GAP_S) -> float:
-    """H = integral of G_b dt [kWh/m^2] by trapezoids over gaps <= ``max_gap`` [s]; NaN skipped."""
+def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None) -> float:
+    """H = integral of G_b dt [kWh/m^2] by trapezoids over gaps <= ``max_gap`` [s]
+    (default :func:`gap_limit`); NaN samples skipped."""
     ok = np.isfinite(g)
     t, g = t[ok], g[ok]
     if len(t) < 2:
         return 0.0
+    max_gap = gap_limit(t) if max_gap is None else max_gap
     dtt = np.diff(t)
     area = 0.5 * (g[1:] + g[:-1]) * dtt
     return float(area[(dtt > 0) & (dtt <= max_gap)].sum() / 3.6e6)
@@ -251,7 +263,8 @@ def analyse(reader: BagReader) -> DayReport:
     pt, pv = phase.arrays()
     if len(pt):
         rep.phase_time = {PHASE_NAMES.get(k, str(k)): v for k, v in
-                          step_durations(pt, pv['phase'], end).items()}
+                          step_durations(pt, pv['phase'], end, max_gap=np.inf).items()}
+        # (the planner publishes on change: a phase holds until the next message)
         for i, j in intervals(pt, pv['phase'] == 5, end):
             t1 = pt[j] if j < len(pt) else end
             rep.commanded_stows.append({'start': pt[i], 'end': t1, 'duration': t1 - pt[i],
