@@ -257,6 +257,15 @@ def test_link_cut_then_restored_resumes_tracking_and_reset_uses_sensor(rig, ros)
     assert int(d['set_zero_sent']) >= 2 and b['resets'] == 1, (d, b)   # start-up + after the reset
     print(f'board reset (sensor): re-referenced and following {_stamp(back) - t_reset:.2f} s later')
 
+    # the port disappears for 3 s (USB unplugged): reopened with back-off, tracking again
+    reconnects = int(r.diag()['reconnects'])
+    r.sim.cmd('unplug 3')
+    t_cut = time.time() - 2.0          # tracking_again() looks for statuses after t_cut + 5
+    assert ros.spin_until(lambda: r.status[-1].link_state == 0, 3)      # LINK_DOWN seen
+    assert ros.spin_until(tracking_again, 10.0)
+    print(f'port unplugged 3 s: tracking again {_stamp(r.status[-1]) - (t_cut + 5):.2f} s after it came back')
+    assert ros.spin_until(lambda: int(r.diag()['reconnects']) > reconnects, 3)
+
 
 def test_board_reset_without_sensor_rehomes_before_moving(rig, ros):
     """mobile_structure axis, board without position sensor: after a reset the only
@@ -371,6 +380,18 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     r.heartbeat = True
     assert ros.spin_until(lambda: r.status[-1].state == 'stowing'
                           and abs(r.status[-1].commanded - math.pi / 2) < STEP, 3)
+    # ESTOP while moving: STOP sent from the safety callback, motor still within 0.3 s
+    assert ros.spin_until(lambda: r.board()['speed'] != 0.0, 2)
+    r.safety.update(level=3, stow_required=False)
+    r._beat()
+    t_estop = time.monotonic()
+    while r.board()['speed'] != 0.0 and time.monotonic() < t_estop + 1.0:
+        ros.spin_for(0.01)
+    print(f'ESTOP: motor still {time.monotonic() - t_estop:.3f} s after the message')
+    assert time.monotonic() - t_estop <= 0.3
+    held = r.board()['counter']
+    assert ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
+    assert r.board()['counter'] == held                          # and it stays stopped
     r.safety.update(level=0, stow_required=False)
 
     # jog: refused outside maintenance, accepted in maintenance

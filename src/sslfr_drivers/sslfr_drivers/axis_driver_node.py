@@ -176,6 +176,7 @@ class AxisDriver(rclpy.lifecycle.Node):
 
         period = 1.0 / self.p['control_rate']
         self._tick_n = 0
+        self._stop_seen = False
         self._clock_pair: tuple[float, float] | None = None
         self._rate = 1.0
         self.create_timer(period, self._control_tick, callback_group=self._io_group, clock=self.steady)
@@ -334,6 +335,11 @@ class AxisDriver(rclpy.lifecycle.Node):
 
     def _on_safety(self, msg: SafetyState) -> None:
         now = self.steady.now().nanoseconds * 1e-9
+        session = self.session
+        stop_us = msg.level == SafetyState.ESTOP or self.axis in msg.stopped_axes
+        if session is not None and stop_us and not self._stop_seen:
+            session.stop_now()      # before taking the lock: never wait behind a control tick
+        self._stop_seen = stop_us
         with self._lock:
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
                                     msg.sequence, list(msg.reasons))

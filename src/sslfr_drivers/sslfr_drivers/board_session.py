@@ -197,6 +197,14 @@ class AxisBoardSession:
         return self.last_status.speed * cal.joint_per_step
 
     # ------------------------------------------------------------------ commands
+    def stop_now(self) -> None:
+        """Queue a STOP without waiting for its ACK (safe from any thread; used for
+        e-stops so they never wait behind a control tick that is retrying)."""
+        try:
+            self.link.submit(m.Stop())
+        except (LinkError, ProtocolError, OSError):
+            pass
+
     def command(self, act: Action) -> tuple[bool, str]:
         """Execute one action; ``(True, '')`` when ACKed, else ``(False, reason)``.
 
