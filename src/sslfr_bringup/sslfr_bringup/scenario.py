@@ -65,6 +65,20 @@ class Day:
     fix: Series
     trajectory: Series
     topics: dict[str, int]
+    diagnostics: Series = field(default_factory=Series)
+
+    def counter(self, status_prefix: str, key: str) -> Series:
+        """A numeric diagnostics value over time (statuses whose name starts with
+        ``status_prefix``), e.g. ``counter('mobile_structure_driver', 'board_resets')``."""
+        t, v = [], []
+        for ti, name, values in zip(self.diagnostics.t, self.diagnostics['name'], self.diagnostics['values']):
+            if name.startswith(status_prefix) and key in values:
+                try:
+                    v.append(float(values[key]))
+                    t.append(ti)
+                except ValueError:
+                    pass
+        return Series(np.asarray(t, dtype=float), {'value': np.asarray(v, dtype=float)})
 
     def phase_changes(self) -> list[tuple[float, str]]:
         """(time, phase_name) at each change of the published phase."""
@@ -77,12 +91,13 @@ class Day:
         return out
 
 
-def _collect(reader, topic: str, fields: dict) -> Series:
-    """Rows of ``topic`` sorted by header stamp (log time when there is no header)."""
+def _collect(reader, topic: str, fields: dict, log_time: bool = False) -> Series:
+    """Rows of ``topic`` sorted by header stamp (by the recorder's log time when there
+    is no header or with ``log_time``)."""
     rows = []
     for raw, msg in reader.decoded([topic]):
         header = getattr(msg, 'header', None)
-        t = _stamp(header) if header is not None else raw.log_time * 1e-9
+        t = _stamp(header) if header is not None and not log_time else raw.log_time * 1e-9
         rows.append((t, [f(msg) for f in fields.values()]))
     rows.sort(key=lambda r: r[0])
     cols = {}
@@ -121,8 +136,18 @@ def read_day(bag: str | Path) -> Day:
     inlet = _collect(reader, '/absorber/inlet_temperature', {'value': lambda m: float(m.temperature)})
     fix = _collect(reader, '/gps/fix', {'status': lambda m: int(m.status.status),
                                         'latitude': lambda m: float(m.latitude)})
-    traj = _collect(reader, '/tracker/trajectory', {'points': lambda m: len(m.points)})
-    return Day(axes, phase, safety, outlet, inlet, fix, traj, topics)
+    # a trajectory's stamp is its first point's time: when it was sent is the log time
+    traj = _collect(reader, '/tracker/trajectory', {'points': lambda m: len(m.points)}, log_time=True)
+    rows = []
+    for raw, msg in reader.decoded(['/diagnostics']):
+        for st in msg.status:
+            rows.append((_stamp(msg.header), st.name, int(st.level) if not isinstance(st.level, bytes)
+                         else st.level[0], st.message, {kv.key: kv.value for kv in st.values}))
+    rows.sort(key=lambda r: r[0])
+    diag = Series(np.asarray([r[0] for r in rows], dtype=float),
+                  {'name': [r[1] for r in rows], 'level': np.asarray([r[2] for r in rows]),
+                   'message': [r[3] for r in rows], 'values': [r[4] for r in rows]})
+    return Day(axes, phase, safety, outlet, inlet, fix, traj, topics, diag)
 
 
 def interval_distance(value: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
