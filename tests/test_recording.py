@@ -7,7 +7,6 @@ and mcap + mcap_ros2 (decoding through the recorded schemas).
 """
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess

@@ -11,19 +11,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, strategies as st
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from sensor_msgs.msg import JointState, NavSatFix, Temperature
-from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
+from sensor_msgs.msg import JointState, Temperature
+from sslfr_interfaces.msg import AxisStatus, SafetyState
 
 from sslfr_bringup.bag import (BagError, BagReader, BagWriter, DefinitionCache, DiskGuard,
                                SplitPolicy, WriterOptions, bag_name, dump_profiles,
                                load_profiles, profile, read_metadata, recover_bag)
-from sslfr_bringup.bag.policy import DiskStatus
 from sslfr_bringup.bag.schema import SEPARATOR, parse_dependencies
 from sslfr_bringup.bag.session import RecordingSession
 
@@ -309,7 +308,7 @@ def test_session_day_rollover_disk_guard_and_resume(tmp_path):
 
 # -- what-if comparison and report on bags -------------------------------------------------
 def test_whatif_comparison_on_bags(tmp_path):
-    from daybag import DAY0, SUNRISE, write_day
+    from daybag import SUNRISE, write_day
 
     from sslfr_bringup.bag.whatif import compare_bags
     start, end = SUNRISE - 900, SUNRISE + 300
