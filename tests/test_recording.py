@@ -245,6 +245,13 @@ def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
                    for d in diags for s in d.status)
     assert ros.spin_until(stopped, 10.0)
     assert rec.running()                          # only recording stops
+    # invalid parameters are refused at runtime, the node keeps its configuration
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    req = SetParameters.Request(parameters=[Parameter(name='compression', value=ParameterValue(
+        type=ParameterType.PARAMETER_STRING, string_value='gzip'))])
+    res = ros.call(SetParameters, 'recorder/set_parameters', req)
+    assert not res.results[0].successful and 'compression' in res.results[0].reason
     assert not any((tmp_path / 'bags').glob('*/*.mcap'))
     assert rec.stop() == 0
 
@@ -269,3 +276,20 @@ def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     first = next(BagReader(bag).messages(['/safety/state']))
     assert abs(first.log_time / 1e9 - (SUNRISE - 60)) < 60     # recorded on the bag's day (sim time)
     assert (tmp_path / 'wi' / 'whatif.md').exists()
+
+
+def test_replay_ctrl_c_stops_cleanly(ros_env, tmp_path):
+    w = BagWriter(tmp_path / 'b', WriterOptions(fsync=False))
+    w.add_topic('/absorber/inlet_temperature', 'sensor_msgs/msg/Temperature', [profile()])
+    data = bytes(serialize_message(Temperature(temperature=3.0)))
+    for k in range(600):                        # 60 s at 10 Hz
+        w.write('/absorber/inlet_temperature', data, 1_782_000_000 * 10**9 + k * 10**8)
+    w.close()
+    proc = subprocess.Popen([str(ROOT / 'sslfr'), 'replay', str(tmp_path / 'b'), '--rate', '1'],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(5.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130, err
+    assert 'interrupted' in out and 'Traceback' not in err
+    assert '%' in err                               # the progress bar was drawn

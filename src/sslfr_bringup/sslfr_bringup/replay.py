@@ -97,6 +97,8 @@ class Player:
         self.skipped: dict[str, str] = {}
         self.error: str = ''
         self.wall_elapsed = 0.0
+        self.last_ns = self.start_ns
+        self.interrupted = False
         self._Clock = Clock
         remaps = remaps or {}
         self.publishers = {}
@@ -202,6 +204,7 @@ class Player:
             self.error = str(exc)
         finally:
             self.wall_elapsed = time.monotonic() - wall0
+            self.last_ns = t_ns
             if self.progress:
                 sys.stderr.write('\r' + progress_line(t_ns, self.start_ns, self.end_ns, self.count,
                                                       self.wall_elapsed) + '\n')
@@ -239,6 +242,7 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
         while not player.done.is_set():
             executor.spin_once(timeout_sec=0.05)
     except KeyboardInterrupt:
+        player.interrupted = True
         player.stop()
         sys.stderr.write('\nreplay: interrupted\n')
     finally:
@@ -301,7 +305,8 @@ def main(argv: list[str]) -> int:
     if player.error:
         print(f'sslfr replay: {player.error}', file=sys.stderr)
         return 1
-    span = (player.end_ns - player.start_ns) / 1e9
+    span = (player.last_ns - player.start_ns) / 1e9
     print(f'replayed {player.count} messages in {player.wall_elapsed:.2f} s'
-          + (f' (x{span / player.wall_elapsed:.0f} real time)' if player.wall_elapsed > 0 else ''))
-    return 0
+          + (f' (x{span / player.wall_elapsed:.0f} real time)' if player.wall_elapsed > 0 else '')
+          + (' - interrupted' if player.interrupted else ''))
+    return 130 if player.interrupted else 0
