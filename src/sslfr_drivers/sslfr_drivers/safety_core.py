@@ -35,9 +35,10 @@ Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
     oscillation). With ``sensor_fault_latched`` it also needs :meth:`SafetyCore.reset`.
 ``switch:<name>``  ESTOP for the switch's axis (:data:`SWITCH_AXIS`), latched. A
     switch closing while its axis is not homing and its nominal angle
-    (``switch_positions``) is not on the axis' path, i.e. not between the measured and
-    the commanded angle (+/- ``switch_window`` [rad], from a fresh axis status), is a
-    trip. The seed's switches are position references the mechanism reaches or passes
+    (``switch_positions``) is not on the axis' path, i.e. not within the span of the
+    angles measured over the last ``switch_lookback`` [s] and the commanded angle
+    (+/- ``switch_window`` [rad], from a fresh axis status), is a trip. The look-back
+    absorbs the different delays of the switch and status messages of a moving axis. The seed's switches are position references the mechanism reaches or passes
     in normal operation (mirrors on the sleeping switch every night, passing the
     ``last`` switch on the way), hence the path test. With the position unknown (no
     fresh status, or NaN: no board, the axis cannot move) the closure is judged as
@@ -162,6 +163,7 @@ class SafetyConfig:
     valid_min: float = -40.0              # [degC] plausible thermocouple range
     valid_max: float = 1100.0             # [degC]
     switch_window: float = 0.05           # [rad] closure expected within this of nominal
+    switch_lookback: float = 1.0          # [s] measured angles that make up the axis' path
     switch_positions: dict = field(default_factory=lambda: dict(DEFAULT_SWITCH_POSITIONS))
     stuck_switch_travel: float = 0.1      # [rad] travel with a switch closed at homing
     status_max_age: float = 1.0           # [s] axis status older than this is unknown
@@ -196,6 +198,7 @@ class SafetyConfig:
         pos('stuck_tolerance', self.stuck_tolerance, zero_ok=True)
         pos('stuck_min_beam', self.stuck_min_beam, zero_ok=True)
         pos('switch_window', self.switch_window, zero_ok=True)
+        pos('switch_lookback', self.switch_lookback, zero_ok=True)
         pos('stuck_switch_travel', self.stuck_switch_travel)
         pos('status_max_age', self.status_max_age)
         pos('beam_max_age', self.beam_max_age)
@@ -278,6 +281,7 @@ class _Axis:
     homing: bool = False
     measured: float | None = None
     commanded: float | None = None
+    recent: list = field(default_factory=list)   # [(arrival, measured)] within switch_lookback
     #: switch -> (min, max) measured angle [rad] while homing with the switch continuously closed
     closed_travel: dict = field(default_factory=dict)
 
@@ -415,6 +419,10 @@ class SafetyCore:
         measured, commanded = float(measured), float(commanded)
         ax.measured = measured if math.isfinite(measured) else None
         ax.commanded = commanded if math.isfinite(commanded) else None
+        horizon = now - self.config.switch_lookback
+        ax.recent = [(t, a) for t, a in ax.recent if t >= horizon]
+        if ax.measured is not None:
+            ax.recent.append((now, ax.measured))
         ax.homing = bool(homing)
         if not homing:
             ax.closed_travel = {}
@@ -451,9 +459,10 @@ class SafetyCore:
     # ----------------------------------------------------------------- switches
     def _judge_closure(self, name: str, now: float) -> None:
         """Judge a closed switch: a trip unless acknowledged, its axis homing, or its
-        nominal angle on the axis' path (between the measured and the commanded angle,
-        +/- ``switch_window``) per a fresh axis status. Position unknown: judged later,
-        when one is known (an axis without a board cannot move)."""
+        nominal angle on the axis' path (the span of the angles measured over the last
+        ``switch_lookback`` s and the commanded angle, +/- ``switch_window``) per a fresh
+        axis status. Position unknown: judged later, when one is known (an axis without
+        a board cannot move)."""
         self.pending_switches.discard(name)
         if name in self.switch_ack or self.switch_closed[name] is not True:
             return
@@ -466,7 +475,10 @@ class SafetyCore:
             self.pending_switches.add(name)
             return
         nominal = self.config.switch_positions[name]
-        ends = [ax.measured] + ([ax.commanded] if ax.commanded is not None else [])
+        horizon = now - self.config.switch_lookback
+        ends = [a for t, a in ax.recent if t >= horizon] + [ax.measured]
+        if ax.commanded is not None:
+            ends.append(ax.commanded)
         w = self.config.switch_window
         if min(ends) - w <= nominal <= max(ends) + w:
             return

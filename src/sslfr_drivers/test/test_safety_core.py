@@ -195,7 +195,7 @@ def test_switch_closed_at_its_nominal_position_or_while_homing_is_not_a_trip(swi
     feed(core, clock, steps=2)
     feed(core, clock, steps=5, switches={switch: True}, positions={axis: pos + 0.5}, homing=(axis,))
     assert core.state.level == Level.OK
-    feed(core, clock, steps=1)
+    feed(core, clock, steps=12, positions={axis: pos + 0.5})   # parked > switch_lookback (1 s)
     feed(core, clock, steps=1, switches={switch: True}, positions={axis: pos + 0.5})
     assert core.state.level == Level.ESTOP and core.state.stopped_axes == (axis,)
     assert any(f'limit switch {switch} tripped' in r for r in core.state.reasons)
@@ -227,6 +227,27 @@ def test_switch_on_the_commanded_path_is_expected_even_with_a_stale_measurement(
         assert core.evaluate().level == Level.OK, name
     core.on_limit_switches(OPEN)
     core.on_limit_switches({**OPEN, 'initial': True})     # behind the axis: a trip
+    assert core.evaluate().level == Level.ESTOP
+
+
+def test_switch_passed_by_a_moving_axis_is_expected_despite_message_delays():
+    """Stowing at 0.6 rad/s: the 'last' switch (0.785 rad) closes on the way, but its
+    message arrives after a status that already shows the axis past it (0.842 rad)."""
+    core, clock = make()
+    feed(core, clock, steps=120)
+    for k in range(10):                           # statuses at 5 Hz while stowing
+        clock.advance(0.1)
+        core.on_axis_status('mirrors', False, 0.3 + 0.06 * k, commanded=math.pi / 2)
+    clock.advance(0.05)
+    core.on_axis_status('mirrors', False, 0.842, commanded=math.pi / 2)
+    core.on_limit_switches({**OPEN, 'last': True})
+    assert core.evaluate().level == Level.OK
+    # the same closure with the axis parked at 1.2 rad for more than the look-back: a trip
+    core.on_limit_switches(OPEN)
+    for _ in range(12):
+        clock.advance(0.1)
+        core.on_axis_status('mirrors', False, 1.2, commanded=1.2)
+    core.on_limit_switches({**OPEN, 'last': True})
     assert core.evaluate().level == Level.ESTOP
 
 
