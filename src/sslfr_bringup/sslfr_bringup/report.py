@@ -178,10 +178,35 @@ def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None)
     return float(area[(dtt > 0) & (dtt <= max_gap)].sum() / 3.6e6)
 
 
-def _ideal(site: dict, t: np.ndarray):
+def planner_config(path: str | None) -> dict:
+    """The planner's parameter values: its defaults, overlaid with the ``/**`` and
+    ``planner`` sections of a ROS params file (the site config) when given."""
+    from sslfr_planner.planner_params import defaults
+    cfg = dict(defaults())
+    if path:
+        import yaml
+        with open(path, encoding='utf-8') as fh:
+            doc = yaml.safe_load(fh) or {}
+        for section in ('/**', 'planner', '/planner'):
+            params = (doc.get(section) or {}).get('ros__parameters') or {}
+            flat = {}
+
+            def walk(prefix, node):
+                for k, v in node.items():
+                    key = f'{prefix}.{k}' if prefix else str(k)
+                    if isinstance(v, dict):
+                        walk(key, v)
+                    else:
+                        flat[key] = v
+            walk('', params)
+            cfg.update({k: v for k, v in flat.items() if k in cfg})
+    return cfg
+
+
+def _ideal(site: dict, t: np.ndarray, config: str | None = None):
     """Ideal axis commands at ``t`` from sslfr_planner.daytable, or (None, reason)."""
     try:
-        from sslfr_planner.collector import Collector
+        from sslfr_planner.day_planner import make_collector
         from sslfr_planner.daytable import evaluate
         from sslfr_planner.site import Site
     except ImportError:
@@ -189,16 +214,19 @@ def _ideal(site: dict, t: np.ndarray):
     if not site or not np.isfinite(site.get('latitude', np.nan)):
         return None, 'ideal unavailable (no site in the bag)'
     try:
+        collector = make_collector(planner_config(config))
         s = Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0))
-        table = evaluate(t, s, Collector())
+        table = evaluate(t, s, collector)
         return {a: np.asarray(getattr(table, a), dtype=float) for a in AXES}, \
-            'ideal = sslfr_planner.daytable.evaluate (default Collector) at the same instants'
+            ('ideal = sslfr_planner.daytable.evaluate at the same instants, collector from '
+             + (config or 'the planner defaults') + ', site from the bag')
     except Exception as exc:  # noqa: BLE001 - any failure of the optional reference is reported
         return None, f'ideal unavailable ({type(exc).__name__}: {exc})'
 
 
-def analyse(reader: BagReader) -> DayReport:
-    """Decode the report's topics from a bag and compute the figures."""
+def analyse(reader: BagReader, config: str | None = None) -> DayReport:
+    """Decode the report's topics from a bag and compute the figures (``config``: site
+    params file for the ideal commands' collector)."""
     topics = reader.topics
     names = {k: _find(topics, k) for k in (
         'tracker/phase', 'safety/state', 'gps/fix', 'absorber/inlet_temperature',
@@ -297,7 +325,7 @@ def analyse(reader: BagReader) -> DayReport:
         entry = {'setpoint': ErrorStats.of(err[mask]), 'ideal': None}
         ideal, note = ideal_cache.get(axis, (None, None))
         if axis not in ideal_cache:
-            ideal, note = _ideal(rep.site, t)
+            ideal, note = _ideal(rep.site, t, config)
             ideal_cache[axis] = (ideal, note)
         rep.ideal_note = note
         if ideal is not None:
@@ -489,11 +517,13 @@ def main(argv: list[str]) -> int:
     ap.add_argument('bag', help='bag directory or .mcap file')
     ap.add_argument('--out', default=None, help='directory for report.md and PNGs (default <bag>/report)')
     ap.add_argument('--no-plots', action='store_true', help='text only')
+    ap.add_argument('--config', default=None,
+                    help='site params file (collector geometry for the ideal commands)')
     ns = ap.parse_args(argv)
     try:
         reader = BagReader(ns.bag)
-        rep = analyse(reader)
-    except BagError as exc:
+        rep = analyse(reader, ns.config)
+    except (BagError, OSError) as exc:
         print(f'sslfr report: {exc}', file=sys.stderr)
         return 1
     print(render_text(rep))
