@@ -55,6 +55,8 @@ def main(argv=None):
     ours_cpu = timings(lambda: plan_day(day, site, collector, 1.0), a.repeat, time.process_time)
     sun_only = timings(lambda: spa.sun_position(t, site), a.repeat)
     theirs = timings(lambda: pvsp.spa_python(idx, lat, lon, elev, delta_t=69.2, how='numpy'), a.pvlib_repeat)
+    theirs_cpu = timings(lambda: pvsp.spa_python(idx, lat, lon, elev, delta_t=69.2, how='numpy'), a.pvlib_repeat,
+                         time.process_time)
     med_ours, med_sun, med_pv = statistics.median(ours), statistics.median(sun_only), statistics.median(theirs)
 
     table = plan_day(day, site, collector, 1.0)
@@ -78,6 +80,9 @@ def main(argv=None):
     print(f'  ratio pvlib / plan_day          {med_pv / med_ours:8.1f} x   goal >= 20x: '
           f'{"OK" if med_pv / med_ours >= 20 else "MISSED"}')
     print(f'  ratio pvlib / sun_position      {med_pv / med_sun:8.1f} x')
+    cpu_ratio = statistics.median(theirs_cpu) / statistics.median(ours_cpu)
+    print(f'  ratio of CPU-time medians, pvlib / plan_day {cpu_ratio:8.1f} x '
+          f'(pvlib CPU {statistics.median(theirs_cpu) * 1e3:.1f} ms)')
     print(f'  max |ours - pvlib|: zenith {dz.max():.2e} deg, azimuth {da.max():.2e} deg')
     print(f'  max |fast - exact SPA path|: zenith {fz.max():.2e} deg, azimuth {fa.max():.2e} deg')
 
