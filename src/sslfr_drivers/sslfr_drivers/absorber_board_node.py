@@ -20,16 +20,12 @@ Publishes
 """
 from __future__ import annotations
 
-import collections
 import math
 import sys
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
@@ -37,8 +33,7 @@ from sslfr_interfaces.msg import LimitSwitches
 from . import max6675
 from .debounce import SWITCH_NAMES, SwitchDebouncer
 from .messages_sensors import SwitchSample, ThermocoupleSample
-from .sensor_node_util import (BoardSource, RateMeter, board_status, check_parameters,
-                               declare_parameters, parameter_callback)
+from .sensor_node_util import RateMeter, SensorBoardNode, board_status
 
 PARAMS = {
     'port': ('', 'absorber board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -75,36 +70,25 @@ class _BoardClock:
         return ms / 1000.0 + self._offset
 
 
-class AbsorberBoardNode(Node):
+class AbsorberBoardNode(SensorBoardNode):
     """See the module docstring."""
 
     def __init__(self):
-        super().__init__('absorber_board')
-        self._values = declare_parameters(self, PARAMS)
-        check_parameters(PARAMS, self._values)
+        super().__init__('absorber_board', PARAMS, queue_len=2000)
         self._model = self._error_model(self._values)
         self._debouncer = SwitchDebouncer(self._values['debounce_time'])
         self._board_clock = _BoardClock()
-        self._queue: collections.deque = collections.deque(maxlen=2000)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._meter = RateMeter()
         self._switch_meter = RateMeter()
         self._faults = {'inlet': max6675.FAULT_NONE, 'outlet': max6675.FAULT_NONE}
         self._fault_counts = {'inlet': 0, 'outlet': 0}
         self._last_temp = {'inlet': math.nan, 'outlet': math.nan}
         self._changed_ros: dict[str, object] = {}
-        self._bad_samples = 0
         self._pub_t = {s: self.create_publisher(Temperature, f'absorber/{s}_temperature', 10)
                        for s in ('inlet', 'outlet')}
         self._pub_sw = self.create_publisher(LimitSwitches, 'limit_switches', 10)
-        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        self._source = self._make_source(self._values).start()
-        self.add_on_set_parameters_callback(
-            parameter_callback(self, PARAMS, self._values, self._apply))
-        self.create_timer(0.01, self._drain, clock=self._steady)
+        self._start_board(drain_period=0.01)
         self._sw_timer = self.create_timer(1.0 / self._values['switch_rate'], self._publish_switches,
                                            clock=self._steady)
-        self.create_timer(1.0, self._diagnostics, clock=self._steady)
         self.get_logger().info(f'absorber_board: port {self._values["port"] or "(none)"}')
 
     # -------------------------------------------------------------- set-up
@@ -113,15 +97,9 @@ class AbsorberBoardNode(Node):
         return max6675.ErrorModel(v['converter_error'], v['thermocouple_error'],
                                   v['thermocouple_error_relative'])
 
-    def _make_source(self, v: dict) -> BoardSource:
-        return BoardSource(v['port'], 'protocol', v['baudrate'], on_message=self._on_message,
-                           heartbeat=v['heartbeat'])
-
     def _apply(self, new: dict) -> None:
         SwitchDebouncer(new['debounce_time'])  # raises ValueError if unusable
-        if any(new[k] != self._values[k] for k in ('port', 'baudrate', 'heartbeat')):
-            self._source.stop()
-            self._source = self._make_source(new).start()
+        self._reopen_if_changed(new)
         self._model = self._error_model(new)
         self._debouncer.hold_time = float(new['debounce_time'])
         if new['switch_rate'] != self._values['switch_rate']:
@@ -204,14 +182,7 @@ class AbsorberBoardNode(Node):
                  'switch_bounces': self._debouncer.bounces}
         st = board_status('absorber_board: board', self._source, self._meter,
                           self._values['max_sample_age'], faults, extra)
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
-        self._diag_pub.publish(arr)
-
-    def destroy_node(self):
-        self._source.stop()
-        return super().destroy_node()
+        self._publish_diagnostics(st)
 
 
 def main(args=None):

@@ -16,21 +16,17 @@ Publishes
 """
 from __future__ import annotations
 
-import collections
 import math
 import sys
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.clock import Clock, ClockType
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from . import nmea
 from .messages_sensors import NmeaChunk
-from .sensor_node_util import (BoardSource, RateMeter, board_status, check_parameters,
-                               declare_parameters, parameter_callback)
+from .sensor_node_util import BoardSource, SensorBoardNode, board_status
 
 assert (nmea.STATUS_NO_FIX, nmea.STATUS_FIX, nmea.STATUS_SBAS_FIX, nmea.STATUS_GBAS_FIX) == (
     NavSatStatus.STATUS_NO_FIX, NavSatStatus.STATUS_FIX, NavSatStatus.STATUS_SBAS_FIX,
@@ -59,49 +55,40 @@ PARAMS = {
 }
 
 
-class GpsNode(Node):
+class GpsNode(SensorBoardNode):
     """See the module docstring."""
 
+    SOURCE_KEYS = ('port', 'framing', 'baudrate', 'heartbeat')
+
     def __init__(self):
-        super().__init__('gps')
-        self._values = declare_parameters(self, PARAMS)
-        check_parameters(PARAMS, self._values)
-        self._queue: collections.deque = collections.deque(maxlen=1000)
-        self._stream = self._make_stream(self._values)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._meter = RateMeter()
+        super().__init__('gps', PARAMS, queue_len=1000)
+        self._stream = nmea.NmeaStream(self._error_model(self._values),
+                                       self._values['time_jump_threshold'])
         self._last_jump = 0.0
         self._last_fix_status = None
         self._last_fix: nmea.FixRecord | None = None
         self._chunks_dropped = 0
         self._fix_pub = self.create_publisher(NavSatFix, 'gps/fix', 10)
         self._time_pub = self.create_publisher(TimeReference, 'gps/time_reference', 10)
-        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        self._source = self._make_source(self._values).start()
-        self.add_on_set_parameters_callback(
-            parameter_callback(self, PARAMS, self._values, self._apply))
-        self.create_timer(0.02, self._drain, clock=self._steady)
-        self.create_timer(1.0, self._diagnostics, clock=self._steady)
+        self._start_board(drain_period=0.02)
         self.get_logger().info(
             f'gps: port {self._values["port"] or "(none)"} framing {self._values["framing"]}')
 
     # -------------------------------------------------------------- set-up
-    def _make_stream(self, v: dict) -> nmea.NmeaStream:
-        model = nmea.ReceiverErrorModel(uere={1: v['uere'], 2: v['uere_sbas'], 4: 0.02, 5: 4.0, 9: 3.0})
-        return nmea.NmeaStream(model, v['time_jump_threshold'])
+    @staticmethod
+    def _error_model(v: dict) -> nmea.ReceiverErrorModel:
+        """UERE [m] per GGA quality: 1, 2 from the parameters; 4 RTK fixed, 5 RTK
+        float, 9 WAAS as nmea_navsat_driver."""
+        return nmea.ReceiverErrorModel(uere={1: v['uere'], 2: v['uere_sbas'], 4: 0.02, 5: 4.0, 9: 3.0})
 
     def _make_source(self, v: dict) -> BoardSource:
         return BoardSource(v['port'], v['framing'], v['baudrate'], on_message=self._on_message,
                            on_bytes=self._on_bytes, heartbeat=v['heartbeat'])
 
     def _apply(self, new: dict) -> None:
-        if any(new[k] != self._values[k] for k in ('port', 'framing', 'baudrate', 'heartbeat')):
-            self._source.stop()
-            self._source = self._make_source(new).start()
+        self._reopen_if_changed(new)
         if any(new[k] != self._values[k] for k in ('uere', 'uere_sbas', 'time_jump_threshold')):
-            model = nmea.ReceiverErrorModel(uere={1: new['uere'], 2: new['uere_sbas'], 4: 0.02,
-                                                  5: 4.0, 9: 3.0})
-            self._stream.error_model = model
+            self._stream.error_model = self._error_model(new)
             self._stream.time_jump_threshold = new['time_jump_threshold']
 
     # -------------------------------------------------------------- reader thread
@@ -173,14 +160,7 @@ class GpsNode(Node):
                       KeyValue(key='hdop', value=f'{f.hdop:.2f}' if f else 'none'),
                       KeyValue(key='quality', value=str(f.quality) if f else 'none'),
                       KeyValue(key='nav_mode', value=str(f.nav_mode) if f else 'none')]
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st, fix]
-        self._diag_pub.publish(arr)
-
-    def destroy_node(self):
-        self._source.stop()
-        return super().destroy_node()
+        self._publish_diagnostics(st, fix)
 
 
 def main(args=None):

@@ -13,22 +13,17 @@ Publishes
 """
 from __future__ import annotations
 
-import collections
 import sys
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
 
 from . import veml7700
 from .messages_sensors import AlsSample
-from .sensor_node_util import (BoardSource, RateMeter, board_status, check_parameters,
-                               declare_parameters, parameter_callback)
+from .sensor_node_util import SensorBoardNode, board_status
 
 PARAMS = {
     'port': ('', 'irradiance board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -44,39 +39,23 @@ PARAMS = {
 }
 
 
-class IrradianceNode(Node):
+class IrradianceNode(SensorBoardNode):
     """See the module docstring."""
 
     def __init__(self):
-        super().__init__('irradiance')
-        self._values = declare_parameters(self, PARAMS)
-        check_parameters(PARAMS, self._values)
-        self._queue: collections.deque = collections.deque(maxlen=1000)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._meter = RateMeter()
+        super().__init__('irradiance', PARAMS, queue_len=1000)
         self._saturated = False
         self._saturated_count = 0
         self._invalid = 0
         self._last: veml7700.Sample | None = None
         self._pub_lux = self.create_publisher(Illuminance, 'irradiance/illuminance', 10)
         self._pub_beam = self.create_publisher(Irradiance, 'irradiance/beam', 10)
-        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        self._source = self._make_source(self._values).start()
-        self.add_on_set_parameters_callback(
-            parameter_callback(self, PARAMS, self._values, self._apply))
-        self.create_timer(0.02, self._drain, clock=self._steady)
-        self.create_timer(1.0, self._diagnostics, clock=self._steady)
+        self._start_board(drain_period=0.02)
         self.get_logger().info(f'irradiance: port {self._values["port"] or "(none)"}, '
                                f'efficacy {self._values["luminous_efficacy"]:.1f} lm/W')
 
-    def _make_source(self, v: dict) -> BoardSource:
-        return BoardSource(v['port'], 'protocol', v['baudrate'], on_message=self._on_message,
-                           heartbeat=v['heartbeat'])
-
     def _apply(self, new: dict) -> None:
-        if any(new[k] != self._values[k] for k in ('port', 'baudrate', 'heartbeat')):
-            self._source.stop()
-            self._source = self._make_source(new).start()
+        self._reopen_if_changed(new)
 
     def _on_message(self, msg) -> None:
         if isinstance(msg, AlsSample):
@@ -121,14 +100,7 @@ class IrradianceNode(Node):
                  'saturated_samples': self._saturated_count, 'invalid_samples': self._invalid}
         st = board_status('irradiance: board', self._source, self._meter,
                           self._values['max_sample_age'], faults, extra)
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
-        self._diag_pub.publish(arr)
-
-    def destroy_node(self):
-        self._source.stop()
-        return super().destroy_node()
+        self._publish_diagnostics(st)
 
 
 def main(args=None):

@@ -11,18 +11,23 @@
   samples in a queue that an executor timer drains.
 * :func:`board_status`: the DiagnosticStatus every sensor node publishes (rate,
   last-sample age, link state, frames lost, counters).
+* :class:`SensorBoardNode`: the Node base class of the three sensor nodes (parameter
+  table, sample queue, board source, diagnostics publisher, clean-up).
 """
 from __future__ import annotations
 
+import collections
 import logging
 import math
 import threading
 import time
 from typing import Callable
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
 
 from . import messages_sensors  # noqa: F401 - registers the sensor message types
 from .link import BoardLink
@@ -272,3 +277,63 @@ def board_status(name: str, source: BoardSource, meter: RateMeter, max_age: floa
     values.update({k: str(v) for k, v in extra.items()})
     st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
     return st
+
+
+# ------------------------------------------------------------------ node base
+class SensorBoardNode(Node):
+    """What the gps, absorber_board and irradiance nodes share.
+
+    ``__init__`` declares and checks the ``params`` table (``ValueError`` on a bad
+    start-up value), creates the sample queue (filled in the reader thread, drained by
+    the subclass's ``_drain`` on an executor timer), the steady clock, the sample
+    :class:`RateMeter` and the ``diagnostics`` publisher. The subclass then creates its
+    own state and publishers and calls :meth:`_start_board`. It provides
+    ``_on_message(msg)`` (reader thread), ``_apply(new)`` (may raise ValueError/TypeError
+    to refuse a change), ``_drain()`` and ``_diagnostics()``; it overrides
+    ``_make_source(values)`` for another framing than the board protocol.
+    """
+
+    #: parameters whose change reopens the board
+    SOURCE_KEYS: tuple[str, ...] = ('port', 'baudrate', 'heartbeat')
+
+    def __init__(self, name: str, params: dict, queue_len: int):
+        super().__init__(name)
+        self._params = params
+        self._values = declare_parameters(self, params)
+        check_parameters(params, self._values)
+        self._queue: collections.deque = collections.deque(maxlen=queue_len)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._meter = RateMeter()
+        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._source: BoardSource | None = None
+
+    def _start_board(self, drain_period: float) -> None:
+        """Open the board, accept runtime parameter changes and start the drain
+        (every ``drain_period`` [s]) and diagnostics (1 s) steady-clock timers."""
+        self._source = self._make_source(self._values).start()
+        self.add_on_set_parameters_callback(
+            parameter_callback(self, self._params, self._values, self._apply))
+        self.create_timer(drain_period, self._drain, clock=self._steady)
+        self.create_timer(1.0, self._diagnostics, clock=self._steady)
+
+    def _make_source(self, v: dict) -> BoardSource:
+        """The board behind ``v['port']``, board-protocol framing."""
+        return BoardSource(v['port'], 'protocol', v['baudrate'], on_message=self._on_message,
+                           heartbeat=v['heartbeat'])
+
+    def _reopen_if_changed(self, new: dict) -> None:
+        """Restart the board source when a :attr:`SOURCE_KEYS` parameter changes."""
+        if any(new[k] != self._values[k] for k in self.SOURCE_KEYS):
+            self._source.stop()
+            self._source = self._make_source(new).start()
+
+    def _publish_diagnostics(self, *statuses: DiagnosticStatus) -> None:
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = list(statuses)
+        self._diag_pub.publish(arr)
+
+    def destroy_node(self):
+        if self._source is not None:
+            self._source.stop()
+        return super().destroy_node()
