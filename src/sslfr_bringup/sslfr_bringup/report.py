@@ -14,7 +14,10 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
   commanded stows (phase STOW);
 - max absorber temperatures; max beam irradiance and the day's beam irradiation
   H = integral of G_b dt [kWh/m^2] (trapezoids, gaps > 120 s not bridged);
-- link faults per axis (time not LINK_UP, frames lost / bad, fault bits).
+- link faults per axis (time not LINK_UP, frames lost / bad, fault bits);
+- the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25;
+  :func:`sslfr_planner.analysis.day_energy`) fed with the recorded beam irradiance and
+  once with the ideal axis angles, once with the measured ones (ideal vs achieved).
 
 Pure analysis (no rclpy): messages are decoded through the bag's own schemas.
 """
@@ -113,6 +116,7 @@ class DayReport:
     temperatures: dict = field(default_factory=dict)      # name -> {'max', 't_max', 'nan_samples'}
     irradiance: dict = field(default_factory=dict)
     links: dict = field(default_factory=dict)             # axis -> dict
+    energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'achieved_kwh', 'note'
     series: dict = field(default_factory=dict, repr=False)
 
 
@@ -364,7 +368,53 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                           'H_kWh_m2': beam_irradiation(bt, g), 'saturated': int(bv['sat'].sum())}
         rep.series['beam'] = (bt, g)
     rep.series['phase'] = (pt, pv.get('phase', np.zeros(0)))
+    if len(bt) > 1:
+        rep.energy = energy_estimate(rep.site, bt, bv['g'].astype(float),
+                                     {a: status[a].arrays() for a in AXES if status[a].t}, config)
     return rep
+
+
+def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict, config: str | None) -> dict:
+    """Absorbed energy of the day [kWh], ideal vs achieved (seed 000 eqs. 18, 20, 25).
+
+    ``beam`` [W/m^2] at ``t`` [s]; ``measured``: axis -> (t, {'measured': rad, ...}) from
+    ``axes/<axis>/status``. The ideal angles and the sun come from
+    :func:`sslfr_planner.daytable.evaluate`; an axis without status counts as ideal.
+    """
+    try:
+        from sslfr_planner.analysis import day_energy
+        from sslfr_planner.day_planner import make_collector
+        from sslfr_planner.daytable import evaluate
+        from sslfr_planner.optics import OpticalParameters
+        from sslfr_planner.site import Site
+    except ImportError:
+        return {'note': 'energy estimate unavailable (sslfr_planner not installed)'}
+    if not site or not np.isfinite(site.get('latitude', np.nan)):
+        return {'note': 'energy estimate unavailable (no site in the bag)'}
+    ok = np.isfinite(beam)
+    t, beam = t[ok], np.clip(beam[ok], 0.0, None)
+    if t.size < 2:
+        return {'note': 'energy estimate unavailable (no valid beam samples)'}
+    c = make_collector(planner_config(config))
+    table = evaluate(t, Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0)), c)
+    params = OpticalParameters(n_per_side=c.n_per_side, mirror_width=c.mirror_width, gap=c.gap,
+                               receiver_height=c.receiver_height, tube_diameter=c.tube_diameter)
+    ideal = {a: np.asarray(getattr(table, a), dtype=float) for a in AXES}
+    held = dict(ideal)
+    for axis, (ta, va) in measured.items():
+        good = np.isfinite(va['measured'])
+        if good.sum() >= 2:
+            held[axis] = np.interp(t, ta[good], va['measured'][good])
+    args = (t, beam, table.zenith, table.azimuth)
+    e_ideal = day_energy(*args, ideal['mirrors'], ideal['mobile_structure'], ideal['secondary_reflector'],
+                         params, c.azimuth) / 1000.0
+    e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
+                        params, c.azimuth) / 1000.0
+    missing = [a for a in AXES if a not in measured]
+    note = 'seed 000 optical model (docs/optics.md), recorded beam irradiance'
+    if missing:
+        note += '; no status for ' + ', '.join(missing) + ' (taken as ideal)'
+    return {'ideal_kwh': e_ideal, 'achieved_kwh': e_held, 'note': note}
 
 
 def render_text(rep: DayReport) -> str:
@@ -416,6 +466,13 @@ def render_text(rep: DayReport) -> str:
                      + (f', {ir["saturated"]} saturated samples' if ir['saturated'] else ''))
     else:
         lines.append('irradiance      no irradiance/beam in the bag')
+    en = rep.energy
+    if 'ideal_kwh' in en:
+        share = 100.0 * en['achieved_kwh'] / en['ideal_kwh'] if en['ideal_kwh'] > 0 else float('nan')
+        lines.append(f'absorbed energy {en["achieved_kwh"]:.3f} kWh achieved vs {en["ideal_kwh"]:.3f} kWh with ideal '
+                     f'angles ({share:.1f} %) ({en["note"]})')
+    elif en:
+        lines.append(f'absorbed energy {en["note"]}')
     for axis, lk in rep.links.items():
         lines.append(f'link            {axis}: {lk["drops"]} drop(s), not up {lk["time_not_up"]:.0f} s, '
                      f'{lk["frames_lost"]} frames lost, {lk["frames_bad"]} bad, '

@@ -71,6 +71,10 @@ class OpticalParameters:
     cavity_reflectivity : float
         rho_rc of the receiver cavity for rays that miss the tube [-]. Not given by the
         seeds (left to their ref. 65): 0.90, an assumption (docs/optics.md).
+    cavity_aperture : float
+        Width of the receiver cavity's opening in the focal plane [m]: rays that miss
+        the tube inside it reach the tube after one cavity reflection, rays outside it
+        are lost. Not given by the seeds: 0.12 m, an assumption (docs/optics.md).
     """
 
     n_per_side: int = 12
@@ -88,6 +92,7 @@ class OpticalParameters:
     transmissivity_high: float = 0.85
     absorptivity: float = 0.95
     cavity_reflectivity: float = 0.90
+    cavity_aperture: float = 0.12
 
     def __post_init__(self):
         checks = [
@@ -98,6 +103,7 @@ class OpticalParameters:
             (self.tube_diameter > 0, 'tube_diameter must be > 0 m'),
             (self.receiver_height > 0, 'receiver_height must be > 0 m'),
             (self.tube_left > self.tube_right, 'tube_left must be > tube_right'),
+            (self.cavity_aperture >= self.tube_diameter, 'cavity_aperture must be >= tube_diameter'),
         ]
         for name in ('reflectivity', 'cleanliness_mirror', 'cleanliness_glass', 'transmissivity_low',
                      'transmissivity_high', 'absorptivity', 'cavity_reflectivity'):
@@ -175,8 +181,10 @@ def transversal_capture(transversal, p: OpticalParameters, error=0.0, tilts=None
     its centre crosses the horizontal focal plane OO' away from the focal point, and the
     beam occupies [r_i, l_i] = centre -/+ w_i/2 across the ray (eq. 21). The part inside
     [-D/2, D/2] hits the tube directly (eq. 22); the rest, l_cr (eq. 23), is redirected
-    by the cavity with reflectivity rho_rc. With epsilon = 0 this reduces to eq. 18's
-    three cases (w_i < D: w_i; w_i = D: D; w_i > D: D + (w_i - D) rho_rc).
+    by the cavity with reflectivity rho_rc as far as it enters the cavity's aperture
+    (``cavity_aperture``, an assumption: a far-off beam, e.g. a stowed mirror, is lost).
+    With epsilon = 0 this reduces to eq. 18's three cases (w_i < D: w_i; w_i = D: D;
+    w_i > D: D + (w_i - D) rho_rc).
 
     Parameters
     ----------
@@ -204,7 +212,7 @@ def transversal_capture(transversal, p: OpticalParameters, error=0.0, tilts=None
     # incidence angle on the mirror (transversal plane) and the reflected direction
     theta_i = np.abs(tt - beta)
     psi_e = 2.0 * beta - tt
-    width = p.mirror_width * np.cos(theta_i)
+    width = p.mirror_width * np.clip(np.cos(theta_i), 0.0, None)
     x = mirror_positions(p)
     h = aim_height(p)
     # where the reflected centre ray crosses the focal plane (OO', seed 000 eq. 21)
@@ -214,7 +222,10 @@ def transversal_capture(transversal, p: OpticalParameters, error=0.0, tilts=None
     hi = centre + width / 2.0
     half = p.tube_diameter / 2.0
     direct = np.clip(np.minimum(hi, half) - np.maximum(lo, -half), 0.0, None)
-    return direct + (width - direct) * p.cavity_reflectivity
+    aperture = p.cavity_aperture / 2.0 * np.abs(np.cos(psi_e))  # across the ray
+    entering = np.clip(np.minimum(hi, aperture) - np.maximum(lo, -aperture), 0.0, None)
+    upward = np.cos(psi_e) > 0.0  # a ray reflected downward never reaches the receiver
+    return np.where(upward, direct + (entering - direct) * p.cavity_reflectivity, 0.0)
 
 
 def longitudinal_reflection_angle(longitudinal, beta_m):
