@@ -117,6 +117,21 @@ DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
 ANCHOR_MARGIN = 6.0
 
 
+def parse_set(text: str, nodes) -> tuple[str, str, object]:
+    """``NODE:KEY=VALUE`` -> (node, key, value parsed as YAML); ValueError if malformed."""
+    import yaml
+    head, eq, value = text.partition('=')
+    node, colon, key = head.partition(':')
+    if not (eq and colon and node and key):
+        raise ValueError(f'--set {text!r}: expected NODE:KEY=VALUE')
+    if node not in nodes:
+        raise ValueError(f'--set {text!r}: unknown node {node!r} (known: {", ".join(nodes)})')
+    try:
+        return node, key, yaml.safe_load(value)
+    except yaml.YAMLError as exc:
+        raise ValueError(f'--set {text!r}: bad value: {exc}') from exc
+
+
 def _watch_topics(ns) -> dict:
     """Sensor topics whose first message tells the simulation that a node is fed."""
     from sensor_msgs.msg import NavSatFix, Temperature
@@ -158,6 +173,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--record', default=None, help='bag output directory (default OUT/bags)')
     p.add_argument('--out', default=None, help='output directory: logs, bags, report (default out/sim-DATE)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
+    p.add_argument('--set', action='append', default=[], metavar='NODE:KEY=VALUE',
+                   help='set a node parameter for this run (YAML value, after the site config), '
+                        'e.g. mirrors_driver:status_rate=20 (repeatable)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
     p.add_argument('--domain-id', type=int, default=None,
@@ -210,6 +228,7 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
         day0 = day_epoch(date)
         faults = [faults_mod.parse(s, boards=tuple(ns.boards), nodes=[n.name for n in ns.nodes])
                   for s in args.fault]
+        sets = [parse_set(s, [n.name for n in ns.nodes]) for s in args.set]
     except (ValueError, KeyError) as exc:   # NodeSetError and FaultSpecError are ValueErrors
         print(f'sslfr sim: {exc}', file=sys.stderr)
         return 2
@@ -266,6 +285,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
                                      start=-1, stop=3, restart=False, kind='board')
     # ---- nodes (ports = the simulators' pty links)
     extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
+    for node, key, value in sets:
+        extra.setdefault(node, {})[key] = value
     if any(n.name == 'recorder' for n in ns.nodes):
         extra.setdefault('recorder', {})['output_dir'] = str(bag_root)
     if any(n.name == 'planner' for n in ns.nodes):   # persisted site: per run, not ~/.local/state

@@ -64,3 +64,12 @@ def test_schedule_returns_each_start_and_end_once_in_order():
     assert s.due(36000.0) == []
     assert s.due(36100.0) == [(b, 'start'), (a, 'end')]
     assert s.pending() == 0
+
+
+def test_sim_set_option_parses_yaml_values():
+    from sslfr_bringup.sim import parse_set
+    assert parse_set('mirrors_driver:status_rate=20', ['mirrors_driver']) == ('mirrors_driver', 'status_rate', 20)
+    assert parse_set('planner:collector.law=daily', ['planner']) == ('planner', 'collector.law', 'daily')
+    for bad in ('planner=1', 'planner:x', 'ghost:x=1'):
+        with pytest.raises(ValueError):
+            parse_set(bad, ['planner'])
