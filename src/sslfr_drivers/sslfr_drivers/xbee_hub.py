@@ -28,17 +28,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import queue
 import selectors
-import signal
-import socket
 import sys
 import threading
 import time
 
 from .protocol import Framer, encode_frame
-from .sim.runner import PtyEndpoint
+from .sim.runner import PtyEndpoint, close_control, listen_control, serve_until_signalled
 from .transport import TransmitError, TransportError, XBeeBoardTransport, XBeeCoordinator
 
 
@@ -83,14 +80,7 @@ class XBeeHub:
         self.control_path = control
         self._ctl = None
         if control:
-            try:
-                os.unlink(control)
-            except FileNotFoundError:
-                pass
-            self._ctl = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            self._ctl.bind(control)
-            self._ctl.listen(4)
-            self._ctl.setblocking(False)
+            self._ctl = listen_control(control)
             self.sel.register(self._ctl, selectors.EVENT_READ, 'control')
         self._senders = [threading.Thread(target=self._sender, args=(b,), daemon=True,
                                           name=f'xbee-tx-{b.address}') for b in self.boards]
@@ -171,19 +161,9 @@ class XBeeHub:
     def close(self) -> None:
         self.running = False
         for b in self.boards:
-            b.endpoint.close()
-            if b.endpoint.link:
-                try:
-                    os.unlink(b.endpoint.link)
-                except OSError:
-                    pass
+            b.endpoint.close()   # also removes the board's symlink
         self.coordinator.close()
-        if self._ctl is not None:
-            self._ctl.close()
-            try:
-                os.unlink(self.control_path)
-            except OSError:
-                pass
+        close_control(self._ctl, self.control_path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -203,17 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     hub = XBeeHub(args.port, boards, args.baud, args.control)
     for b in hub.boards:
         print(f'HUB_PTY {b.address} {b.endpoint.path} {b.endpoint.link}', flush=True)
-
-    def _stop(*_):
-        hub.running = False
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    try:
-        hub.serve()
-    finally:
-        hub.close()
-    return 0
+    return serve_until_signalled(hub)
 
 
 if __name__ == '__main__':

@@ -61,6 +61,46 @@ def open_pty() -> tuple[int, int, str]:
     return master, slave, os.ttyname(slave)
 
 
+def listen_control(path: str) -> socket.socket:
+    """A non-blocking UNIX stream socket listening at ``path`` (a stale socket file
+    there is replaced): the ``--control`` socket of ``sim_board`` and ``xbee_hub``."""
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.bind(path)
+    sock.listen(4)
+    sock.setblocking(False)
+    return sock
+
+
+def close_control(sock: socket.socket | None, path: str | None) -> None:
+    """Close a :func:`listen_control` socket and remove its file."""
+    if sock is None:
+        return
+    sock.close()
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def serve_until_signalled(server) -> int:
+    """Run ``server.serve()`` until SIGTERM or SIGINT clears ``server.running``,
+    then ``server.close()``; returns the exit status 0."""
+    def _stop(*_):
+        server.running = False
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    try:
+        server.serve()
+    finally:
+        server.close()
+    return 0
+
+
 class PtyEndpoint:
     """A pty the host connects to, with optional stable symlink and unplug."""
 
@@ -181,14 +221,7 @@ class Runner:
         else:
             self.world = None
         if control:
-            try:
-                os.unlink(control)
-            except FileNotFoundError:
-                pass
-            self._ctl = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            self._ctl.bind(control)
-            self._ctl.listen(4)
-            self._ctl.setblocking(False)
+            self._ctl = listen_control(control)
             self.sel.register(self._ctl, selectors.EVENT_READ, 'accept')
         self._register_master()
 
@@ -232,20 +265,10 @@ class Runner:
     def close(self) -> None:
         for conn in list(self._clients):
             conn.close()
-        if self._ctl is not None:
-            self._ctl.close()
-            try:
-                os.unlink(self.control_path)
-            except OSError:
-                pass
+        close_control(self._ctl, self.control_path)
         if self.endpoint.plugged:
             self.sel.unregister(self.endpoint.master)
-        self.endpoint.close()
-        if self.endpoint.link:
-            try:
-                os.unlink(self.endpoint.link)
-            except OSError:
-                pass
+        self.endpoint.close()   # also removes the --link symlink
 
     # ---------------------------------------------------------------- control
     def _client_read(self, conn: socket.socket) -> None:
@@ -443,18 +466,7 @@ def main(argv: list[str] | None = None) -> int:
         opts.setdefault('axis', args.axis)
         host = PlainHost(make_board(args.kind, opts, rng, 1, args.protocol_version), injector())
     endpoint = PtyEndpoint(args.link, args.path_file, announce)
-    runner = Runner(endpoint, host, control=args.control)
-
-    def _stop(*_):
-        runner.running = False
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    try:
-        runner.serve()
-    finally:
-        runner.close()
-    return 0
+    return serve_until_signalled(Runner(endpoint, host, control=args.control))
 
 
 if __name__ == '__main__':
