@@ -133,7 +133,9 @@ class AbsorberBoardNode(SensorBoardNode):
                     for name in changed:
                         st = self._debouncer.states[name]
                         # ROS time of the first raw sample of the new state
-                        self._changed_ros[name] = stamp - Duration(seconds=max(0.0, t - st.changed))
+                        back = Duration(seconds=max(0.0, t - st.changed))
+                        # (ROS time cannot go below 0: at sim time ~0, before /clock, keep the stamp)
+                        self._changed_ros[name] = stamp - back if stamp.nanoseconds >= back.nanoseconds else stamp
                         self.get_logger().info(f'limit switch {name} {"closed" if st.closed else "open"}')
                 if changed:
                     self._publish_switches()
