@@ -93,13 +93,13 @@ def longitudinal_tilts(law: str, zenith, azimuth, t, site: AnalysisSite):
     Signs as docs/conventions.md (positive faces the south end).
     """
     from .collector import Collector
-    from .daytable import _longitudinal
+    from .daytable import longitudinal_commands
 
     if law not in LAWS:
         raise ValueError(f'unknown law {law!r}; expected one of {", ".join(LAWS)}')
     _, tl = optics.projection_angles(zenith, azimuth, site.collector_azimuth)
     collector = Collector(law=law, azimuth=site.collector_azimuth)
-    return _longitudinal(np.asarray(zenith, dtype=float), tl, np.asarray(t, dtype=float), _site(site), collector)
+    return longitudinal_commands(np.asarray(zenith, dtype=float), tl, np.asarray(t, dtype=float), _site(site), collector)
 
 
 # --- seed 000 section 5.2: tracking error ------------------------------------------------
