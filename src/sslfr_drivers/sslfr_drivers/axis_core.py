@@ -157,10 +157,12 @@ class Trajectory:
 
     @property
     def start(self) -> float:
+        """Time of the first point [s since the Unix epoch]."""
         return float(self.times[0])
 
     @property
     def end(self) -> float:
+        """Time of the last point [s since the Unix epoch]."""
         return float(self.times[-1])
 
     def sample(self, t: float) -> tuple[float, float]:

@@ -193,10 +193,12 @@ class BoardLink:
 
     @property
     def state(self) -> LinkState:
+        """Current link state (:class:`LinkState`)."""
         return self._state
 
     @property
     def is_up(self) -> bool:
+        """True when the link state is UP."""
         return self._state == LinkState.UP
 
     def wait_up(self, timeout: float) -> bool:
@@ -264,12 +266,15 @@ class BoardLink:
 
     # convenience wrappers (blocking)
     def ping(self, **kw) -> m.Ack:
+        """PING carrying the host clock [ms, modulo 2**32]; the board's ACK."""
         return self.request(m.Ping(int(self.clock() * 1000) & 0xFFFFFFFF), **kw)
 
     def get_info(self, **kw) -> m.Info:
+        """The board's INFO answer."""
         return self.request(m.GetInfo(), **kw)
 
     def get_status(self, **kw) -> m.Status:
+        """The board's STATUS answer."""
         return self.request(m.GetStatus(), **kw)
 
     def move_to(self, steps: int, speed: float, **kw) -> m.Ack:
@@ -277,6 +282,7 @@ class BoardLink:
         return self.request(m.MoveTo(int(steps), float(speed)), **kw)
 
     def stop_motor(self, **kw) -> m.Ack:
+        """STOP: decelerate to rest; the ACK."""
         return self.request(m.Stop(), **kw)
 
     def home(self, switch: int, speed: float, position: int = 0, **kw) -> m.Ack:
@@ -285,9 +291,12 @@ class BoardLink:
         return self.request(m.Home(int(switch), float(speed), int(position)), **kw)
 
     def set_zero(self, position: int = 0, **kw) -> m.Ack:
+        """SET_ZERO: the counter becomes ``position`` [steps] and the axis
+        counts as homed; the ACK."""
         return self.request(m.SetZero(int(position)), **kw)
 
     def reset_board(self, **kw) -> m.Ack:
+        """RESET: reboot the board (position lost); the ACK."""
         return self.request(m.Reset(), **kw)
 
     # ------------------------------------------------------------------- counters

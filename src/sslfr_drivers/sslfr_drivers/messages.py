@@ -317,14 +317,17 @@ class Info(Message):
 
     @property
     def firmware(self) -> str:
+        """Firmware version 'major.minor.patch'."""
         return f'{self.fw_major}.{self.fw_minor}.{self.fw_patch}'
 
     @property
     def name_str(self) -> str:
+        """Board name, trailing NULs removed."""
         return self.name.rstrip(b'\0').decode('ascii', 'replace')
 
     @property
     def is_simulator(self) -> bool:
+        """True for simulated boards (name starting with 'sim')."""
         return self.name_str.startswith('sim')
 
 
@@ -356,14 +359,17 @@ class Status(Message):
 
     @property
     def moving(self) -> bool:
+        """MOVING flag: the motor turns or has not reached its target."""
         return bool(self.flags & StatusFlags.MOVING)
 
     @property
     def homed(self) -> bool:
+        """HOMED flag: the step counter is referenced."""
         return bool(self.flags & StatusFlags.HOMED)
 
     @property
     def homing(self) -> bool:
+        """HOMING flag: a HOME request is running."""
         return bool(self.flags & StatusFlags.HOMING)
 
 

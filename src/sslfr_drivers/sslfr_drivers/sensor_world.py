@@ -41,6 +41,7 @@ class SunState:
 
     @property
     def above_horizon(self) -> bool:
+        """True when the apparent zenith is below pi/2 [rad]."""
         return self.zenith < math.pi / 2
 
 

@@ -47,23 +47,30 @@ class Transport:
     name = 'transport'
 
     def open(self) -> None:
+        """Open the port; TransportError when it cannot be opened."""
         raise NotImplementedError
 
     def close(self) -> None:
+        """Close the port (idempotent)."""
         raise NotImplementedError
 
     @property
     def is_open(self) -> bool:
+        """True while the port is open."""
         raise NotImplementedError
 
     def write(self, data: bytes) -> None:
+        """Write all of ``data``; TransportError when the port is gone."""
         raise NotImplementedError
 
     def read(self, timeout: float) -> bytes:
+        """Bytes available within ``timeout`` [s] (b'' when none);
+        TransportError when the port is gone."""
         raise NotImplementedError
 
     @property
     def tx_failures(self) -> int:
+        """Frames the transport could not deliver (XBee transmit status)."""
         return 0
 
 

@@ -87,6 +87,7 @@ class XBeeHub:
         self._radio = threading.Thread(target=self._keep_radio, daemon=True, name='xbee-radio')
 
     def status(self) -> dict:
+        """The ``status`` control reply: coordinator state and counters, per-board counters."""
         c = self.coordinator
         return {'ok': True, 'port': c.port, 'open': c.is_open, 'opens': self.coordinator_opens,
                 'tx_ok': c.tx_ok, 'tx_failures': c.tx_failures, 'rx_frames': c.rx_frames,
@@ -128,6 +129,8 @@ class XBeeHub:
                 self.last_error = str(exc)
 
     def step(self, timeout: float = 0.05) -> None:
+        """One select round of at most ``timeout`` [s]: frames from the ptys go to
+        the per-board send queues; a control connection gets its reply."""
         for key, _ in self.sel.select(timeout):
             if key.data == 'control':
                 conn, _ = self._ctl.accept()
@@ -152,6 +155,7 @@ class XBeeHub:
                     board.frames_dropped += 1
 
     def serve(self) -> None:
+        """Start the radio and sender threads and step until ``running`` is cleared."""
         self._radio.start()
         for t in self._senders:
             t.start()
@@ -159,6 +163,8 @@ class XBeeHub:
             self.step()
 
     def close(self) -> None:
+        """Stop, close the ptys (removing their symlinks), the coordinator and the
+        control socket."""
         self.running = False
         for b in self.boards:
             b.endpoint.close()   # also removes the board's symlink
@@ -167,6 +173,7 @@ class XBeeHub:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``xbee_hub``; exit status 0, 2 on bad arguments."""
     p = argparse.ArgumentParser(prog='xbee_hub', description=__doc__.split('\n')[0])
     p.add_argument('--port', required=True, help='serial device of the coordinator XBee')
     p.add_argument('--baud', type=int, default=9600, help='coordinator UART speed [bit/s]')

@@ -63,6 +63,8 @@ class AxisConfig:
 
     @classmethod
     def for_axis(cls, axis: str, **kw) -> 'AxisConfig':
+        """Configuration of the named axis: end-switch angles ``lo``, ``hi`` and the
+        sleeping angle [rad] from :data:`AXES`; ``kw`` sets the other fields."""
         lo, hi, sleep = AXES[axis]
         return cls(axis=axis, lo=lo, hi=hi, sleep=sleep, **kw)
 
@@ -111,6 +113,9 @@ class AxisSim(SimBoard):
         self.faults = m.FaultBits.RESET
 
     def limit_bits(self) -> int:
+        """Raw limit-switch bits (:class:`messages.LimitBits`) at the joint angle: LOW at
+        or below ``lo``, HIGH at or above ``hi``, SLEEP within ``switch_width``/2 of
+        ``sleep`` [rad]."""
         c, a = self.cfg, self.angle
         bits = 0
         if a <= c.lo:
@@ -122,11 +127,15 @@ class AxisSim(SimBoard):
         return bits
 
     def sensor_angle(self) -> float:
+        """Absolute angle sensor reading [rad]: the joint angle plus Gaussian noise of
+        standard deviation ``sensor_noise`` [rad]; NaN when the axis has no sensor."""
         if not self.cfg.has_sensor:
             return math.nan
         return self.angle + self.rng.gauss(0.0, self.cfg.sensor_noise)
 
     def status(self) -> m.Status:
+        """The STATUS answer: counter and target [steps], speed [steps/s] (signed),
+        flags, limit and fault bits, sensor angle [rad], uptime [ms]."""
         flags = 0
         if self.speed != 0.0 or self.counter != self.target:
             flags |= m.StatusFlags.MOVING

@@ -141,6 +141,7 @@ class SimBoard:
         raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
 
     def info(self) -> m.Info:
+        """The INFO answer: board kind, firmware and protocol versions, id, name."""
         return m.Info(int(self.kind), *self.firmware, self.protocol_version, self.board_id,
                       self.name.encode('ascii')[:16])
 
@@ -155,6 +156,7 @@ class SimBoard:
 
     @property
     def uptime_ms(self) -> int:
+        """Milliseconds since the last boot, wrapping at 2**32 like the firmware [ms]."""
         return int((self.now - self.boot_time) * 1000) & 0xFFFFFFFF
 
     # ------------------------------------------------------------ internals
@@ -238,6 +240,7 @@ class FaultInjector:
         self.frames_silenced = 0
 
     def silent(self, now: float) -> bool:
+        """True while a ``disconnect`` is in force at ``now`` [s, monotonic]."""
         return now < self.silent_until
 
     def bytes(self, data: bytes, now: float) -> bytes:

@@ -116,6 +116,7 @@ class PtyEndpoint:
         self.plug()
 
     def plug(self) -> None:
+        """Open a new pty, point the symlink and the path file at it, announce it."""
         self.master, self.slave, self.path = open_pty()
         if self.link:
             tmp = f'{self.link}.tmp{os.getpid()}'
@@ -132,6 +133,8 @@ class PtyEndpoint:
         self.announce(self.path)
 
     def unplug(self, seconds: float, now: float) -> None:
+        """Close the pty and remove the symlink; the runner plugs a new one at
+        ``now + seconds`` [s, monotonic]."""
         if self.link:
             try:
                 os.unlink(self.link)
@@ -145,9 +148,11 @@ class PtyEndpoint:
 
     @property
     def plugged(self) -> bool:
+        """True while a pty is open."""
         return self.master >= 0
 
     def read(self) -> bytes:
+        """Bytes the host wrote (b'' when none; never blocks)."""
         try:
             return os.read(self.master, 4096)
         except (BlockingIOError, InterruptedError):
@@ -156,6 +161,8 @@ class PtyEndpoint:
             return b''
 
     def write(self, data: bytes) -> None:
+        """Send ``data`` to the host; bytes the pty cannot take now are dropped and
+        counted in ``bytes_unwritable``."""
         if not data or not self.plugged:
             return
         try:
@@ -165,6 +172,7 @@ class PtyEndpoint:
             self.bytes_unwritable += len(data)
 
     def close(self) -> None:
+        """Close the pty and remove the symlink."""
         self.unplug(0, 0)
 
 
@@ -175,10 +183,12 @@ class PlainHost:
         self.boards = [(None, board, faults)]
 
     def from_wire(self, data: bytes, now: float) -> None:
+        """Host bytes -> the board, through the fault injector (``now`` [s, monotonic])."""
         _, board, faults = self.boards[0]
         board.receive(faults.bytes(data, now))
 
     def to_wire(self, now: float) -> bytes:
+        """The board's pending output, through the fault injector (``now`` [s, monotonic])."""
         _, board, faults = self.boards[0]
         return faults.board_frames(board.take_output(), now)
 
@@ -230,6 +240,9 @@ class Runner:
             self.sel.register(self.endpoint.master, selectors.EVENT_READ, 'pty')
 
     def step(self, timeout: float | None = None) -> None:
+        """One select round (pty, control socket) of at most ``timeout`` [s] (default:
+        ``tick`` while a board is busy, else ``idle_tick``), then tick the boards and
+        send their output."""
         if timeout is None:
             busy = any(b.busy() for _, b, _ in self.host.boards)
             timeout = self.tick if busy else self.idle_tick
@@ -259,10 +272,12 @@ class Runner:
             ep.write(out)
 
     def serve(self) -> None:
+        """Step until ``running`` is cleared (``quit`` command or a signal)."""
         while self.running:
             self.step()
 
     def close(self) -> None:
+        """Close the control socket and the pty, removing their files."""
         for conn in list(self._clients):
             conn.close()
         close_control(self._ctl, self.control_path)
@@ -356,6 +371,9 @@ class Runner:
 
 
 def board_state(addr, board: SimBoard, faults: FaultInjector) -> dict:
+    """JSON-able state of one board for the ``status`` command: counters of the
+    board and its fault injector; axis boards add angle [rad], counter, target
+    [steps], speed [steps/s], homed, stalled and fault bits."""
     d = {
         'address': addr.hex() if addr else None,
         'kind': board.kind.name, 'name': board.name,
@@ -380,6 +398,8 @@ class SimControl:
         self.timeout = timeout
 
     def cmd(self, line: str) -> dict:
+        """Send one control command line; return the JSON reply, RuntimeError if it
+        is not ok."""
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
             s.settimeout(self.timeout)
             s.connect(self.path)
@@ -397,6 +417,7 @@ class SimControl:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``sim_board`` command line."""
     p = argparse.ArgumentParser(
         prog='sim_board', description='Simulated SSLFR board(s) on a real pty.',
         epilog='Control commands (one line on --control): status, drop P, corrupt P, '
@@ -427,6 +448,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def make_board(kind: str, options: dict, rng: random.Random, board_id: int,
                protocol_version: int | None) -> SimBoard:
+    """A board model of ``kind`` from its options; ``protocol_version`` (if given)
+    replaces the version it speaks, for refusal tests."""
     board = board_class(kind).from_options(options, rng, board_id=board_id)
     if protocol_version is not None:
         board.protocol_version = protocol_version
@@ -436,6 +459,7 @@ def make_board(kind: str, options: dict, rng: random.Random, board_id: int,
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``sim_board``; exit status 0, 2 on a bad ``--board``."""
     args = build_parser().parse_args(argv)
     rng = random.Random(args.seed)
 
@@ -492,18 +516,22 @@ class SimThread:
 
     @classmethod
     def plain(cls, board: SimBoard, faults: FaultInjector | None = None, **kw) -> 'SimThread':
+        """One board directly on a pty (no XBee)."""
         return cls(PlainHost(board, faults or FaultInjector()), **kw)
 
     @property
     def path(self) -> str:
+        """The pty slave path to give the host."""
         return self.endpoint.path
 
     @property
     def board(self) -> SimBoard:
+        """The (first) board model."""
         return self.host.boards[0][1]
 
     @property
     def faults(self) -> FaultInjector:
+        """The fault injector of the (first) board."""
         return self.host.boards[0][2]
 
     def _serve(self) -> None:
@@ -521,10 +549,12 @@ class SimThread:
         return self._lock
 
     def start(self) -> 'SimThread':
+        """Start serving in the background thread."""
         self._thread.start()
         return self
 
     def stop(self) -> None:
+        """Stop the thread (within 2 s) and close the pty and control socket."""
         self.runner.running = False
         self._thread.join(timeout=2)
         self.runner.close()

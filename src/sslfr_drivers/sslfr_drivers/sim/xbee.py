@@ -42,10 +42,13 @@ DEFAULT_AT = {
 
 
 def checksum(data: bytes) -> int:
+    """XBee API frame checksum: 0xFF minus the low byte of the sum of the frame
+    data bytes."""
     return 0xFF - (sum(data) & 0xFF)
 
 
 def escape(data: bytes) -> bytes:
+    """API mode 2 escaping: 0x7E, 0x7D, 0x11, 0x13 become 0x7D, byte ^ 0x20."""
     out = bytearray()
     for b in data:
         if b in _SPECIAL:
