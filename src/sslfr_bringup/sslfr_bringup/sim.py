@@ -113,8 +113,12 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
 
 
 DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
-#: [s] wall time between starting the time-dependent simulators and their clock anchor
-ANCHOR_MARGIN = 6.0
+#: [s] wall time between starting the time-dependent simulators and their clock anchor.
+#: It must cover their own start-up (they tabulate the day's sun: 2-8 s on a loaded
+#: 2-core machine) and the nodes' reconnection (<= 2 s): a sensor simulator that runs
+#: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
+#: absorber). Override with nodeset.yaml sim.anchor_margin.
+ANCHOR_MARGIN = 10.0
 
 
 def parse_set(text: str, nodes) -> tuple[str, str, object]:
