@@ -41,7 +41,7 @@ def _config() -> str:
 def _run_live(ros, env, out, args, timeout=150.0, on_spin=None):
     """Run `sslfr sim` while spinning the test's harness (live topics)."""
     cmd = [str(ROOT / 'sslfr'), 'sim', '--date', DATE, '--config', _config(), '--no-report',
-           '--out', str(out), *args]
+           '--anchor-margin', '4', '--out', str(out), *args]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ros.spin_until(lambda: (on_spin() if on_spin else None) or proc.poll() is not None, timeout)

@@ -185,6 +185,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else a free id of 215..232 held for the run)')
     p.add_argument('--seed', type=int, default=1, help='random seed of the simulated boards')
+    p.add_argument('--anchor-margin', type=float, default=None, metavar='S',
+                   help=f'wall seconds the sensor simulators get to start before the simulated clock '
+                        f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
+                        f'ahead of /clock, see sim.json sensor_lead_s)')
     p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
     return p
 
@@ -351,7 +355,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
         return _wait_links({b: links[b] for b in names}, {b: board_progs[b] for b in names}, timeout=30.0)
 
     anchor = None
-    margin = float(simcfg.get('anchor_margin', ANCHOR_MARGIN))
+    margin = float(args.anchor_margin if args.anchor_margin is not None
+                   else simcfg.get('anchor_margin', ANCHOR_MARGIN))
     try:
         # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
         anchor = time.monotonic() + margin
@@ -428,7 +433,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     wall = time.monotonic() - t_wall0
     summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
                'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
-               'startup_s': round(t_nodes - t_wall0, 2), 'faults': fired, 'missing': missing,
+               'startup_s': round(t_nodes - t_wall0, 2),
+               'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,
                'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
                'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
                'clock_messages': ros.clock_published,
