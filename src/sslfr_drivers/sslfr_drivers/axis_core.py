@@ -265,6 +265,7 @@ class TrajectoryStore:
         return None
 
     def clear(self) -> None:
+        """Forget the current trajectory (no setpoint until the next one)."""
         self.current = None
 
     def setpoint(self, t: float) -> tuple[float, float, str] | None:
@@ -381,6 +382,7 @@ class StallDetector:
     _pending_since: float | None = None
 
     def reset(self) -> None:
+        """Forget the history (after a fault is cleared or the axis re-referenced)."""
         self._hist.clear()
         self._pending_since = None
 
@@ -554,6 +556,7 @@ class AxisSupervisor:
         return self.cfg.calibration.angle(board.steps)
 
     def clear_fault(self) -> None:
+        """Clear the latched fault and the stall history."""
         self.fault = None
         self.stall.reset()
 

@@ -207,6 +207,7 @@ class AxisDriver(rclpy.lifecycle.Node):
 
     @property
     def port(self) -> str:
+        """The board's port: parameter ``port``, default ``/dev/sslfr/<axis>``."""
         return self.p['port'] or f'/dev/sslfr/{self.axis}'
 
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -230,6 +231,9 @@ class AxisDriver(rclpy.lifecycle.Node):
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
+        """Open the board link and read INFO; FAILURE (logged once per distinct
+        error) when the board cannot be reached or refuses the protocol. The
+        position counts as lost until re-referenced."""
         with self._lock:
             try:
                 session = AxisBoardSession(self.port, self.p['baudrate'], self.p['request_timeout'],
@@ -252,6 +256,7 @@ class AxisDriver(rclpy.lifecycle.Node):
             return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
+        """Start following tracker/trajectory; clears a latched fault."""
         with self._lock:
             self.active = True
             self.sup.clear_fault()
@@ -259,6 +264,7 @@ class AxisDriver(rclpy.lifecycle.Node):
         return super().on_activate(state)
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
+        """Stop the motor and stop following."""
         with self._lock:
             self.active = False
             self._send_stop('deactivate')
@@ -266,16 +272,15 @@ class AxisDriver(rclpy.lifecycle.Node):
         return super().on_deactivate(state)
 
     def on_cleanup(self, state) -> TransitionCallbackReturn:
+        """Stop the motor and close the board link."""
         with self._lock:
             self.active = False
             self._close_session()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state) -> TransitionCallbackReturn:
-        with self._lock:
-            self.active = False
-            self._close_session()
-        return TransitionCallbackReturn.SUCCESS
+        """Stop the motor and close the board link (as :meth:`on_cleanup`)."""
+        return self.on_cleanup(state)
 
     def _close_session(self) -> None:
         if self.session is not None:

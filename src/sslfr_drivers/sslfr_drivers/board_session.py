@@ -122,6 +122,7 @@ class AxisBoardSession:
         return self.board_info
 
     def close(self) -> None:
+        """Stop the link and close the port."""
         self.link.stop()
 
     # ------------------------------------------------------------------ state
@@ -177,13 +178,16 @@ class AxisBoardSession:
         return LINK_DOWN
 
     def frames_lost(self) -> int:
+        """Board frames lost so far (sequence-number gaps)."""
         return int(self.link.frames_lost)
 
     def frames_bad(self) -> int:
+        """Frames dropped as corrupt: CRC, length and decode errors."""
         fr = self.link.framer
         return int(fr.crc_errors + fr.length_errors + self.link.decode_errors)
 
     def counters(self) -> dict[str, int]:
+        """Link counters plus STATUS poll failures and reuses, for diagnostics."""
         c = dict(self.link.counters())
         c['status_poll_failures'] = self.poll_failures
         c['status_reused'] = self.stale_polls

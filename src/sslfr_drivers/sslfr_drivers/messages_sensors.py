@@ -41,12 +41,14 @@ class NmeaChunk(Message):
     data: bytes = b''
 
     def pack(self) -> bytes:
+        """The NMEA bytes as they are (1..MAX_PAYLOAD); PayloadError otherwise."""
         if not 1 <= len(self.data) <= MAX_PAYLOAD:
             raise PayloadError(f'NmeaChunk: {len(self.data)} bytes (1..{MAX_PAYLOAD})')
         return bytes(self.data)
 
     @classmethod
     def unpack(cls, payload: bytes):
+        """A chunk from a payload of 1..MAX_PAYLOAD bytes; PayloadError otherwise."""
         if not 1 <= len(payload) <= MAX_PAYLOAD:
             raise PayloadError(f'NmeaChunk: {len(payload)} bytes (1..{MAX_PAYLOAD})')
         return cls(bytes(payload))
@@ -77,6 +79,7 @@ class SwitchSample(Message):
     reserved: int = 0
 
     def validate(self):
+        """PayloadError when bits beyond the five switches are set."""
         if self.bits > 0x1F:
             raise PayloadError(f'SwitchSample: bits {self.bits:#x} use more than 5 switches')
 

@@ -122,6 +122,7 @@ class Frame:
 
     @property
     def is_response(self) -> bool:
+        """True when the RESPONSE flag is set (an answer to a host request)."""
         return bool(self.flags & FLAG_RESPONSE)
 
 
@@ -248,11 +249,13 @@ class SequenceCounter:
         self._next = start % SEQ_MOD
 
     def next(self) -> int:
+        """The next outgoing sequence number (0..65535, wrapping)."""
         s = self._next
         self._next = (s + 1) % SEQ_MOD
         return s
 
     def peek(self) -> int:
+        """The number :meth:`next` will return, without consuming it."""
         return self._next
 
 
@@ -282,6 +285,8 @@ class SequenceTracker:
         self.last = None
 
     def accept(self, seq: int) -> str:
+        """Classify ``seq`` (0..65535): 'new', 'duplicate' or 'stale'; updates the
+        counters (see the class docstring)."""
         if self.last is None:
             self.last = seq
             self.received += 1

@@ -128,6 +128,8 @@ class BoardSource:
         self.last_error = '' if port else 'no port configured (parameter port is empty)'
 
     def start(self) -> 'BoardSource':
+        """Open the port and start reading (board link or raw reader thread). A bad
+        port is reported by :attr:`state`/:meth:`error`, not raised; returns self."""
         if not self.port:
             return self
         try:
@@ -148,6 +150,7 @@ class BoardSource:
         return self
 
     def stop(self) -> None:
+        """Stop reading and close the port (idempotent)."""
         if self.link is not None:
             self.link.stop()
             self.link = None
@@ -207,11 +210,13 @@ class BoardSource:
         return 'down'
 
     def counters(self) -> dict:
+        """Link counters (protocol framing) or bytes received and reconnects (raw)."""
         if self.link is not None:
             return self.link.counters()
         return {'bytes_received': self.raw_bytes, 'reconnects': self.raw_reconnects}
 
     def error(self) -> str:
+        """The last error text of the port or link (empty when none)."""
         if self.link is not None:
             return self.link.last_error
         return self.last_error
@@ -229,6 +234,7 @@ class RateMeter:
         self._t0 = clock()
 
     def tick(self) -> None:
+        """Count one sample at the current clock time."""
         self.count += 1
         self.total += 1
         self.last = self.clock()
@@ -334,6 +340,7 @@ class SensorBoardNode(Node):
         self._diag_pub.publish(arr)
 
     def destroy_node(self):
+        """Stop the board source, then destroy the node."""
         if self._source is not None:
             self._source.stop()
         return super().destroy_node()

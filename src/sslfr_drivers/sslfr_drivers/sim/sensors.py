@@ -106,6 +106,8 @@ class WorldPublisher:
         self._next = 0.0
 
     def update(self, boards, now: float) -> None:
+        """Write the axis boards' joint angles [rad] to the world file, at most every
+        ``period`` [s] (``now`` [s, monotonic])."""
         if now < self._next:
             return
         self._next = now + self.period
@@ -302,6 +304,8 @@ class AbsorberSim(_SensorSim):
         self._last_bits = None
 
     def axis_angles(self) -> dict[str, float]:
+        """Axis joint angles [rad] from the world file, re-read at most every 0.1 s
+        of board time."""
         t, cache = self._world_cache
         if self.now - t >= 0.1:
             cache = read_axis_angles(self.world)

@@ -75,6 +75,8 @@ class ApiParser:
         self.bad_checksums = 0
 
     def feed(self, data: bytes) -> list[bytes]:
+        """Complete API frames' data (type byte first) in ``data``; frames with a bad
+        checksum are dropped and counted in ``bad_checksums``."""
         out: list[bytes] = []
         for b in data:
             if b == START:
@@ -117,6 +119,8 @@ class XBeeSimCoordinator:
         self.at_commands = 0
 
     def add_board(self, address: bytes, board: SimBoard, faults: FaultInjector) -> None:
+        """Put ``board`` behind the radio at 64-bit ``address`` (8 bytes), with its
+        own fault injector."""
         if len(address) != 8:
             raise ValueError('XBee 64-bit address must be 8 bytes')
         self.boards.append((bytes(address), board, faults))
@@ -131,6 +135,8 @@ class XBeeSimCoordinator:
         self._out += api_frame(data, escaped=self.at.get('AP') == b'\x02')
 
     def from_wire(self, data: bytes, now: float) -> None:
+        """API frames from the host (``now`` [s, monotonic]): AT commands are
+        answered, TX64 data goes to the addressed board."""
         for fd in self._parser.feed(data):
             self._handle(fd, now)
 
@@ -170,6 +176,8 @@ class XBeeSimCoordinator:
         return True
 
     def to_wire(self, now: float) -> bytes:
+        """Boards' output as RX64 frames plus pending AT/TX status answers (``now``
+        [s, monotonic])."""
         for addr, board, faults in self.boards:
             out = board.take_output()
             if not out:
