@@ -119,7 +119,7 @@ def test_fault_kill_holds_until_released(tmp_path):
     sup.stop()
 
 
-def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path):
+def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path, ros_env):
     """`sslfr up --only` with whatever node executables are installed; SIGTERM ->
     ordered stop, exit 0, no process left."""
     from sslfr_bringup import nodeset, up
@@ -130,7 +130,7 @@ def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path):
         installed = []
     site = tmp_path / 'site.yaml'
     site.write_text("/**:\n  ros__parameters:\n    site:\n      latitude_deg: 36.835\n")
-    env = dict(os.environ, ROS_DOMAIN_ID=str(150 + os.getpid() % 50), ROS_LOG_DIR=str(tmp_path / 'log'))
+    env = ros_env
     args = [str(ROOT / 'sslfr'), 'up', '--config', str(site), '--log-dir', str(tmp_path / 'logs')]
     if installed:
         args += ['--only', ','.join(installed[:3])]
