@@ -141,6 +141,9 @@ def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path, ros_env):
         return
     time.sleep(6.0)
     assert proc.poll() is None
+    import psutil
+    kids = psutil.Process(proc.pid).children(recursive=True)
+    assert len(kids) >= len(installed[:3]), [k.cmdline() for k in kids]
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=15)
@@ -148,6 +151,7 @@ def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path, ros_env):
     assert proc.returncode == 0, out
     assert 'stopped in' in out
     # every child is gone
+    assert not [k for k in kids if k.is_running() and k.status() != psutil.STATUS_ZOMBIE]
     for name in installed[:3]:
         log = (tmp_path / 'logs' / f'{name}.log')
         assert log.exists()
