@@ -115,7 +115,6 @@ class PlannerNode(Node):
         self.reason = ''
         self.hold_pose = None
         self.stow_start: tuple[float, object] | None = None
-        self.last_pose = None
         self._replan_reason: str | None = 'start-up'
         self._force_traj = True
         self._last_phase_pub = -math.inf
@@ -418,7 +417,6 @@ class PlannerNode(Node):
                                            time_from_start=to_duration_msg(float(h.t[k]) - t0))
                       for k in range(len(h))]
         self.pub_traj.publish(msg)
-        self.last_pose = h.positions[0]
         self._last_traj_pub = now
         self._force_traj = False
         self.counters['trajectories'] += 1
