@@ -36,7 +36,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 
 import rclpy
 import rclpy.lifecycle
@@ -55,7 +54,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from .axis_core import (
-    AXES, AXIS_LIMITS, HOME_SWITCHES, SEED_STEP_ANGLE, STOW_POSITIONS, AxisConfig,
+    AXES, AXIS_LIMITS, HOME_SWITCHES, SEED_STEP_ANGLE, STOW_POSITIONS, Action, AxisConfig,
     AxisSupervisor, BoardState, Calibration, SoftLimits, StallDetector,
 )
 from .board_session import AxisBoardSession, BoardRefused
@@ -198,7 +197,7 @@ class AxisDriver(rclpy.lifecycle.Node):
                 continue
             if default is None:
                 default = _axis_default(axis, name)
-            d = ParameterDescriptor(description=desc, read_only=name == 'port' and False)
+            d = ParameterDescriptor(description=desc)
             if rng is not None and kind == _F:
                 d.floating_point_range = [FloatingPointRange(from_value=float(rng[0]), to_value=float(rng[1]))]
             elif rng is not None and kind == _I:
@@ -464,7 +463,6 @@ class AxisDriver(rclpy.lifecycle.Node):
 
     def _send_stop(self, why: str) -> None:
         if self.session is not None:
-            from .axis_core import Action
             ok, detail = self.session.command(Action('stop'))
             self.counters['stops_sent'] += 1
             if not ok:

@@ -19,7 +19,6 @@ in seconds since the Unix epoch (UTC).
 """
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import random
 from dataclasses import dataclass
