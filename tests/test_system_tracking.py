@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import subprocess
-import time
 
 import numpy as np
 import pytest
