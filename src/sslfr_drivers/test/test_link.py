@@ -14,14 +14,7 @@ from sslfr_drivers.sim.base import FaultInjector
 from sslfr_drivers.sim.runner import SimThread
 from sslfr_drivers.transport import SerialTransport, TransportError, make_transport
 
-
-def wait_for(pred, timeout, step=0.01):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
+from drivers_testutil import wait_for
 
 
 def test_loop_url_transport_roundtrip():

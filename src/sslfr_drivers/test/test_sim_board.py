@@ -13,16 +13,9 @@ from sslfr_drivers.link import BoardLink, LinkState, NackError
 from sslfr_drivers.sim.runner import SimControl
 from sslfr_drivers.transport import SerialTransport
 
+from drivers_testutil import wait_for
+
 STEP = m.DEFAULT_STEP_RAD
-
-
-def wait_for(pred, timeout, step=0.01):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
 
 
 @pytest.fixture

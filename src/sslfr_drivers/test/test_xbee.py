@@ -21,18 +21,11 @@ from sslfr_drivers.sim.runner import SimControl, SimThread
 from sslfr_drivers.sim.xbee import ApiParser, XBeeSimCoordinator, api_frame
 from sslfr_drivers.transport import make_transport
 
+from drivers_testutil import wait_for
+
 # addresses containing bytes that must be escaped (0x7E, 0x7D, 0x11, 0x13)
 ADDR_A = '0013A2007E7D1113'
 ADDR_B = '0013A20040000002'
-
-
-def wait_for(pred, timeout, step=0.01):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
 
 
 @settings(deadline=None)
