@@ -58,6 +58,7 @@ from sslfr_planner.trajectory import JOINTS, finite_or_none, hold, horizon_times
 TL1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TICK_PERIOD = 0.2      # [s] ROS time: phase/sun/trajectory bookkeeping
+ERROR_SHOWN_FOR = 60.0  # [s] steady: diagnostics stay ERROR this long after the last error
 DAY_TYPES = {'normal': TrackerPhase.DAY_NORMAL, 'polar_day': TrackerPhase.DAY_POLAR_DAY,
              'polar_night': TrackerPhase.DAY_POLAR_NIGHT}
 
@@ -123,7 +124,8 @@ class PlannerNode(Node):
         self._last_tick = None
         self._last_plan_ms = math.nan
         self._last_error = ''
-        self._jump = ClockJumpDetector(1.0)
+        self._last_error_steady = -math.inf
+        self._jump = ClockJumpDetector(self.cfg['time_jump_threshold'])
 
         self.pub_sun = self.create_publisher(SunPosition, 'tracker/sun', 10)
         self.pub_phase = self.create_publisher(TrackerPhase, 'tracker/phase', TL1)
@@ -216,10 +218,15 @@ class PlannerNode(Node):
         changed = sorted(k for k in self.cfg if self.cfg[k] != old.get(k))
         if not changed:
             return
+        self._jump.threshold = float(self.cfg['time_jump_threshold'])
         if any(k.startswith(('site.', 'gps.', 'state_dir')) for k in changed):
             gps = self.selector.gps
             self.selector = self._make_selector(self.cfg)
             self.selector.gps = gps
+            for err in self.selector.errors:  # e.g. a corrupt persisted file in a new state_dir
+                self.get_logger().warning(f'persisted site ignored: {err}')
+            self.counters['persist_errors'] += len(self.selector.errors)
+            self._selector_errors_seen = len(self.selector.errors)
         self._replan_reason = 'parameters changed: ' + ', '.join(changed)
 
     def _make_selector(self, cfg: dict) -> SiteSelector:
@@ -321,6 +328,7 @@ class PlannerNode(Node):
 
     def _note_error(self, text: str) -> None:
         self._last_error = text
+        self._last_error_steady = time.monotonic()
         self.get_logger().error(text)
 
     def _tick(self) -> None:
@@ -459,7 +467,7 @@ class PlannerNode(Node):
         st.name = f'{self.get_name()}: day cycle'
         st.hardware_id = 'sslfr_planner'
         site = self.planner.site_fix
-        if self._last_error and self.counters['plan_errors']:
+        if self._last_error and time.monotonic() - self._last_error_steady < ERROR_SHOWN_FOR:
             st.level, st.message = DiagnosticStatus.ERROR, self._last_error
         elif self.phase is None:
             st.level, st.message = DiagnosticStatus.WARN, 'waiting for ROS time'
