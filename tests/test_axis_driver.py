@@ -355,7 +355,9 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     from sslfr_interfaces.srv import Jog
     from std_srvs.srv import Trigger
 
-    r = rig(sim_args=['--opt', 'initial_angle_deg=0'], params={'max_speed': 0.02})
+    # (the fail-safe stow after a longer silence is tested in tests/test_safety_e2e.py)
+    r = rig(sim_args=['--opt', 'initial_angle_deg=0'],
+            params={'max_speed': 0.02, 'safety_silent_stow_after': 5.0})
     assert r.wait_state('holding', 20), r.driver.output()
     t0 = time.time() + 0.3
     r.publish_trajectory(t0, [0.0, 30.0], [0.0, 0.3])             # 0.01 rad/s

@@ -209,8 +209,8 @@ def test_overtemp_stows(morning):
 
 def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
     """No safety heartbeat: the drivers STOP their motors (state 'stopped') within 1.2 s
-    (their steady-clock safety_timeout is 1 s); without a supervisor they do not move,
-    not even to stow."""
+    (their steady-clock safety_timeout is 1 s), then, 1 s later, stow (defocus) since
+    nobody watches the absorber any more (safety_silent_stow_after)."""
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     arrivals = {'safety': [], 'stow': []}
     ros.node.create_subscription(SafetyState, 'safety/state',

@@ -308,10 +308,17 @@ class SafetyWatch:
         This driver's axis name (matched against ``stopped_axes``).
     timeout : float
         Maximum steady-clock age of the last fresh message [s] (1.0 by the spec).
+    silent_stow_after : float
+        Further silence after the stop before the fail-safe stow [s]: with the
+        supervisor gone nobody watches the absorber, so the axis stops first and then
+        defocuses (mirrors to the sleeping position, issues 7 and 9: "stopped within
+        1.2 s and stowing"). Only after messages were once received: at boot without a
+        supervisor the axis does not move at all.
     """
 
     axis: str
     timeout: float = 1.0
+    silent_stow_after: float = 1.0
     last_rx: float | None = None
     last_sequence: int | None = None
     level: int = LEVEL_OK
@@ -333,16 +340,19 @@ class SafetyWatch:
     def verdict(self, now_steady: float) -> tuple[SafetyVerdict, str]:
         """``(verdict, reason)`` for the current steady time [s].
 
-        STOP when no fresh message for > ``timeout`` (or never), when the level is
-        ESTOP, or when this axis is in ``stopped_axes``; STOW when ``stow_required``
-        or level STOW; FOLLOW otherwise.
+        STOP when no fresh message for > ``timeout`` (or never), then STOW once the
+        silence passes ``timeout + silent_stow_after``; STOP when this axis is in
+        ``stopped_axes`` or the level is ESTOP with no axis listed (every axis);
+        STOW when ``stow_required`` or level STOW; FOLLOW otherwise.
         """
         if self.last_rx is None:
             return SafetyVerdict.STOP, 'no safety/state received yet'
         age = now_steady - self.last_rx
+        if age > self.timeout + self.silent_stow_after:
+            return SafetyVerdict.STOW, f'safety/state silent for {age:.2f} s: fail-safe stow (defocus)'
         if age > self.timeout:
             return SafetyVerdict.STOP, f'safety/state silent for {age:.2f} s > {self.timeout:.2f} s'
-        if self.level == LEVEL_ESTOP:
+        if self.level == LEVEL_ESTOP and not self.stopped_axes:
             return SafetyVerdict.STOP, 'safety ESTOP: ' + '; '.join(self.reasons)
         if self.axis in self.stopped_axes:
             return SafetyVerdict.STOP, f'safety stops axis {self.axis}: ' + '; '.join(self.reasons)

@@ -91,6 +91,8 @@ PARAMETERS: dict[str, tuple] = {
     'auto_home': (_B, True, 'home by itself when the board lost its position', None),
     'reference_samples': (_I, 5, 'sensor readings at rest averaged to re-reference (SET_ZERO) [-]', (1, 100)),
     'safety_timeout': (_F, 1.0, 'safety/state silence that stops the axis [s] (steady clock)', (0.05, 10.0)),
+    'safety_silent_stow_after': (_F, 1.0, 'further safety/state silence after the stop before the fail-safe '
+                                 'stow (defocus) [s] (steady clock)', (0.0, 60.0)),
     'lost_step_tolerance': (_F, 0.005, 'step count vs sensor disagreement that faults [rad]', (1e-5, 1.0)),
     'stall_window': (_F, 1.0, 'stall observation window [s]', (0.1, 60.0)),
     'stall_min_motion': (_F, 0.01, 'commanded motion that must show on the sensor within stall_window [rad]', (1e-5, 1.0)),
@@ -149,6 +151,7 @@ class AxisDriver(rclpy.lifecycle.Node):
         self.axis = self.p['axis']
         cfg, stall = build_config(self.axis, self.p)     # ValueError -> main() exits 2
         self.sup = AxisSupervisor(cfg, self.p['safety_timeout'], stall)
+        self.sup.safety.silent_stow_after = self.p['safety_silent_stow_after']
         self.session: AxisBoardSession | None = None
         self.board: BoardState | None = None
         self.active = False
@@ -226,6 +229,7 @@ class AxisDriver(rclpy.lifecycle.Node):
             self.sup.cfg = cfg
             self.sup.stall = stall
             self.sup.safety.timeout = proposed['safety_timeout']
+            self.sup.safety.silent_stow_after = proposed['safety_silent_stow_after']
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ lifecycle
@@ -340,7 +344,9 @@ class AxisDriver(rclpy.lifecycle.Node):
     def _on_safety(self, msg: SafetyState) -> None:
         now = self.steady.now().nanoseconds * 1e-9
         session = self.session
-        stop_us = msg.level == SafetyState.ESTOP or self.axis in msg.stopped_axes
+        # an ESTOP names the axes it stops (a tripped limit switch stops its own axis);
+        # an ESTOP naming none stops every axis
+        stop_us = self.axis in msg.stopped_axes or (msg.level == SafetyState.ESTOP and not msg.stopped_axes)
         if session is not None and stop_us and not self._stop_seen:
             session.stop_now()      # before taking the lock: never wait behind a control tick
         self._stop_seen = stop_us

@@ -116,11 +116,25 @@ def test_safety_watch_timeout_on_steady_clock():
     assert w.verdict(11.6)[0] is SafetyVerdict.FOLLOW
 
 
+def test_safety_silence_stops_then_stows_fail_safe():
+    """Issues 7/9: supervisor gone -> stopped within the timeout, then stowing."""
+    w = SafetyWatch('mirrors', 1.0, silent_stow_after=1.0)
+    w.receive(10.0, 0, False, [], 1)
+    assert w.verdict(11.5)[0] is SafetyVerdict.STOP
+    v, reason = w.verdict(12.01)
+    assert v is SafetyVerdict.STOW and 'fail-safe stow' in reason
+    fresh = SafetyWatch('mirrors', 1.0)                       # never heard at boot: no motion at all
+    assert fresh.verdict(1e6)[0] is SafetyVerdict.STOP
+
+
 @pytest.mark.parametrize('level,stow,stopped,expect', [
     (3, False, [], SafetyVerdict.STOP),
     (3, True, [], SafetyVerdict.STOP),
     (1, False, ['mirrors'], SafetyVerdict.STOP),
     (1, False, ['mobile_structure'], SafetyVerdict.FOLLOW),
+    (3, False, ['mobile_structure'], SafetyVerdict.FOLLOW),   # a switch trip stops its own axis only
+    (3, True, ['mobile_structure'], SafetyVerdict.STOW),
+    (3, False, ['mirrors', 'mobile_structure'], SafetyVerdict.STOP),
     (2, True, [], SafetyVerdict.STOW),
     (0, True, [], SafetyVerdict.STOW),
     (1, False, [], SafetyVerdict.FOLLOW),
