@@ -111,7 +111,7 @@ class AbsorberBoardNode(SensorBoardNode):
     # -------------------------------------------------------------- reader thread
     def _on_message(self, msg) -> None:
         if isinstance(msg, (ThermocoupleSample, SwitchSample)):
-            self._queue.append((msg, self.get_clock().now()))
+            self._enqueue(msg)
 
     # -------------------------------------------------------------- executor
     def _drain(self) -> None:
@@ -181,7 +181,7 @@ class AbsorberBoardNode(SensorBoardNode):
                  'switches': ','.join(n for n in SWITCH_NAMES
                                       if self._debouncer.states and self._debouncer.states[n].closed)
                  or 'none',
-                 'switch_bounces': self._debouncer.bounces}
+                 'switch_bounces': self._debouncer.bounces, 'queue_dropped': self._queue_dropped}
         st = board_status('absorber_board: board', self._source, self._meter,
                           self._values['max_sample_age'], faults, extra)
         self._publish_diagnostics(st)

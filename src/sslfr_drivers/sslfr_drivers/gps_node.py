@@ -67,7 +67,6 @@ class GpsNode(SensorBoardNode):
         self._last_jump = 0.0
         self._last_fix_status = None
         self._last_fix: nmea.FixRecord | None = None
-        self._chunks_dropped = 0
         self._fix_pub = self.create_publisher(NavSatFix, 'gps/fix', 10)
         self._time_pub = self.create_publisher(TimeReference, 'gps/time_reference', 10)
         self._start_board(drain_period=0.02)
@@ -97,9 +96,7 @@ class GpsNode(SensorBoardNode):
             self._on_bytes(msg.data)
 
     def _on_bytes(self, data: bytes) -> None:
-        if len(self._queue) == self._queue.maxlen:
-            self._chunks_dropped += 1
-        self._queue.append((data, self.get_clock().now()))
+        self._enqueue(data)
 
     # -------------------------------------------------------------- executor
     def _drain(self) -> None:
@@ -148,7 +145,7 @@ class GpsNode(SensorBoardNode):
         faults = []
         st = board_status('gps: board', self._source, self._meter, self._values['max_sample_age'],
                           faults, {**c.as_dict(), 'last_time_jump_s': f'{self._last_jump:+.3f}',
-                                   'chunks_dropped': self._chunks_dropped})
+                                   'chunks_dropped': self._queue_dropped})
         fix = DiagnosticStatus(name='gps: fix', hardware_id=self._values['port'] or '(none)')
         if self._last_fix_status is None or self._last_fix_status < 0:
             fix.level, fix.message = DiagnosticStatus.WARN, 'no fix'

@@ -59,7 +59,7 @@ class IrradianceNode(SensorBoardNode):
 
     def _on_message(self, msg) -> None:
         if isinstance(msg, AlsSample):
-            self._queue.append((msg, self.get_clock().now()))
+            self._enqueue(msg)
 
     def _drain(self) -> None:
         while self._queue:
@@ -97,7 +97,8 @@ class IrradianceNode(SensorBoardNode):
         extra = {'illuminance_lx': f'{s.illuminance:.1f}' if s else 'none',
                  'gain': f'{s.gain:g}' if s else 'none',
                  'integration_time_s': f'{s.integration_time:g}' if s else 'none',
-                 'saturated_samples': self._saturated_count, 'invalid_samples': self._invalid}
+                 'saturated_samples': self._saturated_count, 'invalid_samples': self._invalid,
+                 'queue_dropped': self._queue_dropped}
         st = board_status('irradiance: board', self._source, self._meter,
                           self._values['max_sample_age'], faults, extra)
         self._publish_diagnostics(st)

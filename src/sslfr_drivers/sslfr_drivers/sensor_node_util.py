@@ -308,10 +308,18 @@ class SensorBoardNode(Node):
         self._values = declare_parameters(self, params)
         check_parameters(params, self._values)
         self._queue: collections.deque = collections.deque(maxlen=queue_len)
+        self._queue_dropped = 0  # oldest samples pushed out of a full queue [-]
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._meter = RateMeter()
         self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         self._source: BoardSource | None = None
+
+    def _enqueue(self, item) -> None:
+        """Queue a sample (reader thread) with its ROS receive time; a full queue drops
+        the oldest sample and counts it (``queue_dropped`` in diagnostics)."""
+        if len(self._queue) == self._queue.maxlen:
+            self._queue_dropped += 1
+        self._queue.append((item, self.get_clock().now()))
 
     def _start_board(self, drain_period: float) -> None:
         """Open the board, accept runtime parameter changes and start the drain
