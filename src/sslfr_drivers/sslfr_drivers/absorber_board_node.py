@@ -29,6 +29,7 @@ from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
+from sslfr_planner.spin import spin
 
 from . import max6675
 from .debounce import SWITCH_NAMES, SwitchDebouncer
@@ -196,7 +197,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
+        spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

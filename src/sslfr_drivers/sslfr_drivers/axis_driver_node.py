@@ -50,6 +50,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
+from sslfr_planner.spin import spin
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -572,7 +573,7 @@ def main(args=None):
         pkg_log.propagate = False
         executor = MultiThreadedExecutor(num_threads=3)
         executor.add_node(node)
-        executor.spin()
+        spin(node, executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, ParameterException) as exc:

@@ -22,6 +22,7 @@ import sys
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.executors import ExternalShutdownException
+from sslfr_planner.spin import spin
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from . import nmea
@@ -169,7 +170,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
+        spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -20,6 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
+from sslfr_planner.spin import spin
 
 from . import veml7700
 from .messages_sensors import AlsSample
@@ -113,7 +114,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
+        spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -41,6 +41,7 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
+from sslfr_planner.spin import spin
 
 from .safety_core import AXES, SWITCHES, WATCHABLE, Level, SafetyConfig, SafetyCore
 
@@ -365,7 +366,7 @@ def main(args=None):
             raise
         return              # SIGINT/SIGTERM arrived while the node was being built
     try:
-        rclpy.spin(node)
+        spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

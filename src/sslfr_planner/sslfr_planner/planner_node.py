@@ -51,6 +51,7 @@ from sslfr_planner import modes
 from sslfr_planner.day_planner import DayPlanner
 from sslfr_planner.planner_params import SPEC_BY_NAME, SPECS, validate
 from sslfr_planner.site_source import SiteFix, SiteSelector, distance_m
+from sslfr_planner.spin import spin
 from sslfr_planner.timejump import ClockJumpDetector
 from sslfr_planner.trajectory import JOINTS, finite_or_none, hold, horizon_times, ramp
 
@@ -505,7 +506,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
+        spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
