@@ -33,6 +33,7 @@ import numpy as np
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader
+from .nodeset import node_params
 
 AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
 PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
@@ -191,19 +192,8 @@ def planner_config(path: str | None) -> dict:
         import yaml
         with open(path, encoding='utf-8') as fh:
             doc = yaml.safe_load(fh) or {}
-        for section in ('/**', 'planner', '/planner'):
-            params = (doc.get(section) or {}).get('ros__parameters') or {}
-            flat = {}
-
-            def walk(prefix, node):
-                for k, v in node.items():
-                    key = f'{prefix}.{k}' if prefix else str(k)
-                    if isinstance(v, dict):
-                        walk(key, v)
-                    else:
-                        flat[key] = v
-            walk('', params)
-            cfg.update({k: v for k, v in flat.items() if k in cfg})
+        flat = node_params(doc, 'planner')
+        cfg.update({k: v for k, v in flat.items() if k in cfg})
     return cfg
 
 
