@@ -15,8 +15,8 @@ radians; energies in Wh unless a name says otherwise.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from datetime import date, datetime, timedelta, timezone
+from dataclasses import dataclass, field
+from datetime import date, datetime, timezone
 
 import numpy as np
 
@@ -128,7 +128,7 @@ def solar_time_instant(day: date, hour: float, site: AnalysisSite) -> float:
     return solar_transit(local_mean_noon(day, s), s) + 3600.0 * (hour - 12.0)
 
 
-def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours, sun=None):
+def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours):
     """Power loss caused by tracking errors (seed 000 eqs. 17-24, Figs. 22-24).
 
     As in the seed's transversal study, l_abs, DNI and eta_opt's angle dependence are
@@ -142,21 +142,18 @@ def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hou
     days : sequence of datetime.date
     hours : sequence of float
         Local solar hours [h].
-    sun : callable, optional
-        ``sun(t, site) -> (zenith, azimuth)``; defaults to :func:`sun_positions`.
 
     Returns
     -------
     list of ErrorRow
         Rows with the sun below the horizon are skipped.
     """
-    sun = sun or sun_positions
     eta = optics.optical_yield(params)
     rows = []
     for day in days:
         for hour in hours:
             t = solar_time_instant(day, hour, site)
-            zen, azi = sun(np.array([t]), site)
+            zen, azi = sun_positions(np.array([t]), site)
             if zen[0] >= np.pi / 2:
                 continue
             tt, _ = optics.projection_angles(zen, azi, site.collector_azimuth)
@@ -207,16 +204,15 @@ class YearSky:
     step: float
 
     @classmethod
-    def compute(cls, site: AnalysisSite, year: int = 2023, step: float = 600.0, dni=None, sun=None):
+    def compute(cls, site: AnalysisSite, year: int = 2023, step: float = 600.0, dni=None):
         """Sun and DNI for ``year`` at ``step`` [s]; only instants with the sun up are kept.
 
         ``dni``: None for clear sky, or a callable ``dni(t) -> W/m^2`` (measured data).
         """
         from .beam import clear_sky_dni
 
-        sun = sun or sun_positions
         t = year_instants(year, step)
-        zen, azi = sun(t, site)
+        zen, azi = sun_positions(t, site)
         up = zen < np.pi / 2
         t, zen, azi = t[up], zen[up], azi[up]
         if dni is None:
@@ -366,12 +362,6 @@ def tilt_search(sky: YearSky, site: AnalysisSite, params: OpticalParameters, gri
             if a <= max_area:
                 ear[i, j] = e / a
     return TiltSearch(bms, bas, ear, energy, area, tubes)
-
-
-def days_of_year(year: int) -> list[date]:
-    """Every date of ``year``."""
-    d0 = date(year, 1, 1)
-    return [d0 + timedelta(days=k) for k in range((date(year + 1, 1, 1) - d0).days)]
 
 
 def day_energy(t, dni, zenith, azimuth, mirrors, beta_m, beta_a, params: OpticalParameters,

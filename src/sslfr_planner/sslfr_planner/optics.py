@@ -203,7 +203,6 @@ def transversal_capture(transversal, p: OpticalParameters, error=0.0, tilts=None
         DNI * eta_i * l_abs * C_i (eqs. 18, 20).
     """
     tt = np.asarray(transversal, dtype=float)
-    psi = receiver_angles(p)
     if tilts is None:
         beta = ideal_tilts(tt, p) - np.asarray(error, dtype=float)[..., None]
     else:
