@@ -4,10 +4,8 @@ import io
 import math
 import os
 import subprocess
-import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from sslfr_planner import cli_field, cli_plan, lepten
