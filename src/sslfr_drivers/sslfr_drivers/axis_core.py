@@ -577,10 +577,14 @@ class AxisSupervisor:
         self.stall.reset()
 
     def _stop(self, board: BoardState, state: str, reason: str) -> Action:
+        """STOP when the board moves, has a command pending or homes, and always once on
+        entering a stop state (the polled ``moving`` may be a tick old: a safety stop must
+        show on the wire)."""
+        entering = self.state != state
         self.state, self.reason = state, reason
         pending = self._cmd_steps is not None
         self._cmd_steps = None
-        if board.moving or pending or board.homing:
+        if board.moving or pending or board.homing or entering:
             return Action('stop')
         return Action()
 
