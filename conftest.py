@@ -215,3 +215,13 @@ def ros(ros_domain):
     harness = RosHarness(ros_domain)
     yield harness
     harness.close()
+
+
+def pytest_collection_modifyitems(config, items):
+    """Topic-level tests (tests/) run real node processes with wall-clock deadlines on
+    a 2-core machine; a scheduling stall there can miss a deadline once. They are rerun
+    once (pytest-rerunfailures; the rerun is printed as RERUN in the summary), so a real
+    failure still fails. Unit tests beside the cores are never rerun."""
+    for item in items:
+        if ROOT / 'tests' in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.flaky(reruns=1, reruns_delay=2))
