@@ -3,13 +3,18 @@ SHELL := /bin/bash
 ROOT := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
 PYTEST_ARGS ?=
 
-.PHONY: setup test demo bench clean distclean
+.PHONY: setup test soak demo bench clean distclean
 
 setup:
 	@bash $(ROOT)/scripts/setup.sh
 
 test: setup
 	@. $(ROOT)/scripts/env.sh && cd $(ROOT) && python -m pytest $(PYTEST_ARGS)
+
+# make soak N=5 [BUSY=1]: the topic-level tests N times, per-test runs/failures/slowest
+N ?= 5
+soak: setup
+	@. $(ROOT)/scripts/env.sh && cd $(ROOT) && python scripts/soak.py --rounds $(N) $(if $(BUSY),--busy,) $(SOAK_PATHS)
 
 demo: setup
 	@$(ROOT)/sslfr sim --out $(ROOT)/out/demo

@@ -20,9 +20,11 @@ from __future__ import annotations
 import fcntl
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -217,11 +219,93 @@ def ros(ros_domain):
     harness.close()
 
 
-def pytest_collection_modifyitems(config, items):
-    """Topic-level tests (tests/) run real node processes with wall-clock deadlines on
-    a 2-core machine; a scheduling stall there can miss a deadline once. They are rerun
-    once (pytest-rerunfailures; the rerun is printed as RERUN in the summary), so a real
-    failure still fails. Unit tests beside the cores are never rerun."""
-    for item in items:
-        if ROOT / 'tests' in Path(str(item.fspath)).parents:
-            item.add_marker(pytest.mark.flaky(reruns=1, reruns_delay=2))
+# ----------------------------------------------------------------- leak check
+# Every test owns the processes, ptys and temporary directories it starts, and leaves
+# none behind. pytest makes itself a child subreaper (Linux prctl), so a grandchild
+# orphaned by its parent (a node started by `sslfr sim`, a simulator whose runner died)
+# is re-parented to pytest and is still seen here. After each test: descendants that
+# outlive it are reported by name and killed, and the test errors.
+_LEAK_GRACE_S = 5.0        # stop() gives a node 5 s after SIGINT; a leak outlives that
+_TMP_PATTERNS = ('sslfr-sim-*', 'axd*', 'sslfr-up-*')
+
+
+def _become_subreaper() -> None:
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(36, 1, 0, 0, 0)            # PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):         # not Linux: orphans go to init, unseen
+        pass
+
+
+_become_subreaper()
+
+# A private temporary directory per pytest run (inherited by every child through
+# TMPDIR), so the check below sees only what this run's tests left, never the files
+# of another run on the same machine. Short: UNIX socket paths must stay < 108 bytes.
+_RUN_TMP = tempfile.mkdtemp(prefix=f'sslfr-t{os.getpid()}-')
+os.environ['TMPDIR'] = _RUN_TMP
+tempfile.tempdir = _RUN_TMP
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(_RUN_TMP, ignore_errors=True)
+
+
+def _descendants() -> dict[int, str]:
+    import psutil
+    out = {}
+    for p in psutil.Process().children(recursive=True):
+        try:
+            if p.status() == psutil.STATUS_ZOMBIE:
+                p.wait(0)                       # reap what the subreaper inherited
+                continue
+            out[p.pid] = ' '.join(p.cmdline()[:4]) or p.name()
+        except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.TimeoutExpired):
+            pass
+    return out
+
+
+def _pty_fds() -> set[str]:
+    out = set()
+    for fd in os.listdir('/proc/self/fd'):
+        try:
+            target = os.readlink(f'/proc/self/fd/{fd}')
+        except OSError:
+            continue
+        if target.startswith('/dev/pts/') or target == '/dev/ptmx':
+            out.add(f'fd {fd} -> {target}')
+    return out
+
+
+def _tmp_dirs() -> set[str]:
+    import glob
+    return {p for pat in _TMP_PATTERNS for p in glob.glob(os.path.join(_RUN_TMP, pat))}
+
+
+@pytest.fixture(autouse=True)
+def _no_leaks(request):
+    """Fail a test that leaves a process, a pty or an sslfr temp dir behind."""
+    before_procs, before_ptys, before_tmp = set(_descendants()), _pty_fds(), _tmp_dirs()
+    yield
+    import psutil
+    deadline = time.monotonic() + _LEAK_GRACE_S
+    leaked = {}
+    while True:
+        leaked = {pid: cmd for pid, cmd in _descendants().items() if pid not in before_procs}
+        if not leaked or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    for pid in leaked:                       # clean up so the next test starts clean
+        try:
+            psutil.Process(pid).kill()
+        except psutil.NoSuchProcess:
+            pass
+    problems = [f'process {pid} still running: {cmd}' for pid, cmd in sorted(leaked.items())]
+    problems += [f'pty left open: {p}' for p in sorted(_pty_fds() - before_ptys)]
+    tmp_left = sorted(_tmp_dirs() - before_tmp)
+    problems += [f'temporary directory left behind: {p}' for p in tmp_left]
+    for path in tmp_left:
+        shutil.rmtree(path, ignore_errors=True)
+    if problems:
+        pytest.fail(f'{request.node.nodeid} leaked:\n  ' + '\n  '.join(problems), pytrace=False)

@@ -285,11 +285,15 @@ def test_board_reset_without_sensor_rehomes_before_moving(rig, ros):
             break
         ros.spin_for(0.03)
     first_homed = next(i for i, b in enumerate(samples) if b['homed'])
-    before = samples[:first_homed]
-    angles = [b['angle'] for b in before]
-    # before re-homing the joint only moved toward the rest switch (down), never along the trajectory
+    angles = [b['angle'] for b in samples[:first_homed]]
+    # before re-homing the joint only moved toward the rest switch (down), never along
+    # the trajectory; the board's HOME ended at that switch (the simulator records the
+    # angle where it ended: sampling over the control socket can miss the last 40 ms)
     assert all(a2 <= a1 + 1e-12 for a1, a2 in zip(angles, angles[1:])), angles
-    assert angles[-1] < 0.01 and angles[0] > 0.1
+    assert angles[0] > 0.1, angles
+    width = math.radians(0.2)                   # the simulated SLEEP switch's width
+    assert samples[first_homed]['home_angle'] is not None
+    assert abs(samples[first_homed]['home_angle']) <= width / 2 + STEP, samples[first_homed]
     assert r.diag().get('nacks_not_homed') == '0', r.diag()
     ros.spin_for(0.5)
     b = r.board()

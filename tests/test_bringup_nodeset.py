@@ -148,7 +148,7 @@ def test_build_programs_reports_missing_executables_and_never_fakes_them(site, t
 
     def finder(pkg, exe):   # only the planner "is installed"
         return Path('/opt/x/planner') if exe == 'planner' else None
-    programs, missing = up.build_programs(ns, site, finder=finder)
+    programs, missing = up.build_programs(ns, site, finder=finder, run_dir=tmp_path / 'run')
     assert [p.name for p in programs] == ['planner']
     assert len(missing) == len(ns.nodes) - 1 and any('mirrors_driver (sslfr_drivers/axis_driver)' in m for m in missing)
 

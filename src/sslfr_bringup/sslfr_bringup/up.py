@@ -14,8 +14,10 @@ graph to a monitoring laptop.
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
 import shlex
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -41,21 +43,21 @@ def find_executable(package: str, exe: str) -> Path | None:
     return None
 
 
-def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, sim_ports: dict | None = None,
-                   use_sim_time: bool = False, extra: dict | None = None,
-                   namespace: str | None = None, finder=find_executable,
-                   run_dir: Path | None = None) -> tuple[list[Program], list[str]]:
+def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
+                   sim_ports: dict | None = None, use_sim_time: bool = False,
+                   extra: dict | None = None, namespace: str | None = None,
+                   finder=find_executable) -> tuple[list[Program], list[str]]:
     """Programs for every node of ``ns`` whose executable is installed, and the list
     of missing ``package/executable`` (reported, never replaced by anything else).
 
     Each node's overrides (role parameters, port, use_sim_time, ``extra[name]``) are
-    written to ``run_dir/<node>.params.yaml`` (default: a new temporary directory),
-    passed after the site config so they win over its node section.
+    written to ``run_dir/<node>.params.yaml`` (the caller owns ``run_dir`` and
+    removes it), passed after the site config so they win over its node section.
     """
     import yaml
 
     params = nodeset_mod.read_params(config)
-    run_dir = Path(run_dir) if run_dir else Path(tempfile.mkdtemp(prefix='sslfr-up-'))
+    run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     programs, missing = [], []
     for node in ns.start_order():
@@ -111,6 +113,7 @@ def main(argv: list[str]) -> int:
         ns = select(ns, args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
         run_dir = Path(tempfile.mkdtemp(prefix='sslfr-up-'))
+        atexit.register(shutil.rmtree, run_dir, True)
         programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
@@ -121,9 +124,6 @@ def main(argv: list[str]) -> int:
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}', file=sys.stderr)
     for m in missing:
         print(f'sslfr up: MISSING executable, node not started: {m} (run make setup?)', file=sys.stderr)
-    import atexit
-    import shutil
-    atexit.register(shutil.rmtree, run_dir, True)
     if args.print_only:
         for prog in programs:
             print(f'{prog.name}: ' + ' '.join(shlex.quote(a) for a in prog.argv))

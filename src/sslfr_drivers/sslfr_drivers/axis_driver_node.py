@@ -183,6 +183,11 @@ class AxisDriver(rclpy.lifecycle.Node):
         self._clock_pair: tuple[float, float] | None = None
         self._rate = 1.0
         self.create_timer(period, self._control_tick, callback_group=self._io_group, clock=self.steady)
+        # the status heartbeat has its own timer and group: it is published at
+        # status_rate in every lifecycle state, whatever board I/O is under way
+        self._status_timer = self.create_timer(
+            1.0 / self.p['status_rate'], self._publish_status,
+            callback_group=MutuallyExclusiveCallbackGroup(), clock=self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         self._autostart_timer = None
         if self.p['autostart']:
@@ -231,33 +236,37 @@ class AxisDriver(rclpy.lifecycle.Node):
             self.sup.stall = stall
             self.sup.safety.timeout = proposed['safety_timeout']
             self.sup.safety.silent_stow_after = proposed['safety_silent_stow_after']
+            self._status_timer.timer_period_ns = int(1e9 / proposed['status_rate'])
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
         """Open the board link and read INFO; FAILURE (logged once per distinct
         error) when the board cannot be reached or refuses the protocol. The
-        position counts as lost until re-referenced."""
+        position counts as lost until re-referenced. The board is opened without
+        holding the node's lock, so the status heartbeat and the control tick go on
+        while INFO is awaited (up to 3 s)."""
+        try:
+            session = AxisBoardSession(self.port, self.p['baudrate'], self.p['request_timeout'],
+                                       self.p['link_timeout'], self.p['heartbeat_period'])
+            info = session.open()
+        except BoardRefused as exc:
+            if str(exc) != self.last_error:      # autostart retries: log changes only
+                self.get_logger().error(f'configure refused: {exc}')
+            self.last_error = str(exc)
+            return TransitionCallbackReturn.FAILURE
+        except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
+            error = f'cannot reach the board on {self.port}: {exc}'
+            if error != self.last_error:      # autostart retries: log changes only
+                self.get_logger().error(f'configure failed: {error}')
+            self.last_error = error
+            return TransitionCallbackReturn.FAILURE
         with self._lock:
-            try:
-                session = AxisBoardSession(self.port, self.p['baudrate'], self.p['request_timeout'],
-                                           self.p['link_timeout'], self.p['heartbeat_period'])
-                info = session.open()
-            except BoardRefused as exc:
-                if str(exc) != self.last_error:      # autostart retries: log changes only
-                    self.get_logger().error(f'configure refused: {exc}')
-                self.last_error = str(exc)
-                return TransitionCallbackReturn.FAILURE
-            except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
-                error = f'cannot reach the board on {self.port}: {exc}'
-                if error != self.last_error:      # autostart retries: log changes only
-                    self.get_logger().error(f'configure failed: {error}')
-                self.last_error = error
-                return TransitionCallbackReturn.FAILURE
             self.session = session
+            self.last_error = ''
             self.sup.position_lost()
-            self.get_logger().info(f'configured: board {info} on {self.port}')
-            return TransitionCallbackReturn.SUCCESS
+        self.get_logger().info(f'configured: board {info} on {self.port}')
+        return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         """Start following tracker/trajectory; clears a latched fault."""
@@ -435,8 +444,6 @@ class AxisDriver(rclpy.lifecycle.Node):
             if session is not None and board is not None:
                 self._execute(session, act)
             rate = self.p['control_rate']
-            if self._tick_n % max(1, round(rate / self.p['status_rate'])) == 0:
-                self._publish_status(now_ros)
             if board is not None and self._tick_n % max(1, round(rate / self.p['joint_state_rate'])) == 0:
                 self._publish_joint(board)
 
@@ -479,7 +486,12 @@ class AxisDriver(rclpy.lifecycle.Node):
     def _measured(self) -> float:
         return self.sup.measured(self.board) if self.board is not None else float('nan')
 
-    def _publish_status(self, now_ros: float) -> None:
+    def _publish_status(self) -> None:
+        with self._lock:
+            m = self._status_msg()
+        self.pub_status.publish(m)
+
+    def _status_msg(self) -> AxisStatus:
         m = AxisStatus()
         m.header.stamp = self.get_clock().now().to_msg()
         m.axis = self.axis
@@ -501,7 +513,7 @@ class AxisDriver(rclpy.lifecycle.Node):
             m.link_state = s.link_state()
             m.frames_lost, m.frames_bad = s.frames_lost() & 0xFFFFFFFF, s.frames_bad() & 0xFFFFFFFF
             m.board_info = s.board_info
-        self.pub_status.publish(m)
+        return m
 
     def _publish_joint(self, board: BoardState) -> None:
         js = JointState()

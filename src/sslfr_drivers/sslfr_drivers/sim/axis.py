@@ -110,6 +110,7 @@ class AxisSim(SimBoard):
         self.cmd_speed = 0.0        # [steps/s] limit of the current move
         self.homed = False
         self.homing: tuple[int, int] | None = None   # (switch, position)
+        self.home_angle: float | None = None         # joint angle [rad] where HOME ended
         self.faults = m.FaultBits.RESET
 
     def limit_bits(self) -> int:
@@ -233,6 +234,7 @@ class AxisSim(SimBoard):
     def _home_done(self) -> None:
         _, position = self.homing
         self.homing = None
+        self.home_angle = self.angle
         self.counter = self.target = float(position)
         self.speed = 0.0
         self.homed = True

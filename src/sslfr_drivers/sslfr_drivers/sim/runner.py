@@ -373,7 +373,8 @@ class Runner:
 def board_state(addr, board: SimBoard, faults: FaultInjector) -> dict:
     """JSON-able state of one board for the ``status`` command: counters of the
     board and its fault injector; axis boards add angle [rad], counter, target
-    [steps], speed [steps/s], homed, stalled and fault bits."""
+    [steps], speed [steps/s], homed, stalled, fault bits and home_angle (the joint
+    angle [rad] where the last HOME since boot ended, None before)."""
     d = {
         'address': addr.hex() if addr else None,
         'kind': board.kind.name, 'name': board.name,
@@ -383,7 +384,7 @@ def board_state(addr, board: SimBoard, faults: FaultInjector) -> dict:
         'bytes_dropped': faults.bytes_dropped, 'bytes_corrupted': faults.bytes_corrupted,
         'frames_corrupted': faults.frames_corrupted, 'frames_silenced': faults.frames_silenced,
     }
-    for attr in ('angle', 'counter', 'target', 'speed', 'homed', 'stalled', 'faults'):
+    for attr in ('angle', 'counter', 'target', 'speed', 'homed', 'stalled', 'faults', 'home_angle'):
         if hasattr(board, attr):
             v = getattr(board, attr)
             d[attr] = int(v) if attr == 'faults' else v
