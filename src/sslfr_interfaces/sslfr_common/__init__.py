@@ -1,0 +1,9 @@
+"""Python side of the graph contract, shared by every package of the tracker.
+
+Installed by the ``sslfr_interfaces`` package (the lowest layer of the workspace:
+the planner, the drivers and the bring-up all depend on it, it depends on nothing of
+theirs):
+
+- :mod:`sslfr_common.node`: node plumbing (the Jazzy main pattern once, signals,
+  the log bridge).
+"""

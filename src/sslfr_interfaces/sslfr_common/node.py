@@ -1,0 +1,253 @@
+"""Node plumbing shared by every node of the tracker: the Jazzy main pattern, written once.
+
+:func:`run_node` is the whole ``main()`` of a node (as in ros2/demos ``lifecycle_py``
+and ``demo_nodes_py``), with what a tracker on a Pi needs on top of it:
+
+- **Signals.** SIGINT and SIGTERM (Ctrl-C in a terminal, ``ros2 launch``, systemd) ask
+  for an orderly stop: the executor is woken at once, the spin loop ends, the node's
+  ``on_exit()`` hook runs (motors stopped, links and bags closed) while the ROS
+  context is still valid (so its last logs still reach ``/rosout`` and a lifecycle
+  node can still publish its transitions), then the node is destroyed and rclpy shut
+  down. Every further SIGINT/SIGTERM during that stop is ignored (``ros2 launch``
+  without a terminal sends SIGINT twice): the process exits 0 with nothing printed
+  as an error. A signal that arrives while the node is being built stops it the same
+  way once it exists. Only SIGKILL can cut ``on_exit()`` short.
+- **A message rclpy cannot take never ends the process.** Under heavy load rclpy's
+  ``take_message`` was seen raising ``RuntimeError`` for one received message
+  (compare ros2/rclpy#848); ``rclpy.spin`` would let that end the node. The loop
+  logs it (throttled), counts it in :attr:`SpinStats` and goes on.
+- **Invalid start-up configuration** (the exceptions in ``config_errors``, by default
+  ``ValueError`` and rclpy's parameter exceptions) prints one line naming the node
+  and the reason and exits 2, so a supervisor can tell it from a crash.
+- **The log bridge.** The pure modules log with Python ``logging``; :class:`LogBridge`
+  forwards their records to the node's rclpy logger (once per distinct text) and is
+  detached before the node is destroyed: nothing is forwarded to ``/rosout`` after
+  shutdown.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import sys
+import threading
+from typing import Callable
+
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, \
+    ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+#: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
+CONFIG_ERRORS: tuple[type[BaseException], ...] = (
+    ValueError, TypeError, ParameterException, InvalidParameterTypeException,
+    InvalidParameterValueException)
+
+#: Longest wait of one spin_once [s]; the signal wake-up makes stops immediate anyway.
+SPIN_TIMEOUT_S = 0.5
+
+
+class SpinStats:
+    """What :func:`run_node` dropped: ``errors`` [-] and the ``last`` error text."""
+
+    def __init__(self) -> None:
+        self.errors = 0
+        self.last = ''
+
+
+class LogBridge(logging.Handler):
+    """Forward Python ``logging`` records of ``loggers`` to ``node``'s rclpy logger.
+
+    Repeated identical texts are forwarded once (a link that retries every 0.1 s does
+    not flood the log). :meth:`detach` removes the bridge; records after that are
+    dropped below WARNING and printed to stderr from WARNING up (Python's last
+    resort), never sent to a destroyed node.
+    """
+
+    def __init__(self, node, loggers: tuple[str, ...]) -> None:
+        super().__init__(logging.INFO)
+        self.node = node
+        self.last = ''
+        self._loggers = [logging.getLogger(name) for name in loggers]
+        for lg in self._loggers:
+            lg.addHandler(self)
+            lg.setLevel(logging.INFO)
+            lg.propagate = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        node = self.node
+        if node is None:
+            return
+        text = record.getMessage()
+        if text == self.last:
+            return
+        self.last = text
+        try:
+            log = node.get_logger()
+            if record.levelno >= logging.ERROR:
+                log.error(text)
+            elif record.levelno >= logging.WARNING:
+                log.warning(text)
+            else:
+                log.info(text)
+        except Exception:  # noqa: BLE001 - a log line must never break its caller
+            pass
+
+    def detach(self) -> None:
+        """Stop forwarding (idempotent)."""
+        self.node = None
+        for lg in self._loggers:
+            lg.removeHandler(self)
+            lg.propagate = True
+
+
+class _StopRequest:
+    """SIGINT/SIGTERM -> a flag and an executor wake-up, immediately.
+
+    The Python-level handler runs only when the main thread returns to the
+    interpreter, which it does not while it waits in ``rcl_wait``. A wake-up fd
+    (written by CPython's C-level handler, async-signal-safe) is read by a small
+    thread that triggers the executor's guard condition, so ``spin_once`` returns
+    at once and the handler runs.
+    """
+
+    def __init__(self) -> None:
+        self.requested = threading.Event()
+        self.signal_name = ''
+        self.executor = None
+        self._old: dict[int, object] = {}
+        self._rfd, self._wfd = os.pipe()
+        os.set_blocking(self._wfd, False)
+        self._old_wakeup = signal.set_wakeup_fd(self._wfd, warn_on_full_buffer=False)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._handler)
+        threading.Thread(target=self._waker, name='signal-waker', daemon=True).start()
+
+    def _handler(self, signum, frame) -> None:  # noqa: ARG002 - signal API
+        if not self.requested.is_set():
+            self.signal_name = signal.Signals(signum).name
+            self.requested.set()
+        self._wake()
+
+    def _waker(self) -> None:
+        while True:
+            try:
+                data = os.read(self._rfd, 64)
+            except OSError:
+                return
+            if not data:
+                return
+            self._wake()
+
+    def _wake(self) -> None:
+        ex = self.executor
+        if ex is not None:
+            try:
+                ex.wake()
+            except Exception:  # noqa: BLE001 - executor already shut down
+                pass
+
+    def ignore_further(self) -> None:
+        """From now on SIGINT/SIGTERM are ignored (the stop is under way)."""
+        for sig in self._old:
+            signal.signal(sig, signal.SIG_IGN)
+
+    def close(self) -> None:
+        signal.set_wakeup_fd(self._old_wakeup if self._old_wakeup is not None else -1)
+        for fd in (self._wfd, self._rfd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+def spin_until_stopped(node, executor, stop: _StopRequest | None = None,
+                       stats: SpinStats | None = None) -> SpinStats:
+    """Spin ``node`` in ``executor`` until ``stop`` is requested or the context ends.
+
+    A ``RuntimeError`` from the executor (a message rclpy could not take, a callback
+    failing with it) is logged (throttled) and counted in ``stats``; the loop goes on.
+    """
+    stats = stats or SpinStats()
+    if node not in executor.get_nodes():
+        executor.add_node(node)
+    while node.context.ok() and not (stop is not None and stop.requested.is_set()):
+        try:
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+        except RuntimeError as exc:
+            stats.errors += 1
+            stats.last = str(exc)
+            node.get_logger().error(
+                f'a message or callback failed and was dropped ({stats.errors} so far): {exc}',
+                throttle_duration_sec=5.0)
+    return stats
+
+
+def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | None = None,
+             executor: Callable[[object], object] | None = None,
+             config_errors: tuple[type[BaseException], ...] = CONFIG_ERRORS,
+             log_bridge: tuple[str, ...] = ()) -> int:
+    """The whole ``main()`` of a node; returns the exit status (0, or 2 for an invalid
+    start-up configuration).
+
+    Parameters
+    ----------
+    name : str
+        Name used in the one-line refusal (``<name>: invalid configuration, not
+        starting: <reason>``).
+    make_node : callable
+        Builds the node (rclpy is initialised). May raise one of ``config_errors``.
+    executor : callable, optional
+        ``executor(context) -> Executor``; default a SingleThreadedExecutor.
+    log_bridge : tuple of str
+        Python logger names whose records are forwarded to the node's logger
+        (:class:`LogBridge`) until the node is destroyed.
+
+    The node may define ``on_exit()``: called once after spinning ends, with the
+    context still valid (stop motors, close links and files).
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = _StopRequest()
+    node = ex = bridge = None
+    code = 0
+    try:
+        try:
+            node = make_node()
+        except config_errors as exc:
+            print(f'{name}: invalid configuration, not starting: {exc}', file=sys.stderr, flush=True)
+            code = 2
+            return code
+        if log_bridge:
+            bridge = LogBridge(node, log_bridge)
+        ex = executor(node.context) if executor is not None else SingleThreadedExecutor(context=node.context)
+        stop.executor = ex
+        ex.add_node(node)
+        node.spin_stats = spin_until_stopped(node, ex, stop)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        stop.ignore_further()
+        if node is not None:
+            on_exit = getattr(node, 'on_exit', None)
+            if on_exit is not None:
+                try:
+                    on_exit()
+                except Exception as exc:  # noqa: BLE001 - best effort on the way out
+                    try:
+                        node.get_logger().error(f'while stopping: {exc}')
+                    except Exception:  # noqa: BLE001
+                        pass
+        if bridge is not None:
+            bridge.detach()
+        if ex is not None:
+            stop.executor = None
+            ex.shutdown(timeout_sec=2.0)
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - context already gone
+                pass
+        rclpy.try_shutdown()
+        stop.close()
+    return code
