@@ -21,9 +21,9 @@ import random
 import statistics
 import time
 
-from sslfr_drivers.axis_core import (AXIS_LIMITS, STOW_POSITIONS, AxisConfig, AxisSupervisor,
+from sslfr_drivers.axis.core import (AXIS_LIMITS, STOW_POSITIONS, AxisConfig, AxisSupervisor,
                                      BoardState, Calibration, SoftLimits)
-from sslfr_drivers.board_session import AxisBoardSession
+from sslfr_drivers.axis.board_session import AxisBoardSession
 from sslfr_drivers.sim.axis import AxisConfig as SimConfig
 from sslfr_drivers.sim.axis import AxisSim
 from sslfr_drivers.sim.runner import SimThread

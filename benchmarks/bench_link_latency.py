@@ -21,11 +21,11 @@ import threading
 import time
 import tty
 
-from sslfr_drivers import messages as m
-from sslfr_drivers.link import BoardLink
-from sslfr_drivers.protocol import Framer, encode_frame
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.board_link import BoardLink
+from sslfr_drivers.link.protocol import Framer, encode_frame
 from sslfr_drivers.sim.xbee import ApiParser, api_frame
-from sslfr_drivers.transport import SerialTransport, make_transport
+from sslfr_drivers.link.transport import SerialTransport, make_transport
 
 
 def pct(values: list[float], q: float) -> float:

@@ -1,4 +1,4 @@
-"""Throughput of the NMEA stream decoder (sslfr_drivers.nmea.NmeaStream).
+"""Throughput of the NMEA stream decoder (sslfr_drivers.sensors.nmea.NmeaStream).
 
 Prints sentences per second for the full stream path (byte reassembly, checksum,
 pynmeagps parse, fix/time records) fed in 64-byte chunks, and the ratio to bare
@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'sslfr_driv
 from pynmeagps import NMEAReader  # noqa: E402
 
 from sslfr_drivers import nmea  # noqa: E402
-from sslfr_drivers.sensor_world import GpsReceiver  # noqa: E402
+from sslfr_drivers.sim.world import GpsReceiver  # noqa: E402
 
 
 def main(epochs: int = 2000) -> None:

@@ -1,6 +1,6 @@
 """Benchmark: the safety supervisor.
 
-1. Rules core (sslfr_drivers.safety_core): one simulated hour of a tracking day at the
+1. Rules core (sslfr_drivers.safety.core): one simulated hour of a tracking day at the
    real message rates (2 thermocouples at 4 Hz, switches at 10 Hz, 3 axis statuses at
    5 Hz, phase/beam/fix at 1 Hz) and a verdict at 20 Hz, on a fake clock: cost per
    event and per verdict, and the CPU share it would take at the real rates.
@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from sslfr_drivers.safety_core import AXES, SWITCHES, FakeClock, SafetyConfig, SafetyCore
+from sslfr_drivers.safety.core import AXES, SWITCHES, FakeClock, SafetyConfig, SafetyCore
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -417,11 +417,11 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
 
 
 def test_lifecycle_transitions_stall_fault_and_old_protocol(rig, ros):
-    """Driven by sslfr_drivers.lifecycle_util (what bringup uses), no autostart:
+    """Driven by sslfr_drivers.axis.lifecycle_ctl (what bringup uses), no autostart:
     deactivate stops the motor, cleanup closes the link; a stalled joint (steps
     counted, sensor still) latches a fault that stops the axis. A second driver meets
     a board speaking protocol version 0 and must refuse it."""
-    from sslfr_drivers.lifecycle_util import bring_to, get_state
+    from sslfr_drivers.axis.lifecycle_ctl import bring_to, get_state
 
     r = rig(sim_args=['--opt', 'initial_angle_deg=0'], params={'autostart': False})
     # in parallel: a board speaking an old protocol version is refused with a clear message

@@ -40,7 +40,7 @@ def axis_boards(ros_env, tmp_path):
 
 def test_up_activates_axes_reports_safety_restart_and_stops_axes_first(ros, ros_env, axis_boards, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from sslfr_drivers.lifecycle_util import get_state
+    from sslfr_drivers.axis.lifecycle_ctl import get_state
 
     site = tmp_path / 'site.yaml'
     site.write_text(yaml.safe_dump({

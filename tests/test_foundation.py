@@ -56,7 +56,7 @@ def _installed_executables():
 
 
 @pytest.mark.parametrize('package,exe,kind', _installed_executables())
-def test_console_script_installed_where_ros2_run_looks(package, exe, kind, ros_env, tmp_path):
+def test_console_script_installed_where_ros2_run_looks(package, exe, kind, ros_env, ros, tmp_path):
     path = executable(package, exe)
     assert path.is_file() and os.access(path, os.X_OK), f'{path} missing: ros2 run {package} {exe} would fail'
     if kind == 'cli':
@@ -65,8 +65,10 @@ def test_console_script_installed_where_ros2_run_looks(package, exe, kind, ros_e
         assert 'usage' in out.stdout.lower()
     else:  # a node: starts, then stops cleanly on SIGINT
         proc = NodeProcess([str(path)], ros_env, tmp_path / f'{exe}.log')
-        time.sleep(3.0)
-        assert proc.running(), f'{exe} exited early:\n{proc.output()}'
+        # up = its node (default name = the executable's) is in the graph; start-up
+        # takes longer on a loaded machine, so wait for it instead of a fixed sleep
+        up = ros.spin_until(lambda: exe in ros.node.get_node_names() or not proc.running(), 60)
+        assert up and proc.running(), f'{exe} exited early or never joined the graph:\n{proc.output()}'
         code = proc.stop(timeout=10)
         assert code == 0, f'{exe} exit code {code}:\n{proc.output()}'
         assert 'Traceback' not in proc.output(), proc.output()

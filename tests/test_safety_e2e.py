@@ -45,7 +45,8 @@ class WireTap:
     """Transparent pty proxy driver <-> simulated board that decodes host frames."""
 
     def __init__(self, board_path: str):
-        from sslfr_drivers import messages, protocol
+        from sslfr_drivers.link import messages
+        from sslfr_drivers.link import protocol
         self._messages, self._protocol = messages, protocol
         self.master, self._slave = os.openpty()
         tty.setraw(self._slave)

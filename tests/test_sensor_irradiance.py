@@ -6,7 +6,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
-from sslfr_drivers.sensor_world import Sky
+from sslfr_drivers.sim.world import Sky
 from sslfr_drivers.sim.runner import SimThread
 from sslfr_drivers.sim.sensors import DEFAULT_SITE, IrradianceSim
 

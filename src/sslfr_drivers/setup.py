@@ -18,14 +18,14 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'axis_driver = sslfr_drivers.axis_driver_node:main',
-            'lifecycle_ctl = sslfr_drivers.lifecycle_util:main',
-            'safety = sslfr_drivers.safety_node:main',
+            'axis_driver = sslfr_drivers.axis.axis_driver_node:main',
+            'lifecycle_ctl = sslfr_drivers.axis.lifecycle_ctl:main',
+            'safety = sslfr_drivers.safety.safety_node:main',
             'sim_board = sslfr_drivers.sim.runner:main',
-            'xbee_hub = sslfr_drivers.xbee_hub:main',
-            'gps = sslfr_drivers.gps_node:main',
-            'absorber_board = sslfr_drivers.absorber_board_node:main',
-            'irradiance = sslfr_drivers.irradiance_node:main',
+            'xbee_hub = sslfr_drivers.link.xbee_hub:main',
+            'gps = sslfr_drivers.sensors.gps_node:main',
+            'absorber_board = sslfr_drivers.sensors.absorber_board_node:main',
+            'irradiance = sslfr_drivers.sensors.irradiance_node:main',
         ],
     },
 )

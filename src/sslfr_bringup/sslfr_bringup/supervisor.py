@@ -399,7 +399,7 @@ class RosSide(threading.Thread):
             from lifecycle_msgs.srv import ChangeState
             from rclpy.clock import Clock, ClockType
             from rclpy.executors import SingleThreadedExecutor
-            from sslfr_drivers.lifecycle_util import bring_to
+            from sslfr_drivers.axis.lifecycle_ctl import bring_to
 
             ctx = rclpy.Context()
             rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers.axis_core import (
+from sslfr_drivers.axis.core import (
     AXIS_LIMITS, SEED_STEP_ANGLE, Calibration, SafetyVerdict, SafetyWatch, SoftLimits,
     StallDetector, TrajectoryStore, move_speed, validate_trajectory, TrajectoryRejected,
 )
@@ -178,7 +178,7 @@ def test_stall_without_sensor_pending_move_not_moving():
 
 
 # ----------------------------------------------------------------- supervisor
-from sslfr_drivers.axis_core import Action, AxisConfig, AxisSupervisor, BoardState  # noqa: E402
+from sslfr_drivers.axis.core import Action, AxisConfig, AxisSupervisor, BoardState  # noqa: E402
 
 
 def _sup(use_sensor=True, auto_home=True):
@@ -285,8 +285,8 @@ def test_setpoint_lead_scales_with_the_ros_time_rate():
 
 
 def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
-    from sslfr_drivers import messages as m
-    from sslfr_drivers.axis_core import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
+    from sslfr_drivers.link import messages as m
+    from sslfr_drivers.axis.core import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
     assert BOARD_FAULT_STALL == m.FaultBits.STALL and BOARD_FAULT_DRIVER == m.FaultBits.DRIVER
     sup = _sup()
     sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
@@ -296,8 +296,8 @@ def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
 
 
 def test_sensor_fault_bit_drops_the_sensor():
-    from sslfr_drivers import messages as m
-    from sslfr_drivers.board_session import board_state
+    from sslfr_drivers.link import messages as m
+    from sslfr_drivers.axis.board_session import board_state
     st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR | m.StatusFlags.HOMED), 0, 0, 0.5, 1)
     assert board_state(st).sensor == pytest.approx(0.5)
     st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR), 0, int(m.FaultBits.SENSOR), 0.5, 1)

@@ -6,13 +6,13 @@ import tty
 
 import pytest
 
-from sslfr_drivers import messages as m
-from sslfr_drivers.link import BoardLink, LinkDown, LinkState, NackError
-from sslfr_drivers.protocol import Frame, Framer, encode_frame
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.board_link import BoardLink, LinkDown, LinkState, NackError
+from sslfr_drivers.link.protocol import Frame, Framer, encode_frame
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
 from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.transport import SerialTransport, TransportError, make_transport
+from sslfr_drivers.link.transport import SerialTransport, TransportError, make_transport
 
 from drivers_testutil import wait_for
 
@@ -186,7 +186,7 @@ def test_old_protocol_version_refused():
 def test_loss_counter_exact_across_board_sequence_wrap():
     """Board sequence numbers start just below 65535 and wrap during the run while
     5 % of board frames are corrupted: frames_lost stays exactly the corrupted count."""
-    from sslfr_drivers.protocol import SequenceCounter
+    from sslfr_drivers.link.protocol import SequenceCounter
     board = AxisSim(AxisConfig.for_axis('mobile_structure'), rng=random.Random(8))
     board.take_output()                        # drop the power-up BOOT (seq 0) ...
     board._seq = SequenceCounter(65450)        # ... and boot again near the wrap
@@ -215,7 +215,7 @@ def test_loss_counter_exact_across_board_sequence_wrap():
 def test_frame_protocol_with_pyserial_reader_thread():
     import serial
     import serial.threaded
-    from sslfr_drivers.transport import FrameProtocol
+    from sslfr_drivers.link.transport import FrameProtocol
     got = []
     ser = serial.serial_for_url('loop://', timeout=0.05)
     with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(got.append)) as proto:

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers import messages as m
-from sslfr_drivers.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, PROTOCOL_VERSION, SEQ_MOD,
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, PROTOCOL_VERSION, SEQ_MOD,
                                     Frame, FrameError, Framer, PayloadError, ProtocolError,
                                     SequenceTracker, crc16, decode_frame, encode_frame)
 
@@ -200,10 +200,10 @@ def test_nan_speed_refused_at_decode():
 
 
 def test_registry_ranges_and_uniqueness():
-    import sslfr_drivers.messages_sensors  # noqa: F401 - registers the sensor messages
+    import sslfr_drivers.link.sensor_messages  # noqa: F401 - registers the sensor messages
     for code, cls in m.registry().items():
         in_sensor_range = code in m.SENSOR_REQUEST_RANGE or code in m.SENSOR_REPLY_RANGE
-        assert in_sensor_range == (cls.__module__ != 'sslfr_drivers.messages'), cls
+        assert in_sensor_range == (cls.__module__ != 'sslfr_drivers.link.messages'), cls
         assert cls.TYPE == code
     with pytest.raises(ValueError):
         @m.register

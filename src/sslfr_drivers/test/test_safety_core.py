@@ -1,4 +1,4 @@
-"""Unit tests of the safety rules (sslfr_drivers.safety_core), on numbers, with an
+"""Unit tests of the safety rules (sslfr_drivers.safety.core), on numbers, with an
 injected clock (steady and wall time moved by hand)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers.safety_core import (AXES, SWITCH_AXIS, SWITCHES, FakeClock, Level, SafetyConfig,
+from sslfr_drivers.safety.core import (AXES, SWITCH_AXIS, SWITCHES, FakeClock, Level, SafetyConfig,
                                        SafetyCore, with_changes)
 
 TRACKING, NIGHT, STOW_PHASE = 2, 0, 5

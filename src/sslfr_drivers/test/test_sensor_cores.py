@@ -4,7 +4,11 @@ import math
 import pytest
 from hypothesis import given, strategies as st
 
-from sslfr_drivers import debounce, max6675, veml7700
+from sslfr_drivers.sensors import debounce
+
+from sslfr_drivers.sensors import max6675
+
+from sslfr_drivers.sensors import veml7700
 
 
 # ------------------------------------------------------------------ MAX6675

@@ -6,10 +6,16 @@ from types import SimpleNamespace
 import pytest
 from hypothesis import given, strategies as st
 
-from sslfr_drivers import max6675, messages as m, nmea, veml7700
-from sslfr_drivers.messages_sensors import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
-from sslfr_drivers.protocol import Framer, PayloadError
-from sslfr_drivers.sensor_world import Sky
+from sslfr_drivers.sensors import max6675
+
+from sslfr_drivers.link import messages as m
+
+from sslfr_drivers.sensors import nmea
+
+from sslfr_drivers.sensors import veml7700
+from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
+from sslfr_drivers.link.protocol import Framer, PayloadError
+from sslfr_drivers.sim.world import Sky
 from sslfr_drivers.sim.sensors import (AbsorberSim, GpsSim, IrradianceSim, WorldPublisher,
                                        read_axis_angles, write_axis_angle)
 
@@ -115,7 +121,7 @@ def test_irradiance_sim_measures_clear_sky_beam():
 
 def test_sensor_boards_refuse_get_status_and_identify():
     b = IrradianceSim({'start_utc': NOON})
-    from sslfr_drivers.protocol import encode_frame
+    from sslfr_drivers.link.protocol import encode_frame
     b.receive(encode_frame(m.encode(m.GetStatus(), 1)) + encode_frame(m.encode(m.GetInfo(), 2)))
     out = [m.decode(f) for f in Framer().feed(b.take_output())]
     assert any(isinstance(x, m.Nack) and x.code == m.ErrorCode.UNKNOWN_TYPE for x in out)
@@ -141,7 +147,7 @@ def test_bad_sensor_payloads_raise_payload_error():
         NmeaChunk(b'x' * 89).pack()
     with pytest.raises(PayloadError):
         m.decode(m.encode(SwitchSample(1, 0x20), 1))        # a sixth switch does not exist
-    from sslfr_drivers.protocol import Frame
+    from sslfr_drivers.link.protocol import Frame
     with pytest.raises(PayloadError):
         m.decode(Frame(AlsSample.TYPE, 1, b'\x00\x01'))
     assert all(0xC0 <= c.TYPE <= 0xDF for c in (NmeaChunk, ThermocoupleSample, SwitchSample, AlsSample))

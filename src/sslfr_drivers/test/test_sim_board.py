@@ -8,10 +8,10 @@ import time
 
 import pytest
 
-from sslfr_drivers import messages as m
-from sslfr_drivers.link import BoardLink, LinkState, NackError
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.board_link import BoardLink, LinkState, NackError
 from sslfr_drivers.sim.runner import SimControl
-from sslfr_drivers.transport import SerialTransport
+from sslfr_drivers.link.transport import SerialTransport
 
 from drivers_testutil import wait_for
 

@@ -14,12 +14,12 @@ from digi.xbee.packets.raw import RX64Packet, TX64Packet, TXStatusPacket
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers.link import BoardLink, LinkState
+from sslfr_drivers.link.board_link import BoardLink, LinkState
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
 from sslfr_drivers.sim.runner import SimControl, SimThread
 from sslfr_drivers.sim.xbee import ApiParser, XBeeSimCoordinator, api_frame
-from sslfr_drivers.transport import make_transport
+from sslfr_drivers.link.transport import make_transport
 
 from drivers_testutil import wait_for
 
@@ -127,8 +127,8 @@ def test_runner_xbee_process(tmp_path):
 
 def test_hub_gives_each_remote_board_a_pty(xbee_sim, tmp_path):
     """xbee_hub: one process owns the coordinator UART, drivers open plain ptys."""
-    from sslfr_drivers.transport import SerialTransport
-    from sslfr_drivers.xbee_hub import XBeeHub
+    from sslfr_drivers.link.transport import SerialTransport
+    from sslfr_drivers.link.xbee_hub import XBeeHub
     import threading
     paths = {ADDR_A: str(tmp_path / 'a'), ADDR_B: str(tmp_path / 'b')}
     hub = XBeeHub(xbee_sim.path, paths, control=str(tmp_path / 'hub.sock'))

@@ -31,8 +31,8 @@ import math
 import random
 from dataclasses import dataclass
 
-from .. import messages as m
-from .base import Refuse, SimBoard
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.sim.base import Refuse, SimBoard
 
 AXES = {
     # name: (lo, hi, sleep) joint limits [rad] (seed 000 section 4 and team conventions:

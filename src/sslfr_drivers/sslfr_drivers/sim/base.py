@@ -29,8 +29,8 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from .. import messages as m
-from ..protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, SequenceCounter,
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, SequenceCounter,
                         SequenceTracker, encode_frame)
 
 

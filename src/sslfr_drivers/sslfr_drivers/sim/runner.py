@@ -45,8 +45,8 @@ import termios
 import time
 import tty
 
-from .base import FaultInjector, SimBoard
-from . import board_class
+from sslfr_drivers.sim.base import FaultInjector, SimBoard
+from sslfr_drivers.sim import board_class
 
 
 def open_pty() -> tuple[int, int, str]:
@@ -226,7 +226,7 @@ class Runner:
         # shared world file (sim.sensors): axis angles for the absorber's focus model
         world = os.environ.get('SSLFR_SIM_WORLD')
         if world:
-            from .sensors import WorldPublisher
+            from sslfr_drivers.sim.sensors import WorldPublisher
             self.world = WorldPublisher(world)
         else:
             self.world = None
@@ -474,7 +474,7 @@ def main(argv: list[str] | None = None) -> int:
 
     opts = dict(o.split('=', 1) for o in args.opt)
     if args.xbee:
-        from .xbee import XBeeSimCoordinator
+        from sslfr_drivers.sim.xbee import XBeeSimCoordinator
         if not args.board:
             print('sim_board: --xbee needs at least one --board KIND[:AXIS]@ADDR', file=sys.stderr)
             return 2

@@ -3,17 +3,17 @@
 Each class is a :class:`~sslfr_drivers.sim.base.SimBoard` speaking the board
 protocol like the Arduino firmware of seed 000 section 3.5 (streams samples
 unsolicited, answers PING / GET_INFO / RESET, NACKs GET_STATUS), driven by the models
-of :mod:`sslfr_drivers.sensor_world`:
+of :mod:`sslfr_drivers.sim.world`:
 
 * :class:`GpsSim` - a NEO-6M behind an Arduino: one NMEA epoch (RMC, GGA, GSA, GSV)
   per second, forwarded as :class:`NmeaChunk` frames, or - option
   ``framing: raw_nmea`` - as the bare NMEA byte stream of a GPS module plugged on its
   own USB port (no board protocol at all).
 * :class:`AbsorberSim` - two MAX6675 words at 4 Hz (the converter's 220 ms
-  conversion time) from :class:`~sslfr_drivers.sensor_world.AbsorberThermal`, and the
+  conversion time) from :class:`~sslfr_drivers.sim.world.AbsorberThermal`, and the
   five raw limit switch bits at 20 Hz and on every change.
 * :class:`IrradianceSim` - a VEML7700 with the firmware's auto gain / integration
-  time (:func:`sslfr_drivers.veml7700.next_setting`) measuring the clear-sky beam
+  time (:func:`sslfr_drivers.sensors.veml7700.next_setting`) measuring the clear-sky beam
   illuminance DNI * 104 lm/W (1 % noise).
 
 Time. The boards run on the runner's steady clock ``now`` [s] (CLOCK_MONOTONIC, shared
@@ -55,12 +55,14 @@ import random
 import tempfile
 import time
 
-from .. import max6675, veml7700
-from .. import messages as m
-from ..debounce import SWITCH_NAMES
-from ..messages_sensors import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
-from ..sensor_world import AbsorberThermal, GpsReceiver, Sky, ThermalParameters
-from .base import Refuse, SimBoard
+from sslfr_drivers.sensors import max6675
+
+from sslfr_drivers.sensors import veml7700
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.sensors.debounce import SWITCH_NAMES
+from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
+from sslfr_drivers.sim.world import AbsorberThermal, GpsReceiver, Sky, ThermalParameters
+from sslfr_drivers.sim.base import Refuse, SimBoard
 
 #: Defaults: the seed 000 prototype at the University of Almeria (36.83 N, 2.40 W).
 DEFAULT_SITE = {'latitude_deg': 36.8381, 'longitude_deg': -2.4597, 'elevation': 60.0}

@@ -24,7 +24,7 @@ address gets TX status 1 (no ACK) - the host counts those as transmit failures.
 """
 from __future__ import annotations
 
-from .base import FaultInjector, SimBoard, _split_frames
+from sslfr_drivers.sim.base import FaultInjector, SimBoard, _split_frames
 
 START = 0x7E
 ESCAPE = 0x7D

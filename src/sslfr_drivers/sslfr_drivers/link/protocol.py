@@ -99,7 +99,7 @@ class Frame:
     Attributes
     ----------
     type : int
-        Message type code (0..255), see :mod:`sslfr_drivers.messages`.
+        Message type code (0..255), see :mod:`sslfr_drivers.link.messages`.
     seq : int
         Sender's sequence number (0..65535).
     payload : bytes

@@ -3,7 +3,7 @@
 Seed 000 section 3.5.5: a VEML7700 (0-120,000 lx, 16-bit) on the irradiance PCB;
 beam irradiance = illuminance / 104 lm/W. The board does the auto gain / integration
 time ranging and sends the raw count with the register codes used; the conversion
-is :mod:`sslfr_drivers.veml7700`.
+is :mod:`sslfr_drivers.sensors.veml7700`.
 
 Publishes
     ``irradiance/illuminance`` (sensor_msgs/Illuminance, R10, ~1 Hz) [lx], variance [lx^2].
@@ -22,9 +22,9 @@ from sensor_msgs.msg import Illuminance
 from sslfr_interfaces.msg import Irradiance
 from sslfr_planner.spin import spin
 
-from . import veml7700
-from .messages_sensors import AlsSample
-from .sensor_node_util import SensorBoardNode, board_status
+from sslfr_drivers.sensors import veml7700
+from sslfr_drivers.link.sensor_messages import AlsSample
+from sslfr_drivers.sensors.board_node import SensorBoardNode, board_status
 
 PARAMS = {
     'port': ('', 'irradiance board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '

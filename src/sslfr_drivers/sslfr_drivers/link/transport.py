@@ -1,4 +1,4 @@
-"""Byte transports under a :class:`~sslfr_drivers.link.BoardLink` (no rclpy).
+"""Byte transports under a :class:`~sslfr_drivers.link.board_link.BoardLink` (no rclpy).
 
 * :class:`SerialTransport` - any pyserial URL or device: ``/dev/ttyUSB0``,
   ``/dev/serial0``, a pty slave such as ``/dev/pts/7`` (what the simulated boards
@@ -398,15 +398,15 @@ def make_transport(port: str, baudrate: int = 115200) -> Transport:
 
 class FrameProtocol:
     """Adapter for ``serial.threaded.ReaderThread``: feeds every chunk pyserial reads
-    into a :class:`~sslfr_drivers.protocol.Framer` and calls ``on_frame(frame)`` for
+    into a :class:`~sslfr_drivers.link.protocol.Framer` and calls ``on_frame(frame)`` for
     each valid frame (for code that prefers pyserial's own reader thread to
-    :class:`~sslfr_drivers.link.BoardLink`)::
+    :class:`~sslfr_drivers.link.board_link.BoardLink`)::
 
         with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(cb)) as proto: ...
     """
 
     def __init__(self, on_frame):
-        from .protocol import Framer
+        from sslfr_drivers.link.protocol import Framer
         self.framer = Framer()
         self.on_frame = on_frame
         self.transport = None

@@ -7,7 +7,7 @@ plain rclpy *client* of the standard lifecycle services every lifecycle node off
 
 Library use (from any rclpy node, e.g. a bringup script or a test)::
 
-    from sslfr_drivers.lifecycle_util import bring_to
+    from sslfr_drivers.axis.lifecycle_ctl import bring_to
     ok, msg = bring_to(node, 'mirrors_driver', 'active', timeout=10.0)
 
 Command line (the ``lifecycle_ctl`` console script)::

@@ -4,7 +4,7 @@ Pure Python (no rclpy). A node creates one :class:`BoardLink` per board, calls
 :meth:`BoardLink.start` and then uses :meth:`submit` (returns a
 ``concurrent.futures.Future``, never blocks) or :meth:`request` (blocks up to
 ``timeout * (retries + 1)``). A background thread reads the transport, feeds the
-:class:`~sslfr_drivers.protocol.Framer`, matches answers to requests, retries
+:class:`~sslfr_drivers.link.protocol.Framer`, matches answers to requests, retries
 unanswered requests with the SAME sequence number (the board answers a duplicated
 request from its cache and does not execute it twice), sends heartbeats, and
 reopens a lost port with exponential back-off. After every (re)connection, after a
@@ -27,10 +27,10 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 from typing import Callable
 
-from . import messages as m
-from .protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, ProtocolError,
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, ProtocolError,
                        ProtocolVersionError, SequenceCounter, SequenceTracker, encode_frame)
-from .transport import TransmitError, Transport, TransportError
+from sslfr_drivers.link.transport import TransmitError, Transport, TransportError
 
 _log = logging.getLogger(__name__)
 

@@ -1,13 +1,13 @@
 """The axis driver's view of one axis board (no rclpy): a thin adapter over
-:class:`sslfr_drivers.link.BoardLink` that speaks in :mod:`axis_core` terms.
+:class:`sslfr_drivers.link.board_link.BoardLink` that speaks in :mod:`axis_core` terms.
 
 - :meth:`AxisBoardSession.open` starts the link, waits for INFO and refuses a board
   speaking another protocol version or that is not an axis board
   (:class:`BoardRefused`, message says why);
 - :meth:`poll` reads STATUS (one try, short time-out) into a
-  :class:`~sslfr_drivers.axis_core.BoardState`, or None while the link is not UP
+  :class:`~sslfr_drivers.axis.core.BoardState`, or None while the link is not UP
   (down, reconnecting, re-reading INFO/STATUS after a board reset);
-- :meth:`command` executes an :class:`~sslfr_drivers.axis_core.Action`
+- :meth:`command` executes an :class:`~sslfr_drivers.axis.core.Action`
   (MOVE_TO / STOP / HOME / SET_ZERO) and returns ``(ok, detail)``;
 - :meth:`take_reset` / :meth:`take_reconnect` report (once) that the board reset or
   the port was reopened since the last call, so the driver forgets its commands.
@@ -20,11 +20,11 @@ from __future__ import annotations
 import math
 import time
 
-from . import messages as m
-from .axis_core import Action, BoardState, Calibration
-from .link import BoardLink, LinkError, LinkState, NackError
-from .protocol import ProtocolError
-from .transport import make_transport
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.axis.core import Action, BoardState, Calibration
+from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackError
+from sslfr_drivers.link.protocol import ProtocolError
+from sslfr_drivers.link.transport import make_transport
 
 # AxisStatus.LINK_* values (sslfr_interfaces/msg/AxisStatus.msg)
 LINK_DOWN, LINK_CONNECTING, LINK_UP, LINK_FAULT = 0, 1, 2, 3

@@ -4,7 +4,7 @@ Seed 000 sections 3.5.1 and 3.5.3: two type-K thermocouples on MAX6675 converter
 the absorber tube's inlet and outlet (the safety limit, 150 degC, is the safety node's
 business), and five limit switches (initial, last, sleeping, longitudinal 1 and 2).
 The board sends raw MAX6675 words and raw switch bits; decoding
-(:mod:`sslfr_drivers.max6675`) and debouncing (:mod:`sslfr_drivers.debounce`) are
+(:mod:`sslfr_drivers.sensors.max6675`) and debouncing (:mod:`sslfr_drivers.sensors.debounce`) are
 done here, in the pure cores.
 
 Publishes
@@ -31,10 +31,10 @@ from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import LimitSwitches
 from sslfr_planner.spin import spin
 
-from . import max6675
-from .debounce import SWITCH_NAMES, SwitchDebouncer
-from .messages_sensors import SwitchSample, ThermocoupleSample
-from .sensor_node_util import RateMeter, SensorBoardNode, board_status
+from sslfr_drivers.sensors import max6675
+from sslfr_drivers.sensors.debounce import SWITCH_NAMES, SwitchDebouncer
+from sslfr_drivers.link.sensor_messages import SwitchSample, ThermocoupleSample
+from sslfr_drivers.sensors.board_node import RateMeter, SensorBoardNode, board_status
 
 PARAMS = {
     'port': ('', 'absorber board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '

@@ -3,7 +3,7 @@ board its own local pty (pure Python, no rclpy).
 
 Several driver processes (three ``axis_driver`` instances, the sensor nodes) cannot
 open one serial port. The hub opens the local XBee (802.15.4, API mode AP=2) through
-:class:`~sslfr_drivers.transport.XBeeCoordinator` and, for each remote board
+:class:`~sslfr_drivers.link.transport.XBeeCoordinator` and, for each remote board
 ``ADDR=PATH``, creates a raw pty and a symlink ``PATH`` to it. Each driver then uses
 ``PATH`` as an ordinary serial port (``SerialTransport``), exactly as with a
 USB-connected board or a ``sim_board`` pty:
@@ -34,9 +34,9 @@ import sys
 import threading
 import time
 
-from .protocol import Framer, encode_frame
-from .sim.runner import PtyEndpoint, close_control, listen_control, serve_until_signalled
-from .transport import TransmitError, TransportError, XBeeBoardTransport, XBeeCoordinator
+from sslfr_drivers.link.protocol import Framer, encode_frame
+from sslfr_drivers.sim.runner import PtyEndpoint, close_control, listen_control, serve_until_signalled
+from sslfr_drivers.link.transport import TransmitError, TransportError, XBeeBoardTransport, XBeeCoordinator
 
 
 class _Board:

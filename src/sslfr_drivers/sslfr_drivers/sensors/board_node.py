@@ -5,7 +5,7 @@
   ParameterDescriptor; a runtime change is validated and refused with a reason while
   the node keeps its last good configuration.
 * :class:`BoardSource`: the board behind ``port``, either through the board protocol
-  (:class:`~sslfr_drivers.link.BoardLink`, which reopens a lost port with back-off) or
+  (:class:`~sslfr_drivers.link.board_link.BoardLink`, which reopens a lost port with back-off) or
   - GPS only - a raw NMEA byte stream (``framing: raw_nmea``) read by a thread that
   also reopens the port. Either way callbacks run in the reader thread; nodes put
   samples in a queue that an executor timer drains.
@@ -29,9 +29,9 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from . import messages_sensors  # noqa: F401 - registers the sensor message types
-from .link import BoardLink
-from .transport import TransportError, make_transport
+from sslfr_drivers.link import sensor_messages  # noqa: F401 - registers the sensor message types
+from sslfr_drivers.link.board_link import BoardLink
+from sslfr_drivers.link.transport import TransportError, make_transport
 
 _log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Sensor-board messages of the SSLFR board protocol (pure Python, no rclpy).
 
-Registered in the ranges :mod:`sslfr_drivers.messages` reserves for sensor boards
+Registered in the ranges :mod:`sslfr_drivers.link.messages` reserves for sensor boards
 (0x40-0x5F host -> board, 0xC0-0xDF board -> host). Importing this module registers
 them. Wire layout little-endian; documented in docs/protocol.md, "Sensor boards".
 
@@ -27,15 +27,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from .messages import SENSOR_REPLY_RANGE, Message, register
-from .protocol import MAX_PAYLOAD, PayloadError
+from sslfr_drivers.link.messages import SENSOR_REPLY_RANGE, Message, register
+from sslfr_drivers.link.protocol import MAX_PAYLOAD, PayloadError
 
 
 @register
 @dataclass(frozen=True)
 class NmeaChunk(Message):
     """A piece of the GPS receiver's NMEA byte stream (sentences may be split across
-    chunks; the host reassembles them with :class:`sslfr_drivers.nmea.NmeaStream`)."""
+    chunks; the host reassembles them with :class:`sslfr_drivers.sensors.nmea.NmeaStream`)."""
 
     TYPE: ClassVar[int] = 0xC0
     data: bytes = b''
@@ -58,7 +58,7 @@ class NmeaChunk(Message):
 @dataclass(frozen=True)
 class ThermocoupleSample(Message):
     """Raw MAX6675 words of the inlet and outlet thermocouples (decode with
-    :func:`sslfr_drivers.max6675.decode`)."""
+    :func:`sslfr_drivers.sensors.max6675.decode`)."""
 
     TYPE: ClassVar[int] = 0xC1
     FORMAT: ClassVar[str] = 'IHH'
@@ -88,7 +88,7 @@ class SwitchSample(Message):
 @dataclass(frozen=True)
 class AlsSample(Message):
     """VEML7700 raw ALS count with the gain and integration-time codes it was taken
-    with (decode with :func:`sslfr_drivers.veml7700.decode`)."""
+    with (decode with :func:`sslfr_drivers.sensors.veml7700.decode`)."""
 
     TYPE: ClassVar[int] = 0xC3
     FORMAT: ClassVar[str] = 'IHBB'

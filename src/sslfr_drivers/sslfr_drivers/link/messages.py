@@ -2,7 +2,7 @@
 
 Pure Python (no rclpy). Every message type is a frozen dataclass registered with
 :func:`register` under a one-byte type code; :func:`encode` / :func:`decode` turn
-them into / from :class:`~sslfr_drivers.protocol.Frame` payloads. All multi-byte
+them into / from :class:`~sslfr_drivers.link.protocol.Frame` payloads. All multi-byte
 fields are little-endian.
 
 Type code ranges (documented in docs/protocol.md; never reuse a code):
@@ -10,7 +10,7 @@ Type code ranges (documented in docs/protocol.md; never reuse a code):
 =============  ==============================================================
 0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET)
 0x10 - 0x3F    axis-board requests (MOVE_TO, STOP, HOME, SET_ZERO)
-0x40 - 0x5F    RESERVED for sensor-board requests (messages_sensors module)
+0x40 - 0x5F    RESERVED for sensor-board requests (sensor_messages module)
 0x60 - 0x7F    reserved (future)
 0x80 - 0x8F    common board -> host frames (ACK, NACK, INFO, STATUS, BOOT)
 0x90 - 0xBF    axis-board unsolicited frames (none yet)
@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
-from .protocol import FLAG_RESPONSE, Frame, PayloadError
+from sslfr_drivers.link.protocol import FLAG_RESPONSE, Frame, PayloadError
 
 DEFAULT_STEP_RAD = math.radians(0.006)
 

@@ -3,7 +3,7 @@
 Seed 000 section 3.5.2: a GY-GPS6MV2 (u-blox NEO-6M) behind an Arduino gives the
 site's position and UTC. The bytes come either in board-protocol NmeaChunk frames
 (``framing: protocol``, also behind the XBee coordinator) or straight from a GPS module
-on its own USB port (``framing: raw_nmea``). :class:`sslfr_drivers.nmea.NmeaStream`
+on its own USB port (``framing: raw_nmea``). :class:`sslfr_drivers.sensors.nmea.NmeaStream`
 does all the parsing; this node only converts its records to messages.
 
 Publishes
@@ -25,9 +25,9 @@ from rclpy.executors import ExternalShutdownException
 from sslfr_planner.spin import spin
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
-from . import nmea
-from .messages_sensors import NmeaChunk
-from .sensor_node_util import BoardSource, SensorBoardNode, board_status
+from sslfr_drivers.sensors import nmea
+from sslfr_drivers.link.sensor_messages import NmeaChunk
+from sslfr_drivers.sensors.board_node import BoardSource, SensorBoardNode, board_status
 
 assert (nmea.STATUS_NO_FIX, nmea.STATUS_FIX, nmea.STATUS_SBAS_FIX, nmea.STATUS_GBAS_FIX) == (
     NavSatStatus.STATUS_NO_FIX, NavSatStatus.STATUS_FIX, NavSatStatus.STATUS_SBAS_FIX,

@@ -1,7 +1,7 @@
 """``safety``: the safety supervisor node (thin ROS shell around safety_core).
 
 Seed 000 section 3.5.3: absorber above 150 degC -> mirrors to the sleeping position.
-The rules live in :mod:`sslfr_drivers.safety_core`; this node only turns messages into
+The rules live in :mod:`sslfr_drivers.safety.core`; this node only turns messages into
 core events (with their arrival time on the steady clock), publishes the verdict and
 serves the operator calls.
 
@@ -43,7 +43,7 @@ from trajectory_msgs.msg import JointTrajectory
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
 from sslfr_planner.spin import spin
 
-from .safety_core import AXES, SWITCHES, WATCHABLE, Level, SafetyConfig, SafetyCore
+from sslfr_drivers.safety.core import AXES, SWITCHES, WATCHABLE, Level, SafetyConfig, SafetyCore
 
 _D = SafetyConfig()
 

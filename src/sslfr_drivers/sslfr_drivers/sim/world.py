@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import nmea
+from sslfr_drivers.sensors import nmea
 
 
 # ----------------------------------------------------------------------- sky

@@ -3,8 +3,8 @@
 One instance per axis (parameter ``axis`` = mirrors | mobile_structure |
 secondary_reflector; node names ``<axis>_driver`` by convention, set with
 ``-r __node:=mirrors_driver``). The decisions are made by the pure core
-:class:`sslfr_drivers.axis_core.AxisSupervisor`; this file only wires ROS and the
-board link (:class:`sslfr_drivers.link.BoardLink`, protocol in docs/protocol.md).
+:class:`sslfr_drivers.axis.core.AxisSupervisor`; this file only wires ROS and the
+board link (:class:`sslfr_drivers.link.board_link.BoardLink`, protocol in docs/protocol.md).
 
 Lifecycle (rclpy.lifecycle, as ros2/demos lifecycle_py):
 
@@ -18,7 +18,7 @@ Lifecycle (rclpy.lifecycle, as ros2/demos lifecycle_py):
 ``autostart`` (default false, the ROS convention that a manager drives lifecycle
 nodes): when true the node configures itself at start, retrying every
 ``retry_period`` seconds while no board answers, and then activates. Without it use
-``lifecycle_ctl set active <node>`` (sslfr_drivers.lifecycle_util) or call
+``lifecycle_ctl set active <node>`` (sslfr_drivers.axis.lifecycle_ctl) or call
 ``<node>/change_state``.
 
 Operator mode comes from ``tracker/phase`` (TL1): phase MAINTENANCE (or mode
@@ -54,11 +54,11 @@ from sslfr_planner.spin import spin
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from .axis_core import (
+from sslfr_drivers.axis.core import (
     AXES, AXIS_LIMITS, HOME_SWITCHES, SEED_STEP_ANGLE, STOW_POSITIONS, Action, AxisConfig,
     AxisSupervisor, BoardState, Calibration, SoftLimits, StallDetector,
 )
-from .board_session import AxisBoardSession, BoardRefused
+from sslfr_drivers.axis.board_session import AxisBoardSession, BoardRefused
 
 _F, _I, _S, _B = 'double', 'integer', 'string', 'bool'
 

@@ -1,0 +1,1 @@
+"""The axis driver: decision core, board session, lifecycle node and lifecycle tool."""

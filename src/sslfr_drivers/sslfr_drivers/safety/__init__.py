@@ -1,0 +1,1 @@
+"""The safety supervisor: rules, core and node."""
