@@ -59,6 +59,7 @@ class MetadataError(BagError):
 
     def __init__(self, source: str, refused: yamlcpp.Refused):
         self.source, self.rule, self.key, self.line = source, refused.rule, refused.key, refused.line
+        self.message = refused.message
         where = f'{source}:{refused.line}' if refused.line else source
         super().__init__(f'{where}: {refused.key}: {refused.message} (rosbag2 would refuse it, '
                          f'rule {refused.rule})')

@@ -32,6 +32,7 @@ SOURCES = {
     'convert.h': 'jbeder/yaml-cpp@0.8.0 include/yaml-cpp/node/convert.h',
     'registry.md': 'foxglove/mcap@95d06735 website/docs/spec/registry.md',
     'spec.md': 'foxglove/mcap@95d06735 website/docs/spec/index.md',
+    'reader.inl': 'foxglove/mcap@95d06735 cpp/mcap/include/mcap/reader.inl',
     'type_description': 'ros2/rosidl@1d92ce39 (jazzy) rosidl_generator_type_description/'
                         'rosidl_generator_type_description/__init__.py',
 }
@@ -104,9 +105,12 @@ _RULES = [
           ('qos.cpp', '151-165'))),
     # -- each .mcap file ------------------------------------------------------------------
     Rule('F01', 'refuse', 'the file opens as MCAP (magic, header)',
-         (('mcap_storage.cpp', '366-374'), ('spec.md', '40'), ('spec.md', '48'))),
-    Rule('F02', 'refuse', 'the summary can be read (footer and summary section intact)',
-         (('mcap_storage.cpp', '699-708'), ('spec.md', '143'))),
+         (('mcap_storage.cpp', '362-377'), ('reader.inl', '301-351'), ('spec.md', '40'),
+          ('spec.md', '48'))),
+    Rule('F02', 'refuse', 'the summary can be read, or else the whole data section scans '
+         'cleanly (rosbag2 reads with AllowFallbackScan: a cut or damaged record fails it)',
+         (('mcap_storage.cpp', '699-708'), ('reader.inl', '397-427'), ('reader.inl', '515-588'),
+          ('spec.md', '143'))),
     Rule('F03', 'refuse', 'the summary has a Statistics record',
          (('mcap_storage.cpp', '459-463'),)),
     Rule('F04', 'differs', 'the header profile is `ros2`', (('registry.md', '240-242'),)),
@@ -119,7 +123,8 @@ _RULES = [
          'YAML text of a sequence of QoS maps (rules M09-M11); rosbag2 writes `[]` when '
          'there is none', (('registry.md', '247-249'), ('mcap_storage.cpp', '483-488'),
                            ('mcap_storage.cpp', '935-937'), ('qos.cpp', '441-452'))),
-    Rule('F08', 'differs', 'channel metadata `topic_type_hash` is present and is a RIHS01 hash',
+    Rule('F08', 'differs', 'channel metadata `topic_type_hash`, when present, is the RIHS01 '
+         'hash of the schema\'s type description (rosbag2 writes it, readers do not require it)',
          (('mcap_storage.cpp', '489-492'), ('mcap_storage.cpp', '938'),
           ('type_description', '26-33'))),
     Rule('F09', 'refuse', 'schema encoding is `ros2msg` and the name a package resource '
