@@ -50,12 +50,15 @@ def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: b
 
     The refusal names the allowed range, e.g. ``must be in (0.05, 60] s, got 'nan'``.
     """
+    def fmt(x: float) -> str:
+        return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f'{x:g}'
+
     def describe() -> str:
         left = '(' if lo_open else '['
-        rng = f'{left}{lo:g}, {hi:g}]' if lo is not None and hi is not None else \
-            (f'>= {lo:g}' if lo is not None else f'<= {hi:g}')
+        rng = f'{left}{fmt(lo)}, {fmt(hi)}]' if lo is not None and hi is not None else \
+            (f'>= {fmt(lo)}' if lo is not None else f'<= {fmt(hi)}')
         if lo_open and hi is None:
-            rng = f'> {lo:g}'
+            rng = f'> {fmt(lo)}'
         return ('0 or ' if zero else '') + rng + (f' {unit}' if unit else '')
 
     def parse(text: str) -> float:

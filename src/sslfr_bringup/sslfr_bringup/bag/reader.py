@@ -20,7 +20,8 @@ from mcap.reader import SeekingReader
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from .metadata import METADATA_FILENAME, BagError, BagMetadata, FileInfo, TopicInfo, read_metadata
+from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError, TopicInfo,
+                       read_metadata)
 from .scan import mcap_files, topic_from_channel
 
 
@@ -81,7 +82,11 @@ class BagReader:
         if self.path.is_dir():
             self.directory = self.path
             if (self.path / METADATA_FILENAME).exists():
-                self.meta = read_metadata(self.path)
+                try:
+                    self.meta = read_metadata(self.path)
+                except MetadataError as exc:
+                    raise BagError(f'{exc}; `sslfr bag recover {self.path}` rebuilds it from the '
+                                   '.mcap files') from None
                 self.files = [self.path / p for p in self.meta.file_paths()]
             else:
                 self.meta = None
