@@ -219,6 +219,11 @@ def check_file(path: Path, scan: FileScan | None = None) -> tuple[FileScan, list
     if scan.chunks and (not chunk_idx or all(ci.message_index_length == 0 for ci in chunk_idx)):
         out.append(Finding('F12', where, 'message indexes', 'no chunk has message indexes: '
                            'rosbag2 cannot read in log-time order and plays in file order'))
+    if chunk_idx and any(ci.message_index_length for ci in chunk_idx):
+        for c in scan.index_mismatches():
+            out.append(Finding('F12', where, f'message index of the chunk at byte {c.offset}',
+                               'does not list exactly the chunk\'s messages (log time, offset): '
+                               'log-time reads go wrong'))
     if summary is not None:
         offsets = {ci.chunk_start_offset for ci in chunk_idx}
         for c in scan.chunks:

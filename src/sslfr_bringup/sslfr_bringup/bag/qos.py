@@ -136,7 +136,7 @@ def decode_profiles(node: yamlcpp.Node) -> list[dict]:
         node.as_str()  # raises "required key is missing"
     if node.kind != 'seq':
         raise node.refuse(f'must be a YAML sequence of QoS maps, found a YAML {node.kind}', 'M09')
-    return [decode_profile(item) for item in node.elements()]
+    return [decode_profile(item.with_rule('M10')) for item in node.elements()]
 
 
 def load_profiles(text: str, where: str = 'offered_qos_profiles') -> list[dict]:

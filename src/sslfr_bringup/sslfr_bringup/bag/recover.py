@@ -129,7 +129,7 @@ def _lost(scan: FileScan) -> list[str]:
         n = f'{c.indexed_count} messages per its message index' if c.indexed_count is not None \
             else 'message count unknown'
         out.append(f'chunk at byte {c.offset} ({c.length} bytes, {n}): {c.error}')
-    for off, length, why in scan.damaged:
+    for off, length, why in scan.unrescued_damage():
         out.append(f'bytes {off}..{off + length - 1} unreadable: {why}')
     if scan.truncated_at is not None:
         out.append(f'bytes {scan.truncated_at}..{scan.size - 1}: an unfinished record (the '

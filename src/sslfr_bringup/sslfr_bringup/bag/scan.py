@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Iterator
 
 from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Metadata, Schema
 
 from .metadata import TopicInfo
@@ -74,7 +75,7 @@ def parse_record(op: int, body: bytes):
             cid, seq, log, pub = struct.unpack_from('<HIQQ', body)
             return Message(channel_id=cid, sequence=seq, log_time=log, publish_time=pub,
                            data=body[22:])
-    except (struct.error, UnicodeDecodeError, EOFError, IndexError) as exc:
+    except (struct.error, UnicodeDecodeError, EOFError, IndexError, McapError) as exc:
         raise ScanError(f'malformed record ({exc or type(exc).__name__})') from None
     raise ScanError(f'unexpected opcode {op:#04x}')
 
@@ -137,7 +138,10 @@ def chunk_records(body: bytes, validate_crc: bool = True) -> tuple[dict, list]:
         rec_body = payload[pos + 9:pos + 9 + length]
         pos += 9 + length
         if op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
-            records.append(parse_record(op, rec_body))
+            rec = parse_record(op, rec_body)
+            if op == OP_MESSAGE:
+                rec._offset = pos - 9 - length  # where its message index entry must point
+            records.append(rec)
         elif op == 0 or op > OP_DATA_END:
             raise ScanError(f'invalid opcode {op:#04x} inside the chunk')
     return {'start': start, 'end': end, 'usize': usize, 'crc': crc,
@@ -158,6 +162,8 @@ class ChunkFacts:
     end: int = 0    # last log time [ns]
     via_index: bool = False  # reached only through the summary's chunk index
     indexed_count: int | None = None  # messages its Message Index records list
+    entries: dict[int, list[tuple[int, int]]] = field(default_factory=dict)  # cid -> (log, offset)
+    index: dict[int, list[tuple[int, int]]] = field(default_factory=dict)    # as its indexes say
 
 
 @dataclass
@@ -184,6 +190,11 @@ class FileScan:
     summary_error: str = ''
     summary_schemas_only: set[int] = field(default_factory=set)   # ids known only from summary
     summary_channels_only: set[int] = field(default_factory=set)
+
+    def unrescued_damage(self) -> list[tuple[int, int, str]]:
+        """Damaged byte ranges that no intact chunk (found through the index) covers."""
+        good = {c.offset: c.length for c in self.good_chunks}
+        return [d for d in self.damaged if not (d[0] in good and d[1] <= good[d[0]])]
 
     @property
     def good_chunks(self) -> list[ChunkFacts]:
@@ -213,11 +224,24 @@ class FileScan:
             return None
         return min(t[0] for t in times), max(t[1] for t in times)
 
+    def index_mismatches(self) -> list[ChunkFacts]:
+        """Intact chunks whose Message Index records do not list exactly their messages."""
+        out = []
+        for c in self.good_chunks:
+            if c.via_index or not c.count:
+                continue
+            want = {cid: sorted(v) for cid, v in c.entries.items()}
+            got = {cid: sorted(tuple(e) for e in v) for cid, v in c.index.items() if v}
+            if want != got:
+                out.append(c)
+        return out
+
     @property
     def intact(self) -> bool:
-        """Nothing damaged, nothing cut, summary readable."""
+        """Nothing damaged, nothing cut, summary readable, message indexes right."""
         return (self.header_ok and self.data_end and not self.damaged and self.truncated_at is None
-                and not self.bad_chunks and self.summary is not None)
+                and not self.bad_chunks and self.summary is not None
+                and not self.index_mismatches())
 
 
 def _summary(path: Path):
@@ -314,6 +338,7 @@ class _Walker:
             else:
                 facts.count += 1
                 facts.per_channel[rec.channel_id] = facts.per_channel.get(rec.channel_id, 0) + 1
+                facts.entries.setdefault(rec.channel_id, []).append((rec.log_time, rec._offset))
                 times.append(rec.log_time)
         if times:
             facts.start, facts.end = min(times), max(times)
@@ -367,11 +392,14 @@ class _Walker:
                         if scan.chunks and scan.chunks[-1].offset == self.last_chunk:
                             c = scan.chunks[-1]
                             c.indexed_count = (c.indexed_count or 0) + alen // 16
+                            (cid,) = struct.unpack_from('<H', body, 0)
+                            c.index[cid] = [struct.unpack_from('<QQ', body, 6 + 16 * k)
+                                            for k in range(alen // 16)]
                     elif op == OP_ATTACHMENT:
                         pass
                     else:
                         raise ScanError(f'opcode {op:#04x} cannot appear in the data section')
-                except (ScanError, EOFError, UnicodeDecodeError, struct.error) as exc:
+                except (ScanError, EOFError, UnicodeDecodeError, struct.error, McapError) as exc:
                     ok = False
                     why = str(exc) or type(exc).__name__
                 else:
@@ -437,10 +465,14 @@ def scan_file(path: str | os.PathLike, on_records=None) -> FileScan:
                 scan.channels[cid] = c
                 scan.summary_channels_only.add(cid)
         for ci in summary.chunk_indexes:
-            if ci.chunk_start_offset not in walker.seen_chunks:
-                rec = walker.record_at(ci.chunk_start_offset)
-                if rec is not None and rec[0] == OP_CHUNK:
-                    walker.chunk(ci.chunk_start_offset, rec[1], via_index=True)
+            off = ci.chunk_start_offset
+            if off in walker.seen_chunks:
+                continue
+            rec = walker.record_at(off)
+            if rec is None and 9 < ci.chunk_length and off + ci.chunk_length <= len(data):
+                rec = (data[off], data[off + 9:off + ci.chunk_length])  # its length field is damaged
+            if rec is not None and rec[0] == OP_CHUNK:
+                walker.chunk(off, rec[1], via_index=True)
         scan.chunks.sort(key=lambda c: c.offset)
     return scan
 

@@ -169,6 +169,10 @@ class Node:
     def refuse(self, message: str, rule: str | None = None) -> Refused:
         return Refused(rule or self.rule, self.path or 'document', self.line, message)
 
+    def with_rule(self, rule: str) -> Node:
+        """The same node, reporting refusals under another rule id."""
+        return Node(self._node, self.path, rule)
+
     def has(self, key: str) -> bool:
         return self.get(key).kind != 'undefined'
 
