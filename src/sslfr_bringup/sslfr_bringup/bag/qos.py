@@ -153,8 +153,14 @@ def load_profiles(text: str, where: str = 'offered_qos_profiles') -> list[dict]:
 
 
 def unknown_policies(profiles: list[dict]) -> list[str]:
-    """``policy=value`` of every policy that decoded to ``unknown`` (rule M11)."""
-    return [f'{k}={p[k]}' for p in profiles for k in NAMES if p[k] == 'unknown']
+    """``policy=value`` of every policy that decoded to ``unknown`` (rule M11).
+
+    History is left out: DDS does not tell a subscriber the publisher's history, so
+    rosbag2 itself records ``unknown`` there (qos.cpp 50-51) and playback replaces it
+    by keep_last (``adapt_offer_to_recorded_offers``, qos.cpp 419-421).
+    """
+    return [f'{k}={p[k]}' for p in profiles for k in NAMES
+            if k != 'history' and p[k] == 'unknown']
 
 
 def duration_dict(seconds: float | None) -> dict:

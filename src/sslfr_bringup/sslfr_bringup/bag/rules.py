@@ -80,12 +80,13 @@ _RULES = [
          'an int 0..3), deadline, lifespan, liveliness_lease_duration ({sec, nsec} uint64) '
          'and avoid_ros_namespace_conventions (bool)',
          (('qos.cpp', '167-213'), ('qos.cpp', '137-149'))),
-    Rule('M11', 'play', 'QoS policy names are ones rmw knows (history keep_last/keep_all/'
-         'system_default; reliability reliable/best_effort/system_default/best_available; '
-         'durability transient_local/volatile/system_default/best_available; liveliness '
-         'automatic/manual_by_topic/system_default/best_available): any other string '
-         'decodes to UNKNOWN, which no publisher accepts at play time',
-         (('qos.cpp', '57-61'), ('qos_string_conversions.c', '153-200'))),
+    Rule('M11', 'play', 'reliability, durability and liveliness names are ones rmw knows '
+         '(reliable/best_effort, transient_local/volatile, automatic/manual_by_topic, or '
+         'system_default/best_available): any other string decodes to UNKNOWN, which no '
+         'publisher accepts at play time; history may be `unknown` (rosbag2 records it so, '
+         'playback replaces it by keep_last)',
+         (('qos.cpp', '57-61'), ('qos.cpp', '45-55'), ('qos.cpp', '413-422'),
+          ('qos_string_conversions.c', '153-200'))),
     Rule('M12', 'refuse', '`type_description_hash` is a scalar string (version >= 7)',
          (('yaml.hpp', '137-141'),)),
     Rule('M13', 'refuse', '`relative_file_paths` is a sequence of strings',
