@@ -59,8 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     if entry is None:
         print(f'sslfr: unknown subcommand {name!r}\n\n{usage()}', file=sys.stderr)
         return 2
-    module = importlib.import_module(entry[0])
     try:
+        module = importlib.import_module(entry[0])  # Ctrl-C while importing: no traceback
         return int(module.main(rest) or 0)
     except KeyboardInterrupt:
         return 130

@@ -105,20 +105,27 @@ def output_dir(text: str):
         raise argparse.ArgumentTypeError('must be a directory path, got an empty string')
     if '\0' in text:
         raise argparse.ArgumentTypeError('must be a directory path without NUL bytes')
+    import tempfile
     path = Path(os.path.expanduser(text))
     if path.exists():
         if not path.is_dir():
             raise argparse.ArgumentTypeError(f'{text} exists and is not a directory')
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise argparse.ArgumentTypeError(f'{text} is not writable')
+        try:  # a real write test (permission bits say nothing to root, /proc, read-only mounts)
+            with tempfile.TemporaryFile(dir=path):
+                pass
+        except OSError as exc:
+            raise argparse.ArgumentTypeError(f'{text} is not writable ({exc.strerror or exc})') from None
         return path
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise argparse.ArgumentTypeError(f'{text} cannot be created: {parent} is not a directory')
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f'{text} cannot be created: {parent} is not writable')
+    first = path
+    while not first.parent.exists() and first.parent != first:
+        first = first.parent
+    if not first.parent.is_dir():
+        raise argparse.ArgumentTypeError(f'{text} cannot be created: {first.parent} is not a directory')
+    try:  # create and remove the first missing directory: nothing is left behind
+        first.mkdir()
+        first.rmdir()
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f'{text} cannot be created ({exc.strerror or exc})') from None
     return path
 
 
