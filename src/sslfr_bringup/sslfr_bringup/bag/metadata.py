@@ -195,6 +195,15 @@ def _time_ns(node: yamlcpp.Node, key: str) -> int:
     return node.get(key).as_uint64()
 
 
+def _sequence(node: yamlcpp.Node, what: str) -> list[yamlcpp.Node]:
+    """Items of a key that must be a YAML sequence (``as<std::vector<T>>`` refuses the rest)."""
+    if node.kind != 'seq':
+        if node.kind == 'undefined':
+            node.as_str()  # raises "required key is missing"
+        raise node.refuse(f'must be a YAML sequence of {what}, found a YAML {node.kind}')
+    return node.elements()
+
+
 def decode_info(info: yamlcpp.Node) -> BagMetadata:
     """``convert<BagMetadata>::decode`` of the inner mapping, in rosbag2's order.
 
@@ -212,12 +221,7 @@ def decode_info(info: yamlcpp.Node) -> BagMetadata:
     start = _time_ns(info.get('starting_time', 'M05'), 'nanoseconds_since_epoch')
     count = info.get('message_count', 'M06').as_uint64()
     meta.read_totals = (count, start, duration)
-    topics = info.get('topics_with_message_count', 'M07')
-    if topics.kind != 'seq':
-        if topics.kind == 'undefined':
-            topics.as_str()
-        raise topics.refuse(f'must be a YAML sequence, found a YAML {topics.kind}')
-    for item in topics.elements():
+    for item in _sequence(info.get('topics_with_message_count', 'M07'), 'topic entries'):
         tm = item.get('topic_metadata', 'M07')
         if tm.kind == 'undefined':
             tm.as_str()
@@ -233,22 +237,13 @@ def decode_info(info: yamlcpp.Node) -> BagMetadata:
             info_t.type_description_hash = tm.get('type_description_hash', 'M12').as_str()
         info_t.message_count = item.get('message_count', 'M07').as_uint64()
         meta.topics[name] = info_t
-    paths = info.get('relative_file_paths', 'M13')
-    if paths.kind != 'seq':
-        if paths.kind == 'undefined':
-            paths.as_str()
-        raise paths.refuse(f'must be a YAML sequence of file names, found a YAML {paths.kind}')
-    meta.relative_file_paths = [p.as_str() for p in paths.elements()]
+    meta.relative_file_paths = [p.as_str() for p in _sequence(info.get('relative_file_paths', 'M13'),
+                                                               'file names')]
     if version >= 3:
         meta.compression_format = info.get('compression_format', 'M14').as_str()
         meta.compression_mode = info.get('compression_mode', 'M14').as_str()
     if version >= 5:
-        files = info.get('files', 'M15')
-        if files.kind != 'seq':
-            if files.kind == 'undefined':
-                files.as_str()
-            raise files.refuse(f'must be a YAML sequence of file entries, found a YAML {files.kind}')
-        for f in files.elements():
+        for f in _sequence(info.get('files', 'M15'), 'file entries'):
             meta.files.append(FileInfo(
                 path=f.get('path').as_str(),
                 starting_time_ns=_time_ns(f.get('starting_time'), 'nanoseconds_since_epoch'),

@@ -22,7 +22,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError, TopicInfo,
                        read_metadata)
-from .scan import mcap_files, topic_from_channel
+from .scan import decompress, mcap_files, topic_from_channel
 
 
 def _chunk_payload(record: bytes, validate_crc: bool) -> bytes:
@@ -38,21 +38,7 @@ def _chunk_payload(record: bytes, validate_crc: bool) -> bytes:
     payload = record[off:off + rlen]
     if len(payload) != rlen:
         raise EOFError('chunk cut short')
-    try:
-        if compression == 'zstd':
-            import zstandard
-            payload = zstandard.ZstdDecompressor().decompress(payload, max_output_size=usize)
-        elif compression == 'lz4':
-            import lz4.frame
-            payload = lz4.frame.decompress(payload)
-        elif compression:
-            raise ValueError(f'unsupported chunk compression {compression!r}')
-    except ValueError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - zstd/lz4 raise their own error types
-        raise ValueError(f'chunk does not decompress ({exc})') from None
-    if len(payload) != usize:
-        raise ValueError('chunk size mismatch')
+    payload = decompress(compression, payload, usize)
     if validate_crc and crc and zlib.crc32(payload) != crc:
         raise ValueError(f'chunk CRC mismatch (expected {crc:#010x})')
     return payload

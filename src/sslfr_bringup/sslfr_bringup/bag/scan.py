@@ -80,6 +80,32 @@ def parse_record(op: int, body: bytes):
     raise ScanError(f'unexpected opcode {op:#04x}')
 
 
+def decompress(compression: str, data: bytes, usize: int) -> bytes:
+    """Uncompressed records of a chunk ('' / zstd / lz4), checked to be ``usize`` bytes.
+
+    Raises
+    ------
+    ScanError
+        Unknown compression, data that does not decompress, or a size mismatch.
+    """
+    try:
+        if compression == 'zstd':
+            import zstandard
+            data = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
+        elif compression == 'lz4':
+            import lz4.frame
+            data = lz4.frame.decompress(data)
+        elif compression:
+            raise ScanError(f'unsupported chunk compression {compression!r}')
+    except ScanError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - zstd/lz4 raise their own error types
+        raise ScanError(f'chunk does not decompress ({exc})') from None
+    if len(data) != usize:
+        raise ScanError('chunk uncompressed size mismatch')
+    return data
+
+
 def chunk_records(body: bytes, validate_crc: bool = True) -> tuple[dict, list]:
     """Decode a Chunk record body: (header fields, [Schema | Channel | Message ...]).
 
@@ -108,22 +134,7 @@ def chunk_records(body: bytes, validate_crc: bool = True) -> tuple[dict, list]:
         raise ScanError('chunk records length does not match the record length')
     if usize > _MAX_RECORD:
         raise ScanError('impossible uncompressed chunk size')
-    payload = body[off:]
-    try:
-        if compression == 'zstd':
-            import zstandard
-            payload = zstandard.ZstdDecompressor().decompress(payload, max_output_size=usize)
-        elif compression == 'lz4':
-            import lz4.frame
-            payload = lz4.frame.decompress(payload)
-        elif compression:
-            raise ScanError(f'unsupported chunk compression {compression!r}')
-    except ScanError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - zstd/lz4 raise their own error types
-        raise ScanError(f'chunk does not decompress ({exc})') from None
-    if len(payload) != usize:
-        raise ScanError('chunk uncompressed size mismatch')
+    payload = decompress(compression, body[off:], usize)
     if validate_crc and crc and zlib.crc32(payload) != crc:
         raise ScanError(f'chunk CRC mismatch (stored {crc:#010x}, data {zlib.crc32(payload):#010x})')
     records = []
