@@ -72,6 +72,19 @@ def _wait_matched(ros, pubs, timeout=15.0):
         'recorder did not subscribe'
 
 
+def _publish(ros, pub, value: float, n: int) -> None:
+    for _ in range(n):
+        pub.publish(Temperature(temperature=value))
+        ros.spin_for(0.05)
+
+
+def _diag_error(diags, text: str):
+    """Predicate: some diagnostics status is ERROR with ``text`` in its message."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    return lambda: any(s.level == DiagnosticStatus.ERROR and text in s.message
+                       for d in diags for s in d.status)
+
+
 def _sslfr(args, env, timeout=60):
     return subprocess.run([str(ROOT / 'sslfr'), *args], env=env, capture_output=True, text=True,
                           timeout=timeout)
@@ -240,21 +253,15 @@ def test_full_rate_day_replays_over_1000x(ros_env, tmp_path):
 
 
 def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from diagnostic_msgs.msg import DiagnosticArray
     rec = launch('sslfr_bringup', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'min_free_bytes': 2**60, 'discovery_period': 0.2,
         'disk_check_period': 0.2})
     diags = ros.collect(DiagnosticArray, 'diagnostics')
     pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
     _wait_matched(ros, [pub])
-    for _ in range(20):
-        pub.publish(Temperature(temperature=1.0))
-        ros.spin_for(0.05)
-
-    def stopped():
-        return any(s.level == DiagnosticStatus.ERROR and 'recording stopped' in s.message
-                   for d in diags for s in d.status)
-    assert ros.spin_until(stopped, 10.0)
+    _publish(ros, pub, 1.0, 20)
+    assert ros.spin_until(_diag_error(diags, 'recording stopped'), 10.0)
     assert rec.running()                          # only recording stops
     # invalid parameters are refused at runtime, the node keeps its configuration
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -268,7 +275,7 @@ def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
 
 
 def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from diagnostic_msgs.msg import DiagnosticArray
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
     # at start: an output_dir that cannot hold bags stops the node with the reason
@@ -290,9 +297,7 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
     assert not res.successful and '/proc/x' in res.reason and 'cannot write' in res.reason
     pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
     _wait_matched(ros, [pub])
-    for _ in range(10):
-        pub.publish(Temperature(temperature=1.0))
-        ros.spin_for(0.05)
+    _publish(ros, pub, 1.0, 10)
     assert ros.spin_until(lambda: any((tmp_path / 'bags').glob('*/*.mcap')), 10.0)
     # a write error (the bag directory replaced by a file under the recorder) is an ERROR
     # from the first one on
@@ -300,14 +305,8 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
     os.makedirs(tmp_path / 'bags2', exist_ok=True)
     shutil.rmtree(tmp_path / 'bags2')
     (tmp_path / 'bags2').write_text('not a directory')
-    for _ in range(10):
-        pub.publish(Temperature(temperature=2.0))
-        ros.spin_for(0.05)
-
-    def error():
-        return any(s.level == DiagnosticStatus.ERROR and 'write error' in s.message
-                   for d in diags for s in d.status)
-    assert ros.spin_until(error, 10.0)
+    _publish(ros, pub, 2.0, 10)
+    assert ros.spin_until(_diag_error(diags, 'write error'), 10.0)
     assert rec.running()
     assert rec.stop() == 0
 

@@ -236,7 +236,6 @@ def test_our_bags_conform_plain_split_and_recovered(tmp_path):
 
 def test_rosbags_v9_control_bag_conforms(tmp_path):
     from rosbags.rosbag2 import StoragePlugin, Writer as RosbagsWriter
-    from rosbags.rosbag2.metadata import Qos  # noqa: F401 - the v9 writer's QoS type
     from rosbags.typesys import Stores, get_typestore
     store = get_typestore(Stores.ROS2_JAZZY)
     T = store.types['sensor_msgs/msg/Temperature']
