@@ -348,3 +348,15 @@ def test_replay_ctrl_c_stops_cleanly(ros_env, tmp_path):
     assert proc.returncode == 130, err
     assert 'interrupted' in out and 'Traceback' not in err
     assert '%' in err                               # the progress bar was drawn
+
+
+def test_sslfr_record_exits_1_when_it_recorded_nothing(ros_env, tmp_path):
+    proc = subprocess.Popen([str(ROOT / 'sslfr'), 'record', '-o', str(tmp_path / 'bags'),
+                             '--topics', '/nobody/publishes/this'], env=ros_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1, (out, err)
+    assert 'recorded 0 message(s)' in err and '/nobody/publishes/this' in err
+    assert 'Traceback' not in err
