@@ -6,6 +6,7 @@ full graph's message rate.
 Figures printed:
 - writer: messages/s writing a day of 1 Hz + 10 Hz topics with BagWriter;
 - reader: messages/s through BagReader (raw) and with decoding;
+- conformance check and ``recover --dry-run`` of the day bag (every chunk scanned);
 - replay: wall time of ``sslfr replay --rate 0`` (as fast as possible) of the full day,
   as a multiple of real time (goal >= 1000x), and at ``--rate 1000`` the lag;
 - recorder: CPU share of the recorder process while a publisher process sends the
@@ -20,6 +21,11 @@ Measured 2026-11-21 on the 2-core x86 development VM, shared with other jobs
     replay --rate 0 of 86400 s: 8.4 s wall = x10,313 real time (goal >= 1000x)
         [replayed 950400 messages in 6.75 s (x12797 real time), process start excluded]
     recorder CPU at the full graph rate (97 msg/s, 16 topics): 10.7 % of one core
+
+2026-11-22, --hours 6, load average 18-24 on the 2 cores (so every figure slow):
+
+    conformance check (rosbag2 rules, every chunk scanned): 1.7 s = 4.4 MB/s, 0 finding(s)
+    recover --dry-run (full scan): 3.4 s
 """
 from __future__ import annotations
 
@@ -158,6 +164,17 @@ def main() -> int:
         k = sum(1 for _ in r.messages())
         dt = time.monotonic() - t
         print(f'reader (raw): {k} messages in {dt:.1f} s = {k / dt:,.0f} msg/s')
+        from sslfr_bringup.bag.conformance import check_bag
+        from sslfr_bringup.bag.recover import recover_bag
+        t = time.monotonic()
+        rep = check_bag(bag)
+        dt = time.monotonic() - t
+        print(f'conformance check (rosbag2 rules, every chunk scanned): {dt:.1f} s = '
+              f'{size / 1e6 / dt:.1f} MB/s, {len(rep.findings)} finding(s)')
+        t = time.monotonic()
+        recover_bag(bag, write=False)
+        dt = time.monotonic() - t
+        print(f'recover --dry-run (full scan): {dt:.1f} s')
         t = time.monotonic()
         k = sum(1 for _ in r.decoded(['/tracker/sun']))
         dt = time.monotonic() - t

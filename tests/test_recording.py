@@ -7,7 +7,9 @@ and mcap + mcap_ros2 (decoding through the recorded schemas).
 """
 from __future__ import annotations
 
+import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -28,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'sslfr_bringup' / 'test'))
 
 from sslfr_bringup.bag import BagReader, BagWriter, WriterOptions, profile  # noqa: E402
+from sslfr_bringup.bag.conformance import check_bag  # noqa: E402
 
 TL1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -67,6 +70,19 @@ def _read_mcap_ros2(bag: Path) -> list[tuple[str, int, bytes, object]]:
 def _wait_matched(ros, pubs, timeout=15.0):
     assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs), timeout), \
         'recorder did not subscribe'
+
+
+def _publish(ros, pub, value: float, n: int) -> None:
+    for _ in range(n):
+        pub.publish(Temperature(temperature=value))
+        ros.spin_for(0.05)
+
+
+def _diag_error(diags, text: str):
+    """Predicate: some diagnostics status is ERROR with ``text`` in its message."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    return lambda: any(s.level == DiagnosticStatus.ERROR and text in s.message
+                       for d in diags for s in d.status)
 
 
 def _sslfr(args, env, timeout=60):
@@ -121,6 +137,10 @@ def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
                     assert dec.reason == m.reason
     info = BagReader(bag).topics
     assert info['/tracker/phase'].offered_qos_profiles[0]['durability'] == 'transient_local'
+    # rosbag2 Jazzy's reading rules (metadata v9, QoS maps, ros2 profile, hashes, indexes)
+    report = check_bag(bag)
+    assert report.findings == [], report.text()
+    assert all(t.type_description_hash.startswith('RIHS01_') for t in report.metadata.topics.values())
 
 
 def test_record_replay_round_trip_lossless(launch, ros_env, tmp_path):
@@ -193,9 +213,13 @@ def test_sigkill_then_recover_loses_at_most_5_s(launch, ros, ros_env, tmp_path):
     (bag,) = _bag_dirs(tmp_path / 'bags')
     assert not (bag / 'metadata.yaml').exists()
     out = _sslfr(['bag', 'info', str(bag)], ros_env)
-    assert out.returncode == 1 and 'recover' in out.stderr
+    assert out.returncode == 2 and 'recover' in out.stderr and 'metadata.yaml' in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and 'Traceback' not in out.stderr
     out = _sslfr(['bag', 'recover', str(bag)], ros_env)
     assert out.returncode == 0, out.stderr
+    report = check_bag(bag)                       # the recovered bag is one rosbag2 opens
+    assert report.findings == [], report.text()
+    assert _sslfr(['bag', 'info', str(bag)], ros_env).returncode == 0
     got = [g for g in _read_rosbags(bag) if g[0] == '/absorber/outlet_temperature']
     values = [int(dec.temperature) for _, _, _, dec in got]
     assert values == list(range(values[0], values[0] + len(values)))   # no hole, no damage
@@ -229,21 +253,15 @@ def test_full_rate_day_replays_over_1000x(ros_env, tmp_path):
 
 
 def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from diagnostic_msgs.msg import DiagnosticArray
     rec = launch('sslfr_bringup', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'min_free_bytes': 2**60, 'discovery_period': 0.2,
         'disk_check_period': 0.2})
     diags = ros.collect(DiagnosticArray, 'diagnostics')
     pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
     _wait_matched(ros, [pub])
-    for _ in range(20):
-        pub.publish(Temperature(temperature=1.0))
-        ros.spin_for(0.05)
-
-    def stopped():
-        return any(s.level == DiagnosticStatus.ERROR and 'recording stopped' in s.message
-                   for d in diags for s in d.status)
-    assert ros.spin_until(stopped, 10.0)
+    _publish(ros, pub, 1.0, 20)
+    assert ros.spin_until(_diag_error(diags, 'recording stopped'), 10.0)
     assert rec.running()                          # only recording stops
     # invalid parameters are refused at runtime, the node keeps its configuration
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -253,6 +271,43 @@ def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
     res = ros.call(SetParameters, 'recorder/set_parameters', req)
     assert not res.results[0].successful and 'compression' in res.results[0].reason
     assert not any((tmp_path / 'bags').glob('*/*.mcap'))
+    assert rec.stop() == 0
+
+
+def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    # at start: an output_dir that cannot hold bags stops the node with the reason
+    (tmp_path / 'a_file').write_text('x')
+    bad = launch('sslfr_bringup', 'recorder', params={'output_dir': str(tmp_path / 'a_file')})
+    assert bad.proc.wait(20) == 2
+    assert 'not a directory' in bad.output()
+    rec = launch('sslfr_bringup', 'recorder', params={
+        'output_dir': str(tmp_path / 'bags'), 'discovery_period': 0.2, 'chunk_duration': 0.2,
+        'fsync': False, 'exclude': ['/diagnostics']})
+    diags = ros.collect(DiagnosticArray, 'diagnostics')
+
+    def set_dir(value):
+        req = SetParameters.Request(parameters=[Parameter(name='output_dir', value=ParameterValue(
+            type=ParameterType.PARAMETER_STRING, string_value=value))])
+        return ros.call(SetParameters, 'recorder/set_parameters', req).results[0]
+    # at run time: refused with the reason, the old location is kept
+    res = set_dir('/proc/x')
+    assert not res.successful and '/proc/x' in res.reason and 'cannot write' in res.reason
+    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    _wait_matched(ros, [pub])
+    _publish(ros, pub, 1.0, 10)
+    assert ros.spin_until(lambda: any((tmp_path / 'bags').glob('*/*.mcap')), 10.0)
+    # a write error (the bag directory replaced by a file under the recorder) is an ERROR
+    # from the first one on
+    assert set_dir(str(tmp_path / 'bags2')).successful
+    os.makedirs(tmp_path / 'bags2', exist_ok=True)
+    shutil.rmtree(tmp_path / 'bags2')
+    (tmp_path / 'bags2').write_text('not a directory')
+    _publish(ros, pub, 2.0, 10)
+    assert ros.spin_until(_diag_error(diags, 'write error'), 10.0)
+    assert rec.running()
     assert rec.stop() == 0
 
 
@@ -293,3 +348,15 @@ def test_replay_ctrl_c_stops_cleanly(ros_env, tmp_path):
     assert proc.returncode == 130, err
     assert 'interrupted' in out and 'Traceback' not in err
     assert '%' in err                               # the progress bar was drawn
+
+
+def test_sslfr_record_exits_1_when_it_recorded_nothing(ros_env, tmp_path):
+    proc = subprocess.Popen([str(ROOT / 'sslfr'), 'record', '-o', str(tmp_path / 'bags'),
+                             '--topics', '/nobody/publishes/this'], env=ros_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1, (out, err)
+    assert 'recorded 0 message(s)' in err and '/nobody/publishes/this' in err
+    assert 'Traceback' not in err

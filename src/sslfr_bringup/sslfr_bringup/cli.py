@@ -19,7 +19,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'up': ('sslfr_bringup.up', 'start the whole node set (real boards) as supervised processes'),
     'sim': ('sslfr_bringup.sim', 'run the node set against simulated boards over a simulated day'),
     'record': ('sslfr_bringup.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
-    'bag': ('sslfr_bringup.bag_cli', 'bag utilities: info, recover'),
+    'bag': ('sslfr_bringup.bag_cli', 'bag utilities: info, check (rosbag2 rules), recover'),
     'replay': ('sslfr_bringup.replay', 'replay a recorded bag with /clock'),
     'report': ('sslfr_bringup.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
@@ -59,8 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     if entry is None:
         print(f'sslfr: unknown subcommand {name!r}\n\n{usage()}', file=sys.stderr)
         return 2
-    module = importlib.import_module(entry[0])
     try:
+        module = importlib.import_module(entry[0])  # Ctrl-C while importing: no traceback
         return int(module.main(rest) or 0)
     except KeyboardInterrupt:
         return 130

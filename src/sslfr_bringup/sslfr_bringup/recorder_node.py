@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from sslfr_planner.spin import spin
 from rclpy.node import Node
@@ -32,7 +34,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProf
 from .bag.policy import DiskGuard, SplitPolicy
 from .bag.qos import duration_dict
 from .bag.schema import DefinitionNotFoundError
-from .bag.session import RecordingSession
+from .bag.session import RecordingSession, probe_output_dir
 from .bag.writer import WriterOptions
 
 _ALWAYS_EXCLUDED = ('/rosout', '/parameter_events')
@@ -100,7 +102,7 @@ class Recorder(Node):
                 desc.integer_range = [IntegerRange(from_value=rng[0], to_value=min(rng[1], 2**62))]
             self.declare_parameter(pname, default, desc)
         cfg = {p: self.get_parameter(p).value for p in self.PARAMS}
-        error = self._validate(cfg)
+        error = self._validate(cfg) or self._output_error(cfg)
         if error:
             raise ValueError(f'recorder: invalid parameters: {error}')
         self.cfg = cfg
@@ -109,6 +111,9 @@ class Recorder(Node):
         self._subs: dict[str, object] = {}
         self._bad_types: set[str] = set()
         self.received = 0
+        self.written = 0        # messages written over the node's life (all sessions)
+        self.write_errors = 0   # write errors over the node's life
+        self.last_error = ''
         self.no_clock = 0
         self._discover_timer = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -127,15 +132,21 @@ class Recorder(Node):
             return f"compression must be zstd, lz4 or none (got {cfg['compression']!r})"
         if not str(cfg['output_dir']).strip():
             return 'output_dir is empty'
-        if not cfg['prefix'] or '/' in cfg['prefix']:
+        if not cfg['prefix'] or '/' in cfg['prefix'] or '\0' in cfg['prefix'] \
+                or cfg['prefix'] in ('.', '..'):
             return 'prefix must be a non-empty name without /'
         for key in ('discovery_period', 'chunk_duration', 'disk_check_period'):
             if not cfg[key] > 0:
                 return f'{key} must be > 0'
         for key in ('max_file_size', 'max_file_duration', 'min_free_bytes', 'min_free_fraction'):
-            if cfg[key] < 0:
+            if not cfg[key] >= 0:
                 return f'{key} must be >= 0'
         return ''
+
+    @staticmethod
+    def _output_error(cfg: dict) -> str:
+        why = probe_output_dir(os.path.expanduser(str(cfg['output_dir'])))
+        return f'output_dir {cfg["output_dir"]!r}: {why}' if why else ''
 
     def _make_session(self, cfg: dict) -> RecordingSession:
         opts = WriterOptions(chunk_size=int(cfg['chunk_size']),
@@ -154,10 +165,11 @@ class Recorder(Node):
         for p in params:
             if p.name in new:
                 new[p.name] = p.value
-        error = self._validate(new)
-        if error:
-            return SetParametersResult(successful=False, reason=error)
         changed = {k for k in new if new[k] != self.cfg[k]}
+        error = self._validate(new) or (self._output_error(new) if 'output_dir' in changed else '')
+        if error:
+            self.get_logger().error(f'parameter change refused: {error}')
+            return SetParametersResult(successful=False, reason=error)
         self.cfg = new
         if changed & {'output_dir', 'prefix', 'per_day', 'max_file_size', 'max_file_duration',
                       'chunk_duration', 'chunk_size', 'compression', 'fsync', 'min_free_bytes',
@@ -246,10 +258,22 @@ class Recorder(Node):
             src = None
             if isinstance(info, dict):
                 src = info.get('source_timestamp')
-            session_ref.session.write(topic, bytes(data), now, src if src else now,
-                                      int(info.get('publication_sequence_number', 0) or 0)
-                                      if isinstance(info, dict) else 0)
+            session = session_ref.session
+            errors = session.stats.write_errors
+            if session.write(topic, bytes(data), now, src if src else now,
+                             int(info.get('publication_sequence_number', 0) or 0)
+                             if isinstance(info, dict) else 0):
+                session_ref.written += 1
+            elif session.stats.write_errors > errors:
+                session_ref._on_write_error(session.stats.last_error)
         return callback
+
+    def _on_write_error(self, error: str) -> None:
+        """Count a write error; the first one (and every change of reason) is logged as ERROR."""
+        self.write_errors += 1
+        if error != self.last_error:
+            self.get_logger().error(f'cannot record: {error}')
+        self.last_error = error
 
     def _poll(self) -> None:
         was = self.session.recording
@@ -267,7 +291,7 @@ class Recorder(Node):
             st.level = DiagnosticStatus.ERROR
             st.message = s.disk.message if s.disk else 'recording stopped by the disk guard'
         elif s.stats.write_errors:
-            st.level = DiagnosticStatus.WARN
+            st.level = DiagnosticStatus.ERROR  # from the first write error on
             st.message = f'{s.stats.write_errors} write error(s): {s.stats.last_error}'
         else:
             st.level = DiagnosticStatus.OK
@@ -288,12 +312,13 @@ class Recorder(Node):
             super().destroy_node()
 
 
-def main(args=None):
+def main(args=None, require_data: bool = False):
+    """Run the recorder; with ``require_data`` (``sslfr record``) exit 1 when nothing was recorded."""
     rclpy.init(args=args)
     try:
         node = Recorder()
-    except ValueError as exc:
-        print(exc, flush=True)
+    except (ValueError, ParameterException) as exc:
+        print(f'recorder: {exc}' if not str(exc).startswith('recorder') else exc, flush=True)
         rclpy.try_shutdown()
         return 2
     try:
@@ -303,4 +328,9 @@ def main(args=None):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    if require_data and (node.written == 0 or node.write_errors):
+        why = (f'{node.write_errors} write error(s), last: {node.last_error}' if node.write_errors
+               else f'no message received on {", ".join(node.cfg["topics"]) if any(node.cfg["topics"]) else "any topic"}')
+        print(f'sslfr record: recorded {node.written} message(s): {why}', file=sys.stderr, flush=True)
+        return 1
     return 0

@@ -26,8 +26,11 @@ import sys
 import threading
 import time
 
+from sslfr_planner._cliutil import (CliError, OneLineParser, bounded_int, output_dir, ranged_float,
+                                    read_text_file, ros_remap, ros_topic, run)
+
 from .bag.metadata import BagError
-from .bag.playback import Timeline, absolute, parse_remaps, parse_time_spec, progress_line
+from .bag.playback import Timeline, absolute, parse_time_spec, progress_line
 from .bag.reader import BagReader
 
 #: Inputs played in what-if mode (relative names): the sensors (GPS, absorber
@@ -253,41 +256,78 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
     return player
 
 
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='sslfr replay', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+def parser() -> OneLineParser:
+    p = OneLineParser(prog='sslfr replay', description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('bag', help='bag directory (or .mcap file)')
-    p.add_argument('--rate', type=float, default=1.0, help='speed factor, 0 = as fast as possible')
-    p.add_argument('--topics', nargs='+', default=None, help='topics to play (default: all)')
-    p.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO', help='rename topics')
+    p.add_argument('--rate', type=ranged_float(0.001, 1e6, zero=True), default=1.0,
+                   help='speed factor 0.001..1e6, 0 = as fast as possible')
+    p.add_argument('--topics', nargs='+', default=None, type=ros_topic,
+                   help='topics to play (default: all)')
+    p.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO', type=ros_remap,
+                   help='rename topics')
     p.add_argument('--start', default=None, help='seconds from start, -s from end, HH:MM[:SS] UTC or ISO')
     p.add_argument('--end', default=None, help='same forms as --start')
-    p.add_argument('--clock-hz', type=float, default=100.0, help='/clock rate while waiting [Hz wall]')
+    p.add_argument('--clock-hz', type=ranged_float(0.1, 10000.0, unit='Hz'), default=100.0,
+                   help='/clock rate while waiting [Hz wall], 0.1..10000')
     p.add_argument('--no-progress', action='store_true')
-    p.add_argument('--wait-subscribers', type=float, default=0.0,
-                   help='wait up to this long [s] for a subscriber on every played topic')
+    p.add_argument('--wait-subscribers', type=ranged_float(0.0, 3600.0, unit='s'), default=0.0,
+                   help='wait up to this long [s] (0..3600) for a subscriber on every played topic')
     p.add_argument('--what-if', action='store_true',
                    help='play sensor inputs into a fresh planner + safety and compare decisions')
-    p.add_argument('--out', default=None, help='what-if: where to keep the decisions bag and report')
+    p.add_argument('--out', default=None, type=output_dir,
+                   help='what-if: where to keep the decisions bag and report')
     p.add_argument('--config', default=None, help='what-if: site params file for planner/safety')
-    p.add_argument('--domain', type=int, default=None, help='what-if: ROS domain id (default: a free one)')
-    p.add_argument('--inputs', nargs='+', default=None, help='what-if: input topics to play')
+    p.add_argument('--domain', type=bounded_int(0, 232), default=None,
+                   help='what-if: ROS domain id 0..232 (default: a free one)')
+    p.add_argument('--inputs', nargs='+', default=None, type=ros_topic,
+                   help='what-if: input topics to play')
     return p
 
 
-def main(argv: list[str]) -> int:
+def remap_table(pairs: list[tuple[str, str]], recorded: list[str]) -> dict[str, str]:
+    """Recorded name -> published name, refusing remaps that would collide.
+
+    Two played topics must never end up on one name (one node cannot publish two
+    types on a name; rclpy would raise).
+
+    Raises
+    ------
+    CliError
+        A remap of a topic the bag does not hold, or a collision.
+    """
+    out: dict[str, str] = {}
+    for src, dst in pairs:
+        a = absolute(src)
+        if a not in recorded:
+            raise CliError(f'argument --remap: {src}:={dst}: the bag has no topic {a}')
+        out[a] = dst if not dst.startswith('/') else absolute(dst)
+    final: dict[str, str] = {}
+    for name in recorded:
+        target = absolute(out.get(name, name))
+        if target in final:
+            raise CliError(f'argument --remap: {final[target]} and {name} would both be published '
+                           f'on {target}')
+        final[target] = name
+    return out
+
+
+def _body(argv: list[str]) -> int:
     ns = parser().parse_args(argv)
+    if ns.config is not None:
+        read_text_file(ns.config, '--config')
+    if ns.domain is not None and not ns.what_if:
+        raise CliError('argument --domain: only with --what-if')
     try:
         reader = BagReader(ns.bag)
+    except BagError as exc:
+        raise CliError(f'bag {ns.bag}: {exc}') from None
+    try:
         start = parse_time_spec(ns.start, reader.start_ns, reader.end_ns) if ns.start else None
         end = parse_time_spec(ns.end, reader.start_ns, reader.end_ns) if ns.end else None
-        remaps = parse_remaps(ns.remap)
-    except (BagError, ValueError) as exc:
-        print(f'sslfr replay: {exc}', file=sys.stderr)
-        return 1
-    if ns.rate < 0:
-        print('sslfr replay: --rate must be >= 0', file=sys.stderr)
-        return 1
+    except ValueError as exc:
+        raise CliError(f'argument --start/--end: {exc}') from None
+    remaps = remap_table(ns.remap, list(reader.topics))
     if ns.what_if:
         from .whatif_run import run_whatif
         return run_whatif(reader, ns, start, end)
@@ -295,8 +335,7 @@ def main(argv: list[str]) -> int:
     if topics:
         missing = [t for t in topics if t not in reader.topics]
         if missing:
-            print(f'sslfr replay: not in the bag: {", ".join(missing)}', file=sys.stderr)
-            return 1
+            raise CliError(f'argument --topics: not in the bag: {", ".join(missing)}')
     player = run_player(reader, topics=topics, remaps=remaps, rate=ns.rate, start_ns=start,
                         end_ns=end, clock_hz=ns.clock_hz, progress=not ns.no_progress,
                         wait_subscribers=ns.wait_subscribers)
@@ -310,3 +349,7 @@ def main(argv: list[str]) -> int:
           + (f' (x{span / player.wall_elapsed:.0f} real time)' if player.wall_elapsed > 0 else '')
           + (' - interrupted' if player.interrupted else ''))
     return 130 if player.interrupted else 0
+
+
+def main(argv: list[str]) -> int:
+    return run('replay', _body, argv)

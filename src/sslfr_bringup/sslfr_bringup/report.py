@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from sslfr_planner._cliutil import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader
@@ -559,16 +560,25 @@ def render_markdown(rep: DayReport, plots: list[Path]) -> str:
 
 
 def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog='sslfr report', description=__doc__,
+    ap = OneLineParser(prog='sslfr report', description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('bag', help='bag directory or .mcap file')
-    ap.add_argument('--out', default=None, help='directory for report.md and PNGs (default <bag>/report)')
+    ap.add_argument('--out', default=None, type=output_dir,
+                    help='directory for report.md and PNGs (default <bag>/report)')
     ap.add_argument('--no-plots', action='store_true', help='text only')
     ap.add_argument('--config', default=None,
                     help='site params file (collector geometry for the ideal commands)')
-    ns = ap.parse_args(argv)
+    try:
+        ns = ap.parse_args(argv)
+    except CliError as exc:
+        print(f'sslfr report: error: {exc}', file=sys.stderr)
+        return 2
     try:
         reader = BagReader(ns.bag)
+    except BagError as exc:  # missing, damaged or wrong-kind bag: bad input
+        print(f'sslfr report: error: bag {ns.bag}: {exc}', file=sys.stderr)
+        return 2
+    try:
         rep = analyse(reader, ns.config)
     except (BagError, OSError) as exc:
         print(f'sslfr report: {exc}', file=sys.stderr)

@@ -126,7 +126,9 @@ def test_schema_parses_like_rosbags_jazzy_store(typ):
                           st.integers(0, 1000)), max_size=4))
 def test_qos_roundtrip(items):
     profs = [profile(r, d, n) for r, d, n in items]
-    assert load_profiles(dump_profiles(profs)) == profs
+    text = dump_profiles(profs)
+    assert load_profiles(text) == profs
+    assert (text == '[]') == (not profs)  # rosbag2 writes [] for no profile
 
 
 def test_qos_v8_integers_are_read():
@@ -252,16 +254,19 @@ def test_corrupt_chunk_is_dropped_and_reader_error_is_clear(tmp_path, capsys):
     assert rep.files[0].chunks_bad == 1
     kept = [m.data for m in BagReader(tmp_path / 'b').messages()]
     assert 0 < len(kept) < len(msgs)
+    # the damaged original is kept beside the rebuilt file, byte for byte
+    assert (tmp_path / 'b' / (f.name + '.damaged')).read_bytes() == bytes(data)
     # garbage is a clear error, never a traceback
     (tmp_path / 'g').mkdir()
     (tmp_path / 'g' / 'g_0.mcap').write_bytes(b'not an mcap file at all')
-    assert bag_cli.main(['info', str(tmp_path / 'g')]) == 1
-    assert bag_cli.main(['recover', str(tmp_path / 'g')]) == 1
+    assert bag_cli.main(['info', str(tmp_path / 'g')]) == 2
+    assert bag_cli.main(['recover', str(tmp_path / 'g')]) == 2
     err = capsys.readouterr().err
-    assert 'not a complete MCAP file' in err and 'bad magic' in err
+    assert 'metadata.yaml: missing' in err and 'no readable .mcap file' in err
     (tmp_path / 'm').mkdir()
     (tmp_path / 'm' / 'metadata.yaml').write_text('rosbag2_bagfile_information: [1, 2')
-    assert bag_cli.main(['info', str(tmp_path / 'm')]) == 1
+    assert bag_cli.main(['info', str(tmp_path / 'm')]) == 2
+    assert 'metadata.yaml:1' in capsys.readouterr().err
 
 
 # -- policies and session -----------------------------------------------------------------
@@ -349,7 +354,9 @@ def test_report_figures_on_a_known_day(tmp_path):
 
 
 def test_playback_helpers():
-    from sslfr_bringup.bag.playback import Timeline, parse_remaps, parse_time_spec
+    from sslfr_bringup.bag.playback import Timeline, parse_time_spec
+    from sslfr_bringup.replay import remap_table
+    from sslfr_planner._cliutil import CliError
     s = T0
     assert parse_time_spec('90', s) == s + 90 * 10**9
     assert parse_time_spec('-10', s, s + 100 * 10**9) == s + 90 * 10**9
@@ -358,8 +365,11 @@ def test_playback_helpers():
     assert parse_time_spec('2026-06-21T12:00:00Z', s) == 1782043200 * 10**9
     with pytest.raises(ValueError):
         parse_time_spec('noon', s)
-    assert parse_remaps(['gps/fix:=/other/fix']) == {'/gps/fix': '/other/fix'}
-    with pytest.raises(ValueError):
-        parse_remaps(['gps/fix'])
+    assert remap_table([('gps/fix', '/other/fix')], ['/gps/fix', '/a']) == {'/gps/fix': '/other/fix'}
+    assert remap_table([('gps/fix', 'rel')], ['/gps/fix']) == {'/gps/fix': 'rel'}
+    with pytest.raises(CliError, match='no topic /x'):
+        remap_table([('x', '/y')], ['/gps/fix'])
+    with pytest.raises(CliError, match='both be published on /a'):
+        remap_table([('gps/fix', '/a')], ['/gps/fix', '/a'])
     tl = Timeline(s, 100.0, 1000.0)
     assert tl.due(s + 10**12) == pytest.approx(101.0) and tl.bag_time(101.0) == s + 10**12

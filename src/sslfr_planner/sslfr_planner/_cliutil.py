@@ -41,3 +41,210 @@ def run(prog: str, body, argv) -> int:
     except OSError as exc:
         print(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': '), file=sys.stderr)
         return 1
+
+
+# -- reusable argparse validators (one-line refusals, exit 2) -------------------------------
+def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+                 zero: bool = False, unit: str = ''):
+    """argparse type: a finite float in [lo, hi] ((lo, hi] with ``lo_open``); ``zero`` also allows 0.
+
+    The refusal names the allowed range, e.g. ``must be in (0.05, 60] s, got 'nan'``.
+    """
+    def fmt(x: float) -> str:
+        return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f'{x:g}'
+
+    def describe() -> str:
+        left = '(' if lo_open else '['
+        rng = f'{left}{fmt(lo)}, {fmt(hi)}]' if lo is not None and hi is not None else \
+            (f'>= {fmt(lo)}' if lo is not None else f'<= {fmt(hi)}')
+        if lo_open and hi is None:
+            rng = f'> {fmt(lo)}'
+        return ('0 or ' if zero else '') + rng + (f' {unit}' if unit else '')
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'must be a number {describe()}, got {text!r}') from None
+        ok = math.isfinite(value)
+        if ok and not (zero and value == 0.0):
+            if lo is not None:
+                ok = value > lo if lo_open else value >= lo
+            if ok and hi is not None:
+                ok = value <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f'must be a number {describe()}, got {text!r}')
+        return value
+    parse.__name__ = 'number'
+    return parse
+
+
+def bounded_int(lo: int, hi: int):
+    """argparse type: an integer in [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}') from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}')
+        return value
+    parse.__name__ = 'integer'
+    return parse
+
+
+def output_dir(text: str):
+    """argparse type: a directory that exists and is writable, or can be created.
+
+    Nothing is created here (a refusal leaves nothing behind); the caller creates it
+    when the work starts. Returns a :class:`pathlib.Path`.
+    """
+    import os
+    from pathlib import Path
+    if not text or not text.strip():
+        raise argparse.ArgumentTypeError('must be a directory path, got an empty string')
+    if '\0' in text:
+        raise argparse.ArgumentTypeError('must be a directory path without NUL bytes')
+    import tempfile
+    path = Path(os.path.expanduser(text))
+    if path.exists():
+        if not path.is_dir():
+            raise argparse.ArgumentTypeError(f'{text} exists and is not a directory')
+        try:  # a real write test (permission bits say nothing to root, /proc, read-only mounts)
+            with tempfile.TemporaryFile(dir=path):
+                pass
+        except OSError as exc:
+            raise argparse.ArgumentTypeError(f'{text} is not writable ({exc.strerror or exc})') from None
+        return path
+    first = path
+    while not first.parent.exists() and first.parent != first:
+        first = first.parent
+    if not first.parent.is_dir():
+        raise argparse.ArgumentTypeError(f'{text} cannot be created: {first.parent} is not a directory')
+    try:  # create and remove the first missing directory: nothing is left behind
+        first.mkdir()
+        first.rmdir()
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f'{text} cannot be created ({exc.strerror or exc})') from None
+    return path
+
+
+def read_text_file(path, what: str = 'file') -> str:
+    """UTF-8 text of an input file, or :class:`CliError` naming the file and what is wrong."""
+    from pathlib import Path
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except IsADirectoryError:
+        raise CliError(f'{what} {p} is a directory, not a file') from None
+    except OSError as exc:
+        raise CliError(f'{what} {p}: {exc.strerror or exc}') from None
+    try:
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise CliError(f'{what} {p} is not a text file (byte 0x{data[exc.start]:02x} at offset '
+                       f'{exc.start} is not UTF-8)') from None
+    if '\0' in text:
+        raise CliError(f'{what} {p} is not a text file (it holds NUL bytes)')
+    return text
+
+
+# ROS names, checked with the rules rcl/rmw apply (rmw validate_node_name.c,
+# rcl validate_topic_name.c, rmw validate_full_topic_name.c) before rcl sees them.
+NODE_NAME_MAX = 255
+TOPIC_NAME_MAX = 255 - 8
+
+
+def _alnum(ch: str) -> bool:
+    return ch.isascii() and ch.isalnum()
+
+
+def node_name_error(name: str) -> str:
+    """Why rmw_validate_node_name refuses ``name`` ('' when it is valid)."""
+    if not name:
+        return 'must not be empty'
+    for i, ch in enumerate(name):
+        if not (_alnum(ch) or ch == '_'):
+            return f'character {ch!r} at {i} is not allowed (letters, digits, _)'
+    if name[0].isdigit():
+        return 'must not start with a digit'
+    if len(name) > NODE_NAME_MAX:
+        return f'is longer than {NODE_NAME_MAX} characters'
+    return ''
+
+
+def topic_name_error(name: str) -> str:
+    """Why rcl would refuse ``name`` as a topic name ('' when valid); relative names allowed."""
+    if not name:
+        return 'must not be empty'
+    if name[0].isdigit():
+        return 'must not start with a digit'
+    if name.endswith('/'):
+        return 'must not end with /'
+    depth = 0
+    for i, ch in enumerate(name):
+        if _alnum(ch) or ch == '_':
+            continue
+        if ch == '/' and not depth:
+            continue
+        if ch == '~' and i == 0:
+            continue
+        if ch == '{' and not depth:
+            depth = 1
+            continue
+        if ch == '}' and depth:
+            depth = 0
+            continue
+        return f'character {ch!r} at {i} is not allowed (letters, digits, _, / and a leading ~)'
+    if depth:
+        return 'has an unmatched {'
+    if '//' in name:
+        return 'must not contain //'
+    for i, ch in enumerate(name[:-1]):
+        if ch == '/' and name[i + 1].isdigit():
+            return f'name token at {i + 1} starts with a digit'
+    if name.startswith('~') and len(name) > 1 and name[1] != '/':
+        return '~ must be followed by /'
+    if len(name) + (0 if name.startswith('/') else 1) > TOPIC_NAME_MAX:
+        return f'is longer than {TOPIC_NAME_MAX} characters'
+    return ''
+
+
+def ros_topic(text: str) -> str:
+    """argparse type: a valid topic name (relative or absolute)."""
+    why = topic_name_error(text)
+    if why:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a valid ROS topic name: {why}')
+    return text
+
+
+def ros_node_name(text: str) -> str:
+    """argparse type: a valid ROS node name."""
+    why = node_name_error(text)
+    if why:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a valid ROS node name: {why}')
+    return text
+
+
+def ros_remap(text: str) -> tuple[str, str]:
+    """argparse type: a topic remap ``from:=to`` with both names valid (rcl's rules)."""
+    if ':=' not in text:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a remap: use from:=to')
+    src, dst = text.split(':=', 1)
+    for side, name in (('from', src), ('to', dst)):
+        why = topic_name_error(name)
+        if why:
+            raise argparse.ArgumentTypeError(f'remap {text!r}: {side} name {name!r} {why}')
+    return src, dst
+
+
+def file_name(text: str) -> str:
+    """argparse type: one path component usable as a file or directory name prefix."""
+    if not text or text in ('.', '..'):
+        raise argparse.ArgumentTypeError(f'must be a non-empty name, got {text!r}')
+    bad = [ch for ch in text if ch in '/\\\0' or not ch.isprintable()]
+    if bad:
+        raise argparse.ArgumentTypeError(f'{text!r} must not contain {bad[0]!r}')
+    if len(text.encode()) > 200:
+        raise argparse.ArgumentTypeError('must be at most 200 bytes long')
+    return text

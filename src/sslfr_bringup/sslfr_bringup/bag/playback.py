@@ -47,25 +47,6 @@ def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None)
     return int(round(t.timestamp() * 1e9))
 
 
-def parse_remaps(items: list[str]) -> dict[str, str]:
-    """``['a:=b', ...]`` -> ``{'/a': '/b'}`` (names made absolute).
-
-    Raises
-    ------
-    ValueError
-        When an item has no ``:=``.
-    """
-    out = {}
-    for item in items or []:
-        if ':=' not in item:
-            raise ValueError(f'remap {item!r} must look like from:=to')
-        src, dst = item.split(':=', 1)
-        if not src or not dst:
-            raise ValueError(f'remap {item!r} must look like from:=to')
-        out[absolute(src)] = absolute(dst) if dst.startswith('/') else dst
-    return out
-
-
 def absolute(name: str) -> str:
     """Topic name with a leading ``/``."""
     return name if name.startswith('/') else '/' + name

@@ -20,9 +20,9 @@ from mcap.reader import SeekingReader
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from .metadata import METADATA_FILENAME, BagError, BagMetadata, FileInfo, TopicInfo, read_metadata
-from .qos import load_profiles
-from .recover import mcap_files
+from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError, TopicInfo,
+                       read_metadata)
+from .scan import decompress, mcap_files, topic_from_channel
 
 
 def _chunk_payload(record: bytes, validate_crc: bool) -> bytes:
@@ -38,16 +38,7 @@ def _chunk_payload(record: bytes, validate_crc: bool) -> bytes:
     payload = record[off:off + rlen]
     if len(payload) != rlen:
         raise EOFError('chunk cut short')
-    if compression == 'zstd':
-        import zstandard
-        payload = zstandard.ZstdDecompressor().decompress(payload, max_output_size=usize)
-    elif compression == 'lz4':
-        import lz4.frame
-        payload = lz4.frame.decompress(payload)
-    elif compression:
-        raise ValueError(f'unsupported chunk compression {compression!r}')
-    if len(payload) != usize:
-        raise ValueError('chunk size mismatch')
+    payload = decompress(compression, payload, usize)
     if validate_crc and crc and zlib.crc32(payload) != crc:
         raise ValueError(f'chunk CRC mismatch (expected {crc:#010x})')
     return payload
@@ -82,8 +73,12 @@ class BagReader:
         if self.path.is_dir():
             self.directory = self.path
             if (self.path / METADATA_FILENAME).exists():
-                self.meta = read_metadata(self.path)
-                self.files = [self.path / f.path for f in self.meta.files]
+                try:
+                    self.meta = read_metadata(self.path)
+                except MetadataError as exc:
+                    raise BagError(f'{exc}; `sslfr bag recover {self.path}` rebuilds it from the '
+                                   '.mcap files') from None
+                self.files = [self.path / p for p in self.meta.file_paths()]
             else:
                 self.meta = None
                 self.files = mcap_files(self.path)
@@ -111,13 +106,7 @@ class BagReader:
                 schema = summary.schemas.get(ch.schema_id)
                 info = self.topics.get(ch.topic)
                 if info is None:
-                    try:
-                        qos = load_profiles(ch.metadata.get('offered_qos_profiles', ''))
-                    except ValueError:
-                        qos = []
-                    info = self.topics[ch.topic] = TopicInfo(
-                        ch.topic, schema.name if schema else '', ch.message_encoding, qos,
-                        ch.metadata.get('topic_type_hash', ''))
+                    info = self.topics[ch.topic] = topic_from_channel(ch, schema)
                 info.message_count += st.channel_message_counts.get(cid, 0)
                 if schema is not None:
                     self.schemas.setdefault(schema.name, schema.data.decode('utf-8', 'replace'))
@@ -260,25 +249,74 @@ class BagReader:
             yield raw, obj
 
     def info_text(self) -> str:
-        """``ros2 bag info``-like summary."""
-        import datetime as dt
-        start, end = self.start_ns, self.end_ns
-        fmt = (lambda t: dt.datetime.fromtimestamp(t / 1e9, tz=dt.timezone.utc)
-               .strftime('%Y-%m-%d %H:%M:%S.%f UTC'))
-        size = sum(p.stat().st_size for p in self.files)
-        lines = [f'Files:             {", ".join(p.name for p in self.files)}',
-                 f'Bag size:          {size / 1024 / 1024:.2f} MiB',
-                 'Storage id:        mcap',
-                 f'Duration:          {(end - start) / 1e9:.3f} s',
-                 f'Start:             {fmt(start) if self.message_count else "-"} ({start / 1e9:.9f})',
-                 f'End:               {fmt(end) if self.message_count else "-"} ({end / 1e9:.9f})',
-                 f'Messages:          {self.message_count}',
-                 'Topic information:']
-        width = max((len(t) for t in self.topics), default=0)
-        for name in sorted(self.topics):
-            t = self.topics[name]
-            q = t.offered_qos_profiles[0] if t.offered_qos_profiles else None
-            qtxt = f'{q["reliability"]}/{q["durability"]}/depth {q["depth"]}' if q else 'no QoS'
-            lines.append(f'  {name:<{width}}  {t.type:<36} {t.message_count:>9} msgs  '
-                         f'{t.serialization_format}  {qtxt}')
+        """What ``ros2 bag info`` prints (rosbag2_py ``format_bag_metadata.cpp``), plus QoS.
+
+        Like rosbag2, a bag directory is described from its metadata.yaml, a single
+        file from its summary; dates are local time. The offered QoS of each topic
+        follows rosbag2's block.
+        """
+        m = self.meta
+        if m.read_totals is not None:
+            count, start, duration = m.read_totals
+        else:
+            count, start, duration = m.message_count, m.starting_time_ns, m.duration_ns
+        topics = list(m.topics.values())
+        if self.path.is_dir():
+            size = sum(p.stat().st_size for p in self.path.rglob('*') if p.is_file())
+        else:
+            size = self.path.stat().st_size
+        pad = ' ' * 19
+        paths = m.file_paths() if self.path.is_dir() else [self.path.name]
+        lines = ['', 'Files:             ' + (f'\n{pad}'.join(paths)),
+                 f'Bag size:          {format_size(size)}',
+                 f'Storage id:        {m.storage_identifier}',
+                 f'ROS Distro:        {m.ros_distro or "unknown"}',
+                 f'Duration:          {seconds_text(duration)}s',
+                 f'Start:             {time_point_text(start)}',
+                 f'End:               {time_point_text(start + duration)}',
+                 f'Messages:          {count}']
+        first = 'Topic information: '
+        for i, t in enumerate(topics):
+            lines.append((first if i == 0 else pad) + f'Topic: {t.name} | Type: {t.type} | '
+                         f'Count: {t.message_count} | Serialization Format: {t.serialization_format}')
+        if not topics:
+            lines.append(first)
+        lines += ['Service:           0', 'Service information: ']
+        for i, t in enumerate(topics):
+            lines.append(('Offered QoS:       ' if i == 0 else pad) + f'{t.name}: {qos_text(t)}')
         return '\n'.join(lines)
+
+
+def seconds_text(ns: int) -> str:
+    """``S.NNNNNNNNN`` of a time or duration [ns] (rosbag2's time_in_sec)."""
+    return f'{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}'
+
+
+def time_point_text(ns: int) -> str:
+    """``Jun 21 2026 12:00:00.000000000 (1782043200.000000000)`` in local time, as rosbag2."""
+    import time as _time
+    t = _time.localtime(ns // 1_000_000_000)
+    return (_time.strftime('%b %e %Y %H:%M:%S', t) + f'.{ns % 1_000_000_000:09d} '
+            f'({seconds_text(ns)})')
+
+
+def format_size(size: int) -> str:
+    """rosbag2's ``format_file_size``: B, KiB, MiB ... with one decimal above bytes."""
+    units = ['B', 'KiB', 'MiB', 'GiB', 'TiB']
+    value, i = float(size), 0
+    while value >= 1024 and i < 4:
+        value /= 1024
+        i += 1
+    return f'{value:.0f} B' if i == 0 else f'{value:.1f} {units[i]}'
+
+
+def qos_text(t: TopicInfo) -> str:
+    """One line per topic: the offered profiles, e.g. ``reliable transient_local keep_last 1``."""
+    if not t.offered_qos_profiles:
+        return 'none recorded'
+    parts = []
+    for q in t.offered_qos_profiles:
+        depth = f' {q["depth"]}' if q['history'] == 'keep_last' else ''
+        parts.append(f'{q["reliability"]} {q["durability"]} {q["history"]}{depth}')
+    uniq = sorted(set(parts))
+    return '; '.join(uniq) + f' ({len(t.offered_qos_profiles)} publisher(s))'

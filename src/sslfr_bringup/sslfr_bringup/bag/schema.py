@@ -137,15 +137,29 @@ class DefinitionCache:
         return append(name, max_depth)
 
     def type_hash(self, name: str) -> str:
-        """The ``RIHS01_...`` type description hash from the generated ``.json``, or ''."""
+        """The ``RIHS01_...`` type description hash of a message type.
+
+        From the generated ``share/<pkg>/msg/<Type>.json`` when it exists (what the build
+        computed), else computed from the ``.msg`` definitions
+        (:func:`sslfr_bringup.bag.typehash.type_hash`, rosidl's algorithm).
+
+        Raises
+        ------
+        DefinitionNotFoundError
+            When neither the ``.json`` nor the ``.msg`` definitions can be found.
+        """
+        from .typehash import type_hash
+        full = normalize_type(name)
+        pkg, ns, typ = split_type(name)
         try:
-            pkg, ns, typ = split_type(name)
             path = self.share_dir(pkg) / ns / f'{typ}.json'
             data = json.loads(path.read_text(encoding='utf-8'))
-            full = normalize_type(name)
             for entry in data.get('type_hashes', []):
-                if entry.get('type_name') == full:
-                    return str(entry.get('hash_string', ''))
-        except (OSError, ValueError, DefinitionNotFoundError):
+                if entry.get('type_name') == full and str(entry.get('hash_string', '')).startswith('RIHS01_'):
+                    return str(entry['hash_string'])
+        except (OSError, ValueError, AttributeError, DefinitionNotFoundError):
             pass
-        return ''
+        try:
+            return type_hash(full, self.text)
+        except (OSError, ValueError) as exc:
+            raise DefinitionNotFoundError(f'cannot compute the type hash of {full}: {exc}') from exc

@@ -14,6 +14,7 @@ and calls :meth:`RecordingSession.poll` from a steady timer. The session
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,27 @@ from .metadata import BagError
 from .policy import DiskGuard, DiskStatus, bag_name
 from .schema import DefinitionCache
 from .writer import BagWriter, WriterOptions
+
+
+def probe_output_dir(root: str | Path) -> str:
+    """Why bags cannot be written under ``root`` ('' when they can).
+
+    Creates the directory if needed and writes and removes a probe file in it: the
+    only test that tells, also as root, that ``/proc/x``, a read-only mount or an
+    existing regular file cannot hold bags.
+    """
+    path = Path(root).expanduser()
+    try:
+        if path.exists() and not path.is_dir():
+            return f'{path} exists and is not a directory'
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f'.sslfr-write-test-{os.getpid()}'
+        with open(probe, 'wb') as fh:
+            fh.write(b'x')
+        probe.unlink()
+    except OSError as exc:
+        return f'cannot write bags in {path}: {exc.strerror or exc}'
+    return ''
 
 
 @dataclass

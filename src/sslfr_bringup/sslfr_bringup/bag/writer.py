@@ -27,7 +27,8 @@ from mcap.writer import CompressionType, Writer
 from .metadata import BagError, BagMetadata, FileInfo, TopicInfo, write_metadata
 from .policy import SplitPolicy
 from .qos import dump_profiles
-from .schema import DefinitionCache, normalize_type
+from .schema import DefinitionCache, DefinitionNotFoundError, normalize_type
+from .typehash import schema_type_hash
 
 LIBRARY = 'sslfr_bringup bag writer (mcap-python)'
 _COMPRESSION = {'none': CompressionType.NONE, '': CompressionType.NONE,
@@ -44,12 +45,12 @@ class McapFile:
     """One open ``.mcap`` file of a bag (ros2 profile, chunked, CRCs on)."""
 
     def __init__(self, path: Path, *, chunk_size: int, compression: str, fsync: bool,
-                 monotonic: Callable[[], float]):
+                 monotonic: Callable[[], float], library: str = LIBRARY):
         self.path = path
         self._fh = open(path, 'xb')  # noqa: SIM115 - closed in finish()/abort()
         self._writer = Writer(self._fh, chunk_size=chunk_size,
                               compression=_COMPRESSION[compression], enable_crcs=True)
-        self._writer.start(profile='ros2', library=LIBRARY)
+        self._writer.start(profile='ros2', library=library)
         self._fsync = fsync
         self._monotonic = monotonic
         self._schemas: dict[str, int] = {}
@@ -59,18 +60,50 @@ class McapFile:
         self._pending_since: float | None = None
 
     def add_topic(self, topic: _Topic) -> None:
-        """Register the schema (once per type) and the channel of a topic."""
+        """Register the schema (once per type) and the channel of a topic.
+
+        Both records go to the data section outside any chunk (the open chunk, if it
+        holds messages, is closed first): a damaged chunk then never takes the
+        definitions of later chunks' messages with it, so recovery keeps every intact
+        chunk. rosbag2 writes the same metadata keys (``mcap_storage.cpp``
+        ``create_topic``: ``offered_qos_profiles`` as the YAML of the QoS sequence,
+        ``[]`` when empty, and ``topic_type_hash``).
+        """
         if topic.info.name in self.channels:
             return
+        if self._pending_since is not None:
+            self.flush()
         typ = topic.info.type
         if typ not in self._schemas:
-            self._schemas[typ] = self._writer.register_schema(
-                name=typ, encoding='ros2msg', data=topic.schema_text.encode('utf-8'))
-        self.channels[topic.info.name] = self._writer.register_channel(
-            topic=topic.info.name, message_encoding=topic.info.serialization_format,
-            schema_id=self._schemas[typ],
+            self._schemas[typ] = self._unchunked(
+                self._writer.register_schema, name=typ, encoding='ros2msg',
+                data=topic.schema_text.encode('utf-8'))
+        self.channels[topic.info.name] = self._unchunked(
+            self._writer.register_channel, topic=topic.info.name,
+            message_encoding=topic.info.serialization_format, schema_id=self._schemas[typ],
             metadata={'offered_qos_profiles': dump_profiles(topic.info.offered_qos_profiles),
                       'topic_type_hash': topic.info.type_description_hash})
+
+    def _unchunked(self, register, **kwargs) -> int:
+        """Call a mcap Writer ``register_*`` with chunking off for that one record.
+
+        mcap-python (pinned in requirements.txt) keeps its chunk builder in the
+        name-mangled ``_Writer__chunk_builder``; without it the record simply goes into
+        the next chunk, which is still valid MCAP.
+        """
+        attr = '_Writer__chunk_builder'
+        builder = getattr(self._writer, attr, None)
+        if builder is None or builder.num_messages:
+            return register(**kwargs)
+        setattr(self._writer, attr, None)
+        try:
+            return register(**kwargs)
+        finally:
+            setattr(self._writer, attr, builder)
+
+    def add_metadata_record(self, meta: BagMetadata) -> None:
+        """Write the ``rosbag2`` metadata record (``mcap_storage.cpp`` ``update_metadata``)."""
+        self._writer.add_metadata('rosbag2', {'serialized_metadata': meta.serialized_for_mcap()})
 
     def write(self, channel_id: int, data: bytes, log_ns: int, publish_ns: int, sequence: int):
         """Append one message (goes into the open chunk)."""
@@ -108,8 +141,7 @@ class McapFile:
     def finish(self, meta: BagMetadata | None) -> None:
         """Write the ``rosbag2`` metadata record, summary, footer; close the file."""
         if meta is not None:
-            self._writer.add_metadata('rosbag2', {'serialized_metadata': meta.serialized_for_mcap(),
-                                                  'ROS_DISTRO': meta.ros_distro})
+            self.add_metadata_record(meta)
         self._writer.finish()
         self._fh.flush()
         if self._fsync:
@@ -195,7 +227,7 @@ class BagWriter:
     # -- set-up -----------------------------------------------------------------------
     def _resume(self) -> None:
         from .recover import recover_bag  # local import: recover uses this module
-        report = recover_bag(self.directory)
+        report = recover_bag(self.directory, verify=False)  # trust closed files: fast restarts
         self.meta = report.metadata
         for name, info in self.meta.topics.items():
             schema_text = report.schemas.get(info.type) or self._schema_text(info.type)
@@ -204,6 +236,17 @@ class BagWriter:
 
     def _schema_text(self, type_name: str) -> str:
         return self.definitions.full_text(type_name)
+
+    def _type_hash(self, type_name: str, schema_text: str) -> str:
+        """RIHS01 hash: generated .json, else computed from the .msg files, else from the schema."""
+        try:
+            return self.definitions.type_hash(type_name)
+        except DefinitionNotFoundError:
+            pass
+        try:
+            return schema_type_hash(schema_text, type_name)
+        except (KeyError, ValueError):
+            return ''
 
     def add_topic(self, name: str, type_name: str, qos_profiles: list[dict] | None = None, *,
                   type_hash: str | None = None, schema_text: str | None = None,
@@ -222,8 +265,7 @@ class BagWriter:
             text = schema_text if schema_text is not None else self._schema_text(type_name)
             info = TopicInfo(name=name, type=type_name, serialization_format=serialization_format,
                              offered_qos_profiles=list(qos_profiles or []),
-                             type_description_hash=(type_hash if type_hash is not None
-                                                    else self.definitions.type_hash(type_name)))
+                             type_description_hash=type_hash or self._type_hash(type_name, text))
             topic = _Topic(info, text)
             self._topics[name] = topic
             self.meta.topics[name] = info
@@ -244,6 +286,7 @@ class BagWriter:
         for topic in self._topics.values():
             f.add_topic(topic)
         self.meta.files.append(f.info)
+        f.add_metadata_record(self.meta)  # as rosbag2 does at open (sequential_writer.cpp 168)
         return f
 
     def _close_file(self) -> None:

@@ -1,0 +1,204 @@
+"""Table-driven bad-input test of the bag commands (issue 22).
+
+Every case is a command line of ``sslfr bag|record|replay|report`` with one bad
+input. Each must be refused with exit status 2, one line on stderr naming the input
+and what is allowed, no traceback, nothing on stdout, and no file created, changed
+or removed anywhere under the test directory. The cases run in-process through the
+``sslfr`` dispatcher (an uncaught exception fails the case); a few run through the
+real ``./sslfr`` script as well.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Temperature
+
+from sslfr_bringup import cli
+from sslfr_bringup.bag import BagWriter, WriterOptions, profile
+
+ROOT = Path(__file__).resolve().parents[3]
+PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))
+
+#: (subcommand argv with {placeholders}, text the one-line refusal must contain)
+CASES = [
+    # -- wrong-kind and missing bags ------------------------------------------------------
+    ('bag info {png}', 'metadata.yaml'),
+    ('bag info {binary}', 'metadata.yaml'),
+    ('bag info {types}', 'topics_with_message_count'),
+    ('bag info {qos_string}', 'offered_qos_profiles'),
+    ('bag info {nometa}', 'metadata.yaml'),
+    ('bag info {tmp}/missing', 'no such file'),
+    ('bag info {pngfile}', 'bad magic'),
+    ('bag info {empty}', 'metadata.yaml'),
+    ('bag check {tmp}/missing', 'no such file'),
+    ('bag check', 'BAG'),
+    ('bag recover {tmp}/missing', 'no such file'),
+    ('bag recover {pngfile}', 'not a file'.replace('not a file', 'bag directory')),
+    ('bag recover {empty}', 'no .mcap file'),
+    ('bag frobnicate {good}', 'frobnicate'),
+    ('report {png}', 'metadata.yaml'),
+    ('report {types}', 'topics_with_message_count'),
+    ('report {binary}', 'metadata.yaml'),
+    ('report {tmp}/missing', 'no such bag'),
+    ('report {good} --out {file}', '--out'),
+    ('report {good} --out {file}/sub', '--out'),
+    ('report {good} --out /proc/x', '--out'),
+    ('replay {png}', 'metadata.yaml'),
+    ('replay {types}', 'topics_with_message_count'),
+    ('replay {tmp}/missing', 'no such bag'),
+    ('replay {pngfile}', 'MCAP'),
+    # -- replay numbers, names, remaps, domains, outputs -----------------------------------
+    ('replay {good} --rate nan', '--rate'),
+    ('replay {good} --rate 1e-300', '--rate'),
+    ('replay {good} --rate inf', '--rate'),
+    ('replay {good} --rate -1', '--rate'),
+    ('replay {good} --rate fast', '--rate'),
+    ('replay {good} --wait-subscribers inf', '--wait-subscribers'),
+    ('replay {good} --wait-subscribers -1', '--wait-subscribers'),
+    ('replay {good} --clock-hz 0', '--clock-hz'),
+    ('replay {good} --clock-hz nan', '--clock-hz'),
+    ('replay {good} --remap garbage', '--remap'),
+    ('replay {good} --remap :=', '--remap'),
+    ('replay {good} --remap /t:=bad\\ name!', '--remap'),
+    ('replay {good} --remap /t:=/u/', '--remap'),
+    ('replay {good} --remap /t:=/1abc', '--remap'),
+    ('replay {good} --remap /t:=/u //u:=/v', '--remap'),
+    ('replay {good} --remap /nothere:=/v', '--remap'),
+    ('replay {good} --remap /t:=/u2', '--remap'),  # collides with the recorded /u2
+    ('replay {good} --topics bad\\ name!', '--topics'),
+    ('replay {good} --topics /nothere', '--topics'),
+    ('replay {good} --start noon', '--start'),
+    ('replay {good} --end 25:99:99x', '--start/--end'),
+    ('replay {good} --what-if --domain -1', '--domain'),
+    ('replay {good} --what-if --domain 233', '--domain'),
+    ('replay {good} --what-if --domain abc', '--domain'),
+    ('replay {good} --domain 5', '--domain'),
+    ('replay {good} --what-if --out {file}', '--out'),
+    ('replay {good} --what-if --out {file}/sub', '--out'),
+    ('replay {good} --what-if --out /proc/x', '--out'),
+    ('replay {good} --what-if --config {pngfile}', '--config'),
+    ('replay {good} --what-if --config {tmp}/missing.yaml', '--config'),
+    ('replay {good} --inputs bad\\ name!', '--inputs'),
+    # -- record numbers, names, outputs -------------------------------------------------------
+    ('record -o {tmp}/r --chunk-duration nan', '--chunk-duration'),
+    ('record -o {tmp}/r --chunk-duration 0', '--chunk-duration'),
+    ('record -o {tmp}/r --chunk-duration -1', '--chunk-duration'),
+    ('record -o {tmp}/r --chunk-duration inf', '--chunk-duration'),
+    ('record -o {tmp}/r --chunk-duration 1e9', '--chunk-duration'),
+    ('record -o {tmp}/r --max-file-size-mib -5', '--max-file-size-mib'),
+    ('record -o {tmp}/r --max-file-size-mib nan', '--max-file-size-mib'),
+    ('record -o {tmp}/r --max-file-size-mib 1e300', '--max-file-size-mib'),
+    ('record -o {tmp}/r --max-file-size-mib 0.001', '--max-file-size-mib'),
+    ('record -o {tmp}/r --min-free-mib -1', '--min-free-mib'),
+    ('record -o {tmp}/r --min-free-mib nan', '--min-free-mib'),
+    ('record -o {tmp}/r --min-free-mib 1e300', '--min-free-mib'),
+    ('record -o {tmp}/r --max-file-duration -1', '--max-file-duration'),
+    ('record -o {tmp}/r --max-file-duration nan', '--max-file-duration'),
+    ('record -o {tmp}/r --max-file-duration inf', '--max-file-duration'),
+    ('record -o {tmp}/r --prefix ""', '--prefix'),
+    ('record -o {tmp}/r --prefix a/b', '--prefix'),
+    ('record -o {tmp}/r --node-name bad\\ name!', '--node-name'),
+    ('record -o {tmp}/r --node-name ""', '--node-name'),
+    ('record -o {tmp}/r --node-name 1abc', '--node-name'),
+    ('record -o {tmp}/r --topics bad\\ name!', '--topics'),
+    ('record -o {tmp}/r --topics /a//b', '--topics'),
+    ('record -o {tmp}/r --compression gzip', '--compression'),
+    ('record -o {file}', '--output'),
+    ('record -o {file}/sub', '--output'),
+    ('record -o /proc/x', '--output'),
+    ('record -o ""', '--output'),
+]
+
+
+def _bag(path: Path, topics=('/t', '/u2')) -> None:
+    w = BagWriter(path, WriterOptions(fsync=False))
+    for t in topics:
+        w.add_topic(t, 'sensor_msgs/msg/Temperature', [profile()])
+    for k in range(20):
+        for t in topics:
+            w.write(t, bytes(serialize_message(Temperature(temperature=float(k)))), 10**18 + k * 10**8)
+    w.close()
+
+
+@pytest.fixture(scope='module')
+def corpus(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp('bad_inputs')
+    paths = {'tmp': tmp, 'good': tmp / 'good', 'file': tmp / 'a_file'}
+    _bag(tmp / 'good')
+    meta = (tmp / 'good' / 'metadata.yaml').read_text()
+    variants = {
+        'png': PNG,
+        'binary': bytes(range(256)) * 4,
+        'types': b'rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n'
+                 b'  duration: {nanoseconds: 1}\n  starting_time: {nanoseconds_since_epoch: 1}\n'
+                 b'  message_count: 1\n  topics_with_message_count: 5\n',
+        'qos_string': meta.replace('        offered_qos_profiles:\n',
+                                   '        offered_qos_profiles: "- history: keep_last"\n'
+                                   '        old_qos:\n', 1).encode(),
+    }
+    for name, data in variants.items():
+        d = tmp / name
+        d.mkdir()
+        for f in (tmp / 'good').glob('*.mcap'):
+            (d / f.name).write_bytes(f.read_bytes())
+        (d / 'metadata.yaml').write_bytes(data)
+        paths[name] = d
+    paths['nometa'] = tmp / 'nometa'
+    paths['nometa'].mkdir()
+    for f in (tmp / 'good').glob('*.mcap'):
+        (paths['nometa'] / f.name).write_bytes(f.read_bytes())
+    paths['empty'] = tmp / 'empty'
+    paths['empty'].mkdir()
+    paths['pngfile'] = tmp / 'picture.png'
+    paths['pngfile'].write_bytes(PNG)
+    paths['file'].write_text('I am a file')
+    return paths
+
+
+def _snapshot(root: Path) -> dict:
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            st = p.lstat()
+            out[str(p.relative_to(root))] = (st.st_mode, st.st_size, st.st_mtime_ns)
+    return out
+
+
+def _argv(template: str, paths: dict) -> list[str]:
+    import shlex
+    return shlex.split(template.format(**{k: str(v) for k, v in paths.items()}))
+
+
+@pytest.mark.parametrize('template,needle', CASES, ids=[c[0] for c in CASES])
+def test_bad_input_refused_in_one_line(template, needle, corpus, capsys):
+    before = _snapshot(corpus['tmp'])
+    rc = cli.main(_argv(template, corpus))
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert rc == 2, (template, err)
+    assert len(lines) == 1, err
+    assert needle in lines[0], (needle, lines[0])
+    assert 'Traceback' not in err and out == ''
+    assert _snapshot(corpus['tmp']) == before, 'a file was created, changed or removed'
+    assert not Path('/proc/x').exists()
+
+
+def test_case_count():
+    print(f'bad-input table: {len(CASES)} cases')
+    assert len(CASES) >= 80
+
+
+@pytest.mark.parametrize('template', ['bag info {png}', 'record -o {file}', 'replay {good} --rate nan',
+                                      'report {types}', 'bag recover {pngfile}'])
+def test_bad_input_through_the_sslfr_script(template, corpus):
+    before = _snapshot(corpus['tmp'])
+    proc = subprocess.run([str(ROOT / 'sslfr'), *_argv(template, corpus)], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and 'Traceback' not in proc.stderr
+    assert _snapshot(corpus['tmp']) == before
