@@ -354,9 +354,16 @@ def test_sslfr_record_exits_1_when_it_recorded_nothing(ros_env, tmp_path):
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'record', '-o', str(tmp_path / 'bags'),
                              '--topics', '/nobody/publishes/this'], env=ros_env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(4.0)
+    first = []                        # wait until it records (start-up is slow when loaded)
+    for line in proc.stderr:
+        first.append(line)
+        if 'recording to' in line:
+            break
+    assert proc.poll() is None, ''.join(first)
+    time.sleep(1.0)                   # a little time in which nothing is published
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
+    err = ''.join(first) + err
     assert proc.returncode == 1, (out, err)
     assert 'recorded 0 message(s)' in err and '/nobody/publishes/this' in err
     assert 'Traceback' not in err

@@ -19,15 +19,12 @@ import importlib
 import os
 import sys
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
-from sslfr_planner.spin import spin
 from rclpy.node import Node
+from sslfr_common.node import run_node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, \
     ReliabilityPolicy
 
@@ -305,30 +302,27 @@ class Recorder(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)
 
-    def destroy_node(self):
-        try:
-            self.session.close()
-        finally:
-            super().destroy_node()
+    def on_exit(self) -> None:
+        """Close the bag (last chunk, summary, metadata.yaml); called by run_node once
+        spinning ends, with further signals ignored."""
+        self.session.close()
 
 
-def main(args=None, require_data: bool = False):
-    """Run the recorder; with ``require_data`` (``sslfr record``) exit 1 when nothing was recorded."""
-    rclpy.init(args=args)
-    try:
-        node = Recorder()
-    except (ValueError, ParameterException) as exc:
-        print(f'recorder: {exc}' if not str(exc).startswith('recorder') else exc, flush=True)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    if require_data and (node.written == 0 or node.write_errors):
+def main(args=None, require_data: bool = False) -> int:
+    """Run the recorder; with ``require_data`` (``sslfr record``) exit 1 when nothing
+    was recorded. The bag is closed (metadata.yaml written atomically) in
+    :meth:`Recorder.on_exit`, whatever signals arrive meanwhile (short of SIGKILL)."""
+    built: list[Recorder] = []
+
+    def make() -> Recorder:
+        built.append(Recorder())
+        return built[0]
+
+    code = run_node('recorder', make, args=args)
+    if code or not require_data or not built:
+        return code
+    node = built[0]
+    if node.written == 0 or node.write_errors:
         why = (f'{node.write_errors} write error(s), last: {node.last_error}' if node.write_errors
                else f'no message received on {", ".join(node.cfg["topics"]) if any(node.cfg["topics"]) else "any topic"}')
         print(f'sslfr record: recorded {node.written} message(s): {why}', file=sys.stderr, flush=True)

@@ -17,8 +17,8 @@ and ``demo_nodes_py``), with what a tracker on a Pi needs on top of it:
   (compare ros2/rclpy#848); ``rclpy.spin`` would let that end the node. The loop
   logs it (throttled), counts it in :attr:`SpinStats` and goes on.
 - **Invalid start-up configuration** (the exceptions in ``config_errors``, by default
-  ``ValueError`` and rclpy's parameter exceptions) prints one line naming the node
-  and the reason and exits 2, so a supervisor can tell it from a crash.
+  ``ValueError`` and rclpy's parameter exceptions) prints one line
+  (``<node>: invalid parameters, not starting: <reason>``) and exits 2, so a supervisor can tell it from a crash.
 - **The log bridge.** The pure modules log with Python ``logging``; :class:`LogBridge`
   forwards their records to the node's rclpy logger (once per distinct text) and is
   detached before the node is destroyed: nothing is forwarded to ``/rosout`` after
@@ -194,7 +194,7 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
     Parameters
     ----------
     name : str
-        Name used in the one-line refusal (``<name>: invalid configuration, not
+        Name used in the one-line refusal (``<name>: invalid parameters, not
         starting: <reason>``).
     make_node : callable
         Builds the node (rclpy is initialised). May raise one of ``config_errors``.
@@ -215,7 +215,7 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
         try:
             node = make_node()
         except config_errors as exc:
-            print(f'{name}: invalid configuration, not starting: {exc}', file=sys.stderr, flush=True)
+            print(f'{name}: invalid parameters, not starting: {exc}', file=sys.stderr, flush=True)
             code = 2
             return code
         if log_bridge:

@@ -27,7 +27,6 @@ import sys
 import time
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Duration as DurationMsg
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +36,6 @@ from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterException)
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -46,12 +44,12 @@ from sslfr_interfaces.msg import SafetyState, SunPosition, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from sslfr_common.node import CONFIG_ERRORS, run_node
 
 from sslfr_planner import modes
 from sslfr_planner.day_planner import DayPlanner
 from sslfr_planner.planner_params import SPEC_BY_NAME, SPECS, validate
 from sslfr_planner.site_source import SiteFix, SiteSelector, distance_m
-from sslfr_planner.spin import spin
 from sslfr_planner.timejump import ClockJumpDetector
 from sslfr_planner.trajectory import JOINTS, finite_or_none, hold, horizon_times, ramp
 
@@ -496,23 +494,9 @@ class PlannerNode(Node):
                 f'({site.source})')
 
 
-def main(args=None):
+def main(args=None) -> int:
     """Entry point of ``ros2 run sslfr_planner planner``."""
-    rclpy.init(args=args)
-    try:
-        node = PlannerNode()
-    except ConfigError as exc:
-        print(f'planner: invalid parameters, not starting: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('planner', PlannerNode, args=args, config_errors=CONFIG_ERRORS + (ConfigError,))
 
 
 if __name__ == '__main__':

@@ -33,7 +33,6 @@ for ``heartbeat_period``.
 """
 from __future__ import annotations
 
-import logging
 import math
 import threading
 
@@ -43,14 +42,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
-from sslfr_planner.spin import spin
+from sslfr_common.node import run_node
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -294,6 +292,13 @@ class AxisDriver(rclpy.lifecycle.Node):
     def on_shutdown(self, state) -> TransitionCallbackReturn:
         """Stop the motor and close the board link (as :meth:`on_cleanup`)."""
         return self.on_cleanup(state)
+
+    def on_exit(self) -> None:
+        """STOP the motor and close the link; called by run_node once spinning ends,
+        while the context is still valid (the last logs still reach /rosout)."""
+        with self._lock:
+            self.active = False
+            self._close_session()
 
     def _close_session(self) -> None:
         if self.session is not None:
@@ -550,69 +555,13 @@ class AxisDriver(rclpy.lifecycle.Node):
         self.pub_diag.publish(arr)
 
 
-class _RosLogHandler(logging.Handler):
-    """Forward the pure modules' ``logging`` records (link, transport) to the node's
-    rclpy logger, once (the link's own stderr fallback is not used)."""
-
-    def __init__(self, node):
-        super().__init__(logging.INFO)
-        self.node = node
-        self.last = ''
-
-    def emit(self, record):
-        text = record.getMessage()
-        if text == self.last:
-            return
-        self.last = text
-        log = self.node.get_logger()
-        if record.levelno >= logging.ERROR:
-            log.error(text)
-        elif record.levelno >= logging.WARNING:
-            log.warning(text)
-        else:
-            log.info(text)
-
-
-def main(args=None):
-    rclpy.init(args=args)
-    node = executor = None
-    code = 0
-    try:
-        node = AxisDriver()
-        pkg_log = logging.getLogger('sslfr_drivers')
-        pkg_log.addHandler(_RosLogHandler(node))
-        pkg_log.setLevel(logging.INFO)
-        pkg_log.propagate = False
-        executor = MultiThreadedExecutor(num_threads=3)
-        executor.add_node(node)
-        spin(node, executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:
-        if rclpy.ok():
-            print(f'axis_driver: invalid parameters: {exc}', flush=True)
-            code = 2
-    except Exception:
-        if rclpy.ok():
-            raise
-        # SIGINT arrived while starting up: rclpy already shut the context down
-    finally:
-        if node is not None:
-            try:
-                if node.session is not None:
-                    node._send_stop('exit')
-                    node.session.close()
-            except Exception:  # noqa: BLE001 - best effort on the way out
-                pass
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            try:
-                node.destroy_node()
-            except Exception:  # noqa: BLE001 - context already gone
-                pass
-        rclpy.try_shutdown()
-    return code
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_drivers axis_driver``: three executor threads
+    (board I/O, status heartbeat, everything else); the link's logs reach the node's
+    logger until the node is destroyed."""
+    return run_node('axis_driver', AxisDriver, args=args,
+                    executor=lambda ctx: MultiThreadedExecutor(num_threads=3, context=ctx),
+                    log_bridge=('sslfr_drivers',))
 
 
 if __name__ == '__main__':

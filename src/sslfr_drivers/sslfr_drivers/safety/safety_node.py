@@ -24,13 +24,10 @@ from __future__ import annotations
 
 import math
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -41,9 +38,9 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
-from sslfr_planner.spin import spin
 
 from sslfr_drivers.safety.core import AXES, SWITCHES, WATCHABLE, Level, SafetyConfig, SafetyCore
+from sslfr_common.node import run_node
 
 _D = SafetyConfig()
 
@@ -352,27 +349,12 @@ class SafetyNode(Node):
         self._diag.publish(arr)
 
 
-def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = SafetyNode()
-    except (ValueError, TypeError, ParameterException, InvalidParameterTypeException) as exc:
-        # invalid start-up configuration: refuse to run (drivers stop without safety/state)
-        rclpy.logging.get_logger('safety').fatal(f'invalid configuration, not starting: {exc}')
-        rclpy.try_shutdown()
-        raise SystemExit(2) from None
-    except (KeyboardInterrupt, ExternalShutdownException, RCLError):
-        if rclpy.ok():
-            raise
-        return              # SIGINT/SIGTERM arrived while the node was being built
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_drivers safety``. An invalid start-up
+    configuration refuses to run (exit 2): the drivers then stop, as they do
+    without safety/state."""
+    return run_node('safety', SafetyNode, args=args)
 
 
 if __name__ == '__main__':
-    main()
+    raise SystemExit(main())

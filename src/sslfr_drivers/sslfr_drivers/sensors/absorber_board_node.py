@@ -23,18 +23,16 @@ from __future__ import annotations
 import math
 import sys
 
-import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
-from sslfr_planner.spin import spin
 
 from sslfr_drivers.sensors import max6675
 from sslfr_drivers.sensors.debounce import SWITCH_NAMES, SwitchDebouncer
 from sslfr_drivers.link.sensor_messages import SwitchSample, ThermocoupleSample
 from sslfr_drivers.sensors.board_node import RateMeter, SensorBoardNode, board_status
+from sslfr_common.node import run_node
 
 PARAMS = {
     'port': ('', 'absorber board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -188,22 +186,9 @@ class AbsorberBoardNode(SensorBoardNode):
         self._publish_diagnostics(st)
 
 
-def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = AbsorberBoardNode()
-    except ValueError as exc:
-        print(f'absorber_board: invalid parameters: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_drivers absorber_board``."""
+    return run_node('absorber_board', AbsorberBoardNode, args=args)
 
 
 if __name__ == '__main__':

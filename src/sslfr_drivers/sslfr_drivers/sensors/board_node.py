@@ -347,8 +347,8 @@ class SensorBoardNode(Node):
         arr.status = list(statuses)
         self._diag_pub.publish(arr)
 
-    def destroy_node(self):
-        """Stop the board source, then destroy the node."""
+    def on_exit(self) -> None:
+        """Stop the board source (its reader thread and port); called by run_node once
+        spinning ends, while the context is still valid."""
         if self._source is not None:
             self._source.stop()
-        return super().destroy_node()

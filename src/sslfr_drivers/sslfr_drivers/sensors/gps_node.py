@@ -19,15 +19,13 @@ from __future__ import annotations
 import math
 import sys
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.executors import ExternalShutdownException
-from sslfr_planner.spin import spin
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from sslfr_drivers.sensors import nmea
 from sslfr_drivers.link.sensor_messages import NmeaChunk
 from sslfr_drivers.sensors.board_node import BoardSource, SensorBoardNode, board_status
+from sslfr_common.node import run_node
 
 assert (nmea.STATUS_NO_FIX, nmea.STATUS_FIX, nmea.STATUS_SBAS_FIX, nmea.STATUS_GBAS_FIX) == (
     NavSatStatus.STATUS_NO_FIX, NavSatStatus.STATUS_FIX, NavSatStatus.STATUS_SBAS_FIX,
@@ -161,22 +159,9 @@ class GpsNode(SensorBoardNode):
         self._publish_diagnostics(st, fix)
 
 
-def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = GpsNode()
-    except ValueError as exc:
-        print(f'gps: invalid parameters: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_drivers gps``."""
+    return run_node('gps', GpsNode, args=args)
 
 
 if __name__ == '__main__':

@@ -15,16 +15,14 @@ from __future__ import annotations
 
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
-from sslfr_planner.spin import spin
 
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link.sensor_messages import AlsSample
 from sslfr_drivers.sensors.board_node import SensorBoardNode, board_status
+from sslfr_common.node import run_node
 
 PARAMS = {
     'port': ('', 'irradiance board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -105,22 +103,9 @@ class IrradianceNode(SensorBoardNode):
         self._publish_diagnostics(st)
 
 
-def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = IrradianceNode()
-    except ValueError as exc:
-        print(f'irradiance: invalid parameters: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_drivers irradiance``."""
+    return run_node('irradiance', IrradianceNode, args=args)
 
 
 if __name__ == '__main__':

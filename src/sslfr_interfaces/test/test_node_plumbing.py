@@ -1,0 +1,162 @@
+"""sslfr_common.node: the one main() of every node.
+
+Signals are sent to real processes running :func:`run_node` (the way ``ros2 launch``,
+systemd and a terminal's Ctrl-C do): an orderly stop, exit 0, nothing printed as an
+error, ``on_exit`` run with the context still valid, whatever further signals arrive.
+"""
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from sslfr_common.node import SpinStats, spin_until_stopped
+
+NODE = textwrap.dedent('''
+    import logging, os, sys, time
+    from rclpy.node import Node
+    from sslfr_common.node import run_node
+
+    BUILD_S = float(os.environ.get('BUILD_S', '0'))
+    EXIT_S = float(os.environ.get('EXIT_S', '0'))
+    lib = logging.getLogger('sslfr_testlib')
+
+    class Demo(Node):
+        def __init__(self):
+            super().__init__('plumbing_demo')
+            if os.environ.get('BAD'):
+                raise ValueError('parameter x = -1 is outside [0, 1]')
+            print('building', flush=True)
+            time.sleep(BUILD_S)
+            self.create_timer(0.05, lambda: None)
+            print('ready', flush=True)
+
+        def on_exit(self):
+            print('on_exit start', flush=True)
+            lib.info('link up -> down')          # a library log during the stop
+            time.sleep(EXIT_S)
+            self.get_logger().info('stopped cleanly')
+            print('on_exit done', flush=True)
+
+    sys.exit(run_node('plumbing_demo', Demo, log_bridge=('sslfr_testlib',)))
+''')
+
+
+def _start(ros_env, **env):
+    return subprocess.Popen([sys.executable, '-c', NODE], env={**ros_env, **env}, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def _wait_line(proc, text, timeout=30.0):
+    seen = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        seen.append(line)
+        if text in line:
+            return seen
+    raise AssertionError(f'{text!r} not printed: {"".join(seen)}')
+
+
+def _finish(proc, timeout=20.0):
+    out, _ = proc.communicate(timeout=timeout)
+    return proc.returncode, out
+
+
+def _clean(out):
+    assert 'Traceback' not in out, out
+    assert 'Failed to publish log message to rosout' not in out, out
+    assert 'context is invalid' not in out, out
+    assert 'on_exit done' in out, out
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_one_signal_orderly_stop_exit_0(ros_env, sig):
+    proc = _start(ros_env)
+    _wait_line(proc, 'ready')
+    time.sleep(0.2)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+    assert time.monotonic() - t0 < 5.0
+    assert 'stopped cleanly' in out      # logged while the context is still valid
+
+
+def test_second_sigint_50ms_later_during_the_stop_is_ignored(ros_env):
+    proc = _start(ros_env, EXIT_S='1.0')
+    _wait_line(proc, 'ready')
+    proc.send_signal(signal.SIGINT)
+    _wait_line(proc, 'on_exit start')
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGTERM)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+
+
+def test_two_sigints_50ms_apart_right_after_start(ros_env):
+    proc = _start(ros_env, EXIT_S='0.5')
+    _wait_line(proc, 'ready')
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+
+
+def test_signal_while_the_node_is_being_built(ros_env):
+    proc = _start(ros_env, BUILD_S='1.5')
+    _wait_line(proc, 'building')
+    proc.send_signal(signal.SIGINT)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+    assert 'ready' in out                 # construction finished, then the orderly stop
+
+
+def test_invalid_configuration_is_one_line_exit_2(ros_env):
+    proc = _start(ros_env, BAD='1')
+    code, out = _finish(proc)
+    assert code == 2, out
+    lines = [ln for ln in out.splitlines() if ln.strip()]
+    assert lines == ['plumbing_demo: invalid parameters, not starting: parameter x = -1 is outside [0, 1]'], out
+
+
+class FlakyExecutor(SingleThreadedExecutor):
+    """Raises like rclpy's take_message did under load, then shuts the context down."""
+
+    def __init__(self, context, failures):
+        super().__init__(context=context)
+        self.calls = 0
+        self.failures = failures
+
+    def spin_once(self, timeout_sec=None):
+        self.calls += 1
+        if self.calls <= self.failures:
+            raise RuntimeError("Unable to convert call argument '0' to Python object")
+        rclpy.try_shutdown(context=self.context)
+
+
+def test_runtime_errors_are_counted_not_fatal(ros_domain):
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=ros_domain)
+    node = rclpy.create_node('spin_test', context=ctx)
+    try:
+        ex = FlakyExecutor(ctx, failures=3)
+        stats = spin_until_stopped(node, ex, stats=SpinStats())
+        assert stats.errors == 3 and 'Unable to convert' in stats.last
+        assert ex.calls == 4
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        ex.shutdown()
