@@ -20,7 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-from sslfr_drivers.safety.core import AXES, SWITCHES, FakeClock, SafetyConfig, SafetyCore
+from sslfr_common.contract import JOINTS as AXES
+from sslfr_common.contract import SWITCHES
+from sslfr_drivers.safety.core import FakeClock, SafetyConfig, SafetyCore
 
 ROOT = Path(__file__).resolve().parents[1]
 

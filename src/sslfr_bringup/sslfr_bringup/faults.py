@@ -37,6 +37,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from sslfr_common.contract import JOINTS
+
 KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
@@ -47,7 +49,7 @@ _RULES = {
     'gps-loss': (False, 'required'),
     'kill': (True, 'optional'),
 }
-DEFAULT_BOARDS = ('mirrors', 'mobile_structure', 'secondary_reflector', 'gps', 'absorber', 'irradiance')
+DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
 FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps'}
 

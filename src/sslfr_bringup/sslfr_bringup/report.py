@@ -30,17 +30,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
 from sslfr_planner._cliutil import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader
 from .nodeset import node_params
 
-AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
-PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
-               6: 'MAINTENANCE'}
-LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'STOW', 3: 'ESTOP'}
-LINK_UP = 2
 MAX_GAP_S = 120.0
 
 
@@ -212,7 +208,7 @@ def _ideal(site: dict, t: np.ndarray, config: str | None = None):
         collector = make_collector(planner_config(config))
         s = Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0))
         table = evaluate(t, s, collector)
-        return {a: np.asarray(getattr(table, a), dtype=float) for a in AXES}, \
+        return {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}, \
             ('ideal = sslfr_planner.daytable.evaluate at the same instants, collector from '
              + (config or 'the planner defaults') + ', site from the bag')
     except Exception as exc:  # noqa: BLE001 - any failure of the optional reference is reported
@@ -226,14 +222,14 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     names = {k: _find(topics, k) for k in (
         'tracker/phase', 'safety/state', 'gps/fix', 'absorber/inlet_temperature',
         'absorber/outlet_temperature', 'irradiance/beam', 'joint_states',
-        *(f'axes/{a}/status' for a in AXES))}
-    have_status = any(names[f'axes/{a}/status'] for a in AXES)
+        *(f'axes/{a}/status' for a in JOINTS))}
+    have_status = any(names[f'axes/{a}/status'] for a in JOINTS)
     wanted = [t for k, t in names.items() if t and not (k == 'joint_states' and have_status)]
     rep = DayReport(bag=str(reader.path), start=reader.start_ns / 1e9, end=reader.end_ns / 1e9)
     by_topic = {t: k for k, t in names.items() if t}
     phase, safety, temps, beam, fix = Series(), Series(), {}, Series(), Series()
-    status = {a: Series() for a in AXES}
-    joints = {a: Series() for a in AXES}
+    status = {a: Series() for a in JOINTS}
+    joints = {a: Series() for a in JOINTS}
     last_phase = None
     for raw in reader.messages(wanted):
         key = by_topic[raw.topic]
@@ -307,7 +303,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                               'reasons': reasons, 'ongoing': j >= len(st)})
     # -- tracking error
     ideal_cache = {}
-    for axis in AXES:
+    for axis in JOINTS:
         src = status[axis] if status[axis].t else None
         if src is None:
             continue
@@ -329,14 +325,14 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         rep.tracking[axis] = entry
         rep.series[f'status_{axis}'] = (t, v)
         lk = v['link']
-        down = step_durations(t, (lk != LINK_UP).astype(int), end).get(1, 0.0)
-        drops = int(np.sum((lk[1:] != LINK_UP) & (lk[:-1] == LINK_UP))) if len(lk) > 1 else 0
+        down = step_durations(t, (lk != LinkState.LINK_UP).astype(int), end).get(1, 0.0)
+        drops = int(np.sum((lk[1:] != LinkState.LINK_UP) & (lk[:-1] == LinkState.LINK_UP))) if len(lk) > 1 else 0
         rep.links[axis] = {'time_not_up': down, 'drops': drops,
                            'frames_lost': int(v['lost'].max() - v['lost'][0]) if len(t) else 0,
                            'frames_bad': int(v['bad'].max() - v['bad'][0]) if len(t) else 0,
                            'fault_samples': int(np.sum(v['faults'] != 0))}
     if not rep.tracking:
-        for axis in AXES:
+        for axis in JOINTS:
             if joints[axis].t:
                 t, v = joints[axis].arrays()
                 rep.series[f'joint_{axis}'] = (t, v)
@@ -361,7 +357,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     rep.series['phase'] = (pt, pv.get('phase', np.zeros(0)))
     if len(bt) > 1:
         rep.energy = energy_estimate(rep.site, bt, bv['g'].astype(float),
-                                     {a: status[a].arrays() for a in AXES if status[a].t}, config)
+                                     {a: status[a].arrays() for a in JOINTS if status[a].t}, config)
     return rep
 
 
@@ -390,7 +386,7 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
     table = evaluate(t, Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0)), c)
     params = OpticalParameters(n_per_side=c.n_per_side, mirror_width=c.mirror_width, gap=c.gap,
                                receiver_height=c.receiver_height, tube_diameter=c.tube_diameter)
-    ideal = {a: np.asarray(getattr(table, a), dtype=float) for a in AXES}
+    ideal = {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}
     held = dict(ideal)
     for axis, (ta, va) in measured.items():
         good = np.isfinite(va['measured'])
@@ -401,7 +397,7 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
                          params, c.azimuth) / 1000.0
     e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
                         params, c.azimuth) / 1000.0
-    missing = [a for a in AXES if a not in measured]
+    missing = [a for a in JOINTS if a not in measured]
     note = 'seed 000 optical model (docs/optics.md), recorded beam irradiance'
     if missing:
         note += '; no status for ' + ', '.join(missing) + ' (taken as ideal)'
@@ -498,7 +494,7 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
         plt.close(fig)
         files.append(path)
 
-    axes_present = [a for a in AXES if f'status_{a}' in rep.series or f'joint_{a}' in rep.series]
+    axes_present = [a for a in JOINTS if f'status_{a}' in rep.series or f'joint_{a}' in rep.series]
     if axes_present:
         fig, axs = plt.subplots(len(axes_present), 1, figsize=(10, 2.6 * len(axes_present)),
                                 sharex=True, squeeze=False)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
+from sslfr_common.contract import JOINTS
+
 
 
 def _stamp(h) -> float:
@@ -117,7 +118,7 @@ def read_day(bag: str | Path) -> Day:
     for raw in reader.messages():
         topics[raw.topic] = topics.get(raw.topic, 0) + 1
     axes = {}
-    for axis in AXES:
+    for axis in JOINTS:
         axes[axis] = _collect(reader, f'/axes/{axis}/status', {
             'measured': lambda m: float(m.measured), 'setpoint': lambda m: float(m.setpoint),
             'commanded': lambda m: float(m.commanded), 'error': lambda m: float(m.error),

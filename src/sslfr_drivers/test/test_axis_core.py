@@ -8,12 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sslfr_common.contract import JOINT_RANGE, STEP_ANGLE
 from sslfr_drivers.axis.core import (
-    AXIS_LIMITS, SEED_STEP_ANGLE, Calibration, SafetyVerdict, SafetyWatch, SoftLimits,
+    Calibration, SafetyVerdict, SafetyWatch, SoftLimits,
     StallDetector, TrajectoryStore, move_speed, validate_trajectory, TrajectoryRejected,
 )
 
-MIRRORS = SoftLimits(*AXIS_LIMITS['mirrors'])
+MIRRORS = SoftLimits(*JOINT_RANGE['mirrors'])
 
 
 def test_seed_step_is_0_006_degrees():
@@ -26,7 +27,7 @@ def test_seed_step_is_0_006_degrees():
 @given(theta=st.floats(-3, 3), ratio=st.floats(0.1, 100), offset=st.floats(-1, 1),
        invert=st.booleans())
 def test_steps_round_trip_within_half_a_step(theta, ratio, offset, invert):
-    cal = Calibration(SEED_STEP_ANGLE, ratio, offset, invert)
+    cal = Calibration(STEP_ANGLE, ratio, offset, invert)
     back = cal.angle(cal.steps(theta))
     assert abs(back - theta) <= abs(cal.joint_per_step) / 2 + 1e-12
 

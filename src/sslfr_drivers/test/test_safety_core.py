@@ -8,7 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers.safety.core import (AXES, SWITCH_AXIS, SWITCHES, FakeClock, Level, SafetyConfig,
+from sslfr_common.contract import JOINTS as AXES
+from sslfr_common.contract import SWITCH_AXIS, SWITCHES, Level
+from sslfr_drivers.safety.core import (FakeClock, SafetyConfig,
                                        SafetyCore, with_changes)
 
 TRACKING, NIGHT, STOW_PHASE = 2, 0, 5

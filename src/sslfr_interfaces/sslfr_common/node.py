@@ -251,3 +251,112 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
         rclpy.try_shutdown()
         stop.close()
     return code
+
+
+# ---------------------------------------------------------------- parameters
+def declare_parameters(node, table) -> dict:
+    """Declare every parameter of ``table`` (a :class:`sslfr_common.params.ParamTable`)
+    on ``node`` with its description, unit and range, and return the values in force
+    (defaults overridden by the command line or params files).
+
+    Raises
+    ------
+    ValueError
+        One line listing every invalid value (``run_node`` turns it into exit 2).
+    """
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    for spec in table:
+        d = ParameterDescriptor(description=spec.description, read_only=spec.read_only,
+                                additional_constraints=spec.constraints)
+        default = spec.default
+        if spec.lo is not None and spec.hi is not None:
+            if isinstance(default, float) or (isinstance(default, list) and default
+                                               and isinstance(default[0], float)):
+                d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi))]
+            elif isinstance(default, int) and not isinstance(default, bool):
+                d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=1)]
+        node.declare_parameter(spec.name, default, d)
+    values = {spec.name: node.get_parameter(spec.name).value for spec in table}
+    errors = table.validate(values)
+    if errors:
+        raise ValueError('; '.join(errors))
+    return values
+
+
+class ParameterGuard:
+    """Run-time parameter changes checked against the table, all or nothing.
+
+    ``apply(proposed)`` is called with the complete proposed set once the table's
+    checks pass; it may raise ``ValueError`` (a node-specific rule) to refuse the
+    change. On a refusal the reason is returned to the caller of ``set_parameters``
+    and the last good configuration (:attr:`values`) stays in force.
+    """
+
+    def __init__(self, node, table, values: dict, apply: Callable[[dict], None]):
+        self.table = table
+        self.values = dict(values)
+        self.apply = apply
+        self.refused = 0
+        self.last_refusal = ''
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, params):
+        from rcl_interfaces.msg import SetParametersResult
+
+        proposed = dict(self.values)
+        for prm in params:
+            spec = self.table.by_name.get(prm.name)
+            if spec is None:
+                continue
+            if spec.read_only and prm.value != self.values[prm.name]:
+                return self._refuse(f'{prm.name} is fixed at start-up')
+            proposed[prm.name] = prm.value
+        errors = self.table.validate(proposed)
+        if not errors:
+            try:
+                self.apply(proposed)
+            except ValueError as exc:
+                errors = [str(exc)]
+        if errors:
+            return self._refuse('; '.join(errors))
+        self.values = proposed
+        return SetParametersResult(successful=True)
+
+    def _refuse(self, reason: str):
+        from rcl_interfaces.msg import SetParametersResult
+
+        self.refused += 1
+        self.last_refusal = reason
+        return SetParametersResult(successful=False, reason=reason)
+
+
+# ---------------------------------------------------------------- time
+def to_sec(t) -> float:
+    """Seconds [s] of a ``builtin_interfaces`` Time/Duration message, an
+    ``rclpy.time.Time``/``Duration`` or an integer of nanoseconds."""
+    if isinstance(t, int):
+        return t * 1e-9
+    ns = getattr(t, 'nanoseconds', None)
+    if ns is not None:
+        return ns * 1e-9
+    return t.sec + t.nanosec * 1e-9
+
+
+def stamp(seconds: float):
+    """``builtin_interfaces/Time`` for ``seconds`` [s since the epoch] (>= 0)."""
+    from builtin_interfaces.msg import Time
+    ns = int(round(seconds * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def duration(seconds: float):
+    """``builtin_interfaces/Duration`` for ``seconds`` [s] (>= 0)."""
+    from builtin_interfaces.msg import Duration
+    ns = int(round(seconds * 1e9))
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def steady_now(clock) -> float:
+    """``clock.now()`` in seconds [s] (a steady or ROS clock)."""
+    return clock.now().nanoseconds * 1e-9

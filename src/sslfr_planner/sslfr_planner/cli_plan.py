@@ -16,9 +16,11 @@ import sys
 
 import numpy as np
 
+from sslfr_common.contract import JOINTS, PHASE_NAMES
+
 from ._cliutil import OneLineParser, finite_float, run
 from .collector import LAWS, Collector
-from .daytable import PHASE_NAMES, plan_day
+from .daytable import plan_day
 from .site import Site
 
 HEADER = ('utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,'
@@ -61,8 +63,7 @@ def format_rows(table) -> list[str]:
     stamps = np.datetime_as_string(np.round(t * 1000.0).astype('datetime64[ms]'),
                                    unit='s' if whole else 'ms', timezone='UTC')
     names = np.array([PHASE_NAMES[i] for i in range(7)], dtype=object)[table.phase]
-    cols = [np.degrees(getattr(table, k)) for k in ('zenith', 'azimuth', 'transversal', 'longitudinal',
-                                                   'mirrors', 'mobile_structure', 'secondary_reflector')]
+    cols = [np.degrees(getattr(table, k)) for k in ('zenith', 'azimuth', 'transversal', 'longitudinal', *JOINTS)]
     cols = np.round(np.stack(cols, axis=1), 6) + 0.0  # + 0.0: no "-0.000000"
     fmt = '%s,%s,' + ','.join(['%.6f'] * 7)
     return [fmt % (s, n, *row) for s, n, row in zip(stamps, names, cols.tolist())]

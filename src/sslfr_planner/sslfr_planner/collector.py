@@ -8,10 +8,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
+
 #: the longitudinal laws of :mod:`sslfr_planner.laws`
 LAWS = ('continuous', 'optimum_fixed', 'horizontal', 'daily')
-#: axis names, in the order of every per-axis tuple
-AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
+#: axis names, in the order of every per-axis tuple (the contract's joints)
+AXES = JOINTS
 
 
 @dataclass(frozen=True)
@@ -74,13 +76,13 @@ class Collector:
     tube_diameter: float = 0.0486
     azimuth: float = 0.0
     law: str = 'continuous'
-    mirror_min: float = -math.pi / 4
-    mirror_max: float = math.pi / 2
-    sleeping: float = math.pi / 2
-    tilt_max: float = math.pi / 2
-    structure_rest: float = 0.0
-    reflector_rest: float = 0.0
-    step_angle: float = math.radians(0.006)
+    mirror_min: float = JOINT_RANGE['mirrors'][0]
+    mirror_max: float = JOINT_RANGE['mirrors'][1]
+    sleeping: float = STOW_POSITION['mirrors']
+    tilt_max: float = JOINT_RANGE['mobile_structure'][1]
+    structure_rest: float = STOW_POSITION['mobile_structure']
+    reflector_rest: float = STOW_POSITION['secondary_reflector']
+    step_angle: float = STEP_ANGLE
     gear_ratio: tuple = (1.0, 1.0, 1.0)
     pre_dawn_lead: float = 600.0
     stow_duration: float = 600.0

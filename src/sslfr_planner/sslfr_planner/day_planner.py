@@ -27,9 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sslfr_common.contract import JOINTS, Phase
+
 from . import daytable, spa
 from .collector import Collector
-from .daytable import NIGHT, PRE_DAWN, STOWING, TRACKING, DayTable, evaluate
+from .daytable import DayTable, evaluate
 from .events import H0_DEG, SunEvents, sun_events
 from .site import Site
 from .site_source import SiteFix
@@ -199,14 +201,14 @@ class DayPlanner:
         t = table.t
         c = self.collector
         rest = self._rest(t)
-        phase = np.full(t.size, NIGHT, dtype=np.uint8)
+        phase = np.full(t.size, Phase.NIGHT, dtype=np.uint8)
         if we > ws:
-            tracking = (t >= ws) & (t < we) & (table.phase == TRACKING)
+            tracking = (t >= ws) & (t < we) & (table.phase == Phase.TRACKING)
             pre = (t < ws) & (t >= ws - c.pre_dawn_lead) & (c.pre_dawn_lead > 0)
             stowing = (t >= we) & (t < we + c.stow_duration)
-            phase[tracking] = TRACKING
-            phase[pre] = PRE_DAWN
-            phase[stowing] = STOWING
+            phase[tracking] = Phase.TRACKING
+            phase[pre] = Phase.PRE_DAWN
+            phase[stowing] = Phase.STOWING
             # the first tracking row of the table is the initial position (Step 2)
             k = int(np.argmax(tracking)) if tracking.any() else 0
             first_pose = (table.mirrors[k], table.mobile_structure[k], table.secondary_reflector[k])
@@ -214,7 +216,7 @@ class DayPlanner:
             tracking = np.zeros(t.size, dtype=bool)
             pre = tracking
         idle = ~tracking
-        for k, name in enumerate(('mirrors', 'mobile_structure', 'secondary_reflector')):
+        for k, name in enumerate(JOINTS):
             arr = getattr(table, name)
             arr[idle] = rest[:, k][idle]
             if we > ws:

@@ -34,16 +34,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sslfr_common.contract import JOINTS, Phase
+
 from . import laws, spa
 from .collector import Collector
 from .events import SCAN_STEP, SunEvents, crossings, events_around, events_from_crossings, solar_transit
 from .site import Site
 
-NIGHT, PRE_DAWN, TRACKING, STOWING = 0, 1, 2, 3
 #: the PRE_DAWN initial position is the TRACKING command this long after sunrise [s]
 RISE_EPSILON = 0.01
-PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
-               6: 'MAINTENANCE'}
 
 
 @dataclass
@@ -185,7 +184,7 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
     b = np.searchsorted(t, ct, side='left')          # first instant at/after each crossing
     starts = np.concatenate([[0], b])
     ends = np.concatenate([b, [t.size]])
-    phase = np.full(t.size, NIGHT, dtype=np.uint8)
+    phase = np.full(t.size, Phase.NIGHT, dtype=np.uint8)
     mirrors = np.full(t.size, c.sleeping)
     bm, ba = _resting(t, site, c)
     track_slices, pre_dawn = [], []
@@ -194,16 +193,16 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
         if i1 <= i0:
             continue
         if up0 ^ (j % 2 == 1):
-            phase[i0:i1] = TRACKING
+            phase[i0:i1] = Phase.TRACKING
             track_slices.append((j, i0, i1))
             continue
         if j > 0 and not rising[j - 1] and c.stow_duration > 0:      # after a sunset
             k = min(int(np.searchsorted(t, ct[j - 1] + c.stow_duration, side='left')), i1)
-            phase[i0:k] = STOWING
+            phase[i0:k] = Phase.STOWING
         if j < ct.size and rising[j] and c.pre_dawn_lead > 0:         # before a sunrise
             k = max(int(np.searchsorted(t, ct[j] - c.pre_dawn_lead, side='left')), i0)
             if k < i1:
-                phase[k:i1] = PRE_DAWN
+                phase[k:i1] = Phase.PRE_DAWN
                 pre_dawn.append((j, k, i1))
 
     # --- commands while TRACKING
@@ -244,8 +243,7 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
                     mirrors, bm, ba, events)
 
 
-_COLUMNS = ('t', 'phase', 'zenith', 'azimuth', 'transversal', 'longitudinal', 'mirrors', 'mobile_structure',
-            'secondary_reflector')
+_COLUMNS = ('t', 'phase', 'zenith', 'azimuth', 'transversal', 'longitudinal', *JOINTS)
 
 
 def _evaluate_sparse(t, site: Site, c: Collector, events):

@@ -18,18 +18,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-NIGHT, PRE_DAWN, TRACKING, STOWING, MANUAL, STOW, MAINTENANCE = range(7)
+from sslfr_common.contract import MODES, PHASE_NAMES, Phase  # noqa: F401 - re-exported for the planner
 
-#: Phase code -> TrackerPhase constant name.
-PHASE_NAMES: dict[int, str] = {
-    NIGHT: 'NIGHT', PRE_DAWN: 'PRE_DAWN', TRACKING: 'TRACKING', STOWING: 'STOWING',
-    MANUAL: 'MANUAL', STOW: 'STOW', MAINTENANCE: 'MAINTENANCE',
-}
 
 #: The automatic (day-cycle) phases the core computes.
-AUTO_PHASES = frozenset({NIGHT, PRE_DAWN, TRACKING, STOWING})
+AUTO_PHASES = frozenset({Phase.NIGHT, Phase.PRE_DAWN, Phase.TRACKING, Phase.STOWING})
 
-MODES = ('auto', 'stow', 'manual', 'maintenance')
 
 #: Allowed operator transitions ``from -> {to}``. Re-requesting the current mode is
 #: always accepted (idempotent). Refused, with the reason in :data:`FORBIDDEN_REASONS`:
@@ -144,11 +138,11 @@ def resolve_phase(mode: str, auto_phase: int, safety_stow: bool,
         raise ValueError(f'auto_phase {auto_phase} is not a day-cycle phase')
     if safety_stow:
         why = '; '.join(safety_reasons) if safety_reasons else 'stow required'
-        return PhaseDecision(STOW, f'safety: {why}')
+        return PhaseDecision(Phase.STOW, f'safety: {why}')
     if mode == 'stow':
-        return PhaseDecision(STOW, 'operator: stow commanded')
+        return PhaseDecision(Phase.STOW, 'operator: stow commanded')
     if mode == 'maintenance':
-        return PhaseDecision(MAINTENANCE, 'operator: maintenance, automatic motion off')
+        return PhaseDecision(Phase.MAINTENANCE, 'operator: maintenance, automatic motion off')
     if mode == 'manual':
-        return PhaseDecision(MANUAL, 'operator: manual hold')
+        return PhaseDecision(Phase.MANUAL, 'operator: manual hold')
     return PhaseDecision(auto_phase, f'day cycle: {PHASE_NAMES[auto_phase]}')

@@ -44,6 +44,7 @@ from sslfr_interfaces.msg import SafetyState, SunPosition, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from sslfr_common.contract import Phase
 from sslfr_common.node import CONFIG_ERRORS, run_node
 
 from sslfr_planner import modes
@@ -379,10 +380,10 @@ class PlannerNode(Node):
     def _enter_phase(self, phase: int, now: float) -> None:
         """Remember where the axes were commanded when an override begins."""
         pose = self._commanded_pose(now)
-        if phase == modes.STOW:
+        if phase == Phase.STOW:
             self.stow_start = (now, pose, self.planner.sleep_pose(now))
-        elif phase in (modes.MANUAL, modes.MAINTENANCE):
-            if self.phase not in (modes.MANUAL, modes.MAINTENANCE):
+        elif phase in (Phase.MANUAL, Phase.MAINTENANCE):
+            if self.phase not in (Phase.MANUAL, Phase.MAINTENANCE):
                 self.hold_pose = pose
         if self.phase is not None:
             self.get_logger().info(f'phase {modes.PHASE_NAMES[self.phase]} -> '
@@ -394,7 +395,7 @@ class PlannerNode(Node):
         """The setpoint in force at ``now`` under the current phase [rad] (3,)."""
         if self.phase in modes.AUTO_PHASES or self.phase is None:
             return self.planner.auto_pose(now)
-        if self.phase == modes.STOW and self.stow_start is not None:
+        if self.phase == Phase.STOW and self.stow_start is not None:
             h = ramp(np.array([now]), *self.stow_start, self.cfg['stow.speeds'])
             return h.positions[0]
         return self.hold_pose if self.hold_pose is not None else self.planner.auto_pose(now)
@@ -403,7 +404,7 @@ class PlannerNode(Node):
         t = horizon_times(now, self.cfg['horizon'], self.cfg['step'])
         if self.phase in modes.AUTO_PHASES:
             return self.planner.auto_horizon(t)
-        if self.phase == modes.STOW:
+        if self.phase == Phase.STOW:
             return ramp(t, *self.stow_start, self.cfg['stow.speeds'])
         return hold(t, self.hold_pose)
 

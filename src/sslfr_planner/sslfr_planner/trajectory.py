@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-JOINTS = ('mirrors', 'mobile_structure', 'secondary_reflector')
+from sslfr_common.contract import JOINTS  # noqa: F401 - the trajectory's joint order (used by the planner node)
 
 
 @dataclass

@@ -9,11 +9,14 @@ import numpy as np
 import pytest
 import yaml
 
-from sslfr_planner.daytable import NIGHT, PRE_DAWN, STOWING, TRACKING, evaluate
+from sslfr_common.contract import Phase
+from sslfr_planner.daytable import evaluate
 from sslfr_planner.day_planner import STEP_RATE, DayPlanner
 from sslfr_planner.planner_params import SPEC_BY_NAME, SPECS, check_value, defaults, validate
 from sslfr_planner.site_source import SiteFix
 from sslfr_planner.trajectory import horizon_times
+
+NIGHT, PRE_DAWN, TRACKING, STOWING = Phase.NIGHT, Phase.PRE_DAWN, Phase.TRACKING, Phase.STOWING
 
 CONFIG = Path(__file__).resolve().parents[2] / 'sslfr_bringup' / 'config'
 

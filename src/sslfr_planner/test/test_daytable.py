@@ -8,9 +8,12 @@ from hypothesis import given, settings, strategies as st
 
 from sslfr_planner import laws
 from sslfr_planner.collector import Collector
-from sslfr_planner.daytable import NIGHT, PRE_DAWN, STOWING, TRACKING, evaluate, plan_day
+from sslfr_common.contract import Phase
+from sslfr_planner.daytable import evaluate, plan_day
 from sslfr_planner.events import sun_events
 from sslfr_planner.site import Site
+
+NIGHT, PRE_DAWN, TRACKING, STOWING = Phase.NIGHT, Phase.PRE_DAWN, Phase.TRACKING, Phase.STOWING
 
 ALMERIA = Site.from_degrees(36.8353, -2.4022, 22.0)
 

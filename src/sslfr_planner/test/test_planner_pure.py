@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sslfr_common.contract import Phase
 from sslfr_planner import modes
 from sslfr_planner.site_source import (PERSIST_FILE, SiteFix, SiteSelector, check_fix,
                                        distance_m, load_persisted, save_persisted)
@@ -48,18 +49,18 @@ def test_mode_aliases_and_case():
 def test_resolve_phase_priorities(auto):
     for mode in modes.MODES:
         d = modes.resolve_phase(mode, auto, True, ['outlet 152.3 degC > 150 degC'])
-        assert d.phase == modes.STOW and d.reason == 'safety: outlet 152.3 degC > 150 degC'
+        assert d.phase == Phase.STOW and d.reason == 'safety: outlet 152.3 degC > 150 degC'
     assert modes.resolve_phase('auto', auto, False).phase == auto
-    assert modes.resolve_phase('stow', auto, False).phase == modes.STOW
-    assert modes.resolve_phase('manual', auto, False).phase == modes.MANUAL
-    assert modes.resolve_phase('maintenance', auto, False).phase == modes.MAINTENANCE
+    assert modes.resolve_phase('stow', auto, False).phase == Phase.STOW
+    assert modes.resolve_phase('manual', auto, False).phase == Phase.MANUAL
+    assert modes.resolve_phase('maintenance', auto, False).phase == Phase.MAINTENANCE
 
 
 def test_resolve_phase_rejects_garbage():
     with pytest.raises(ValueError):
-        modes.resolve_phase('fly', modes.NIGHT, False)
+        modes.resolve_phase('fly', Phase.NIGHT, False)
     with pytest.raises(ValueError):
-        modes.resolve_phase('auto', modes.STOW, False)
+        modes.resolve_phase('auto', Phase.STOW, False)
 
 
 # ------------------------------------------------------------------------ site source

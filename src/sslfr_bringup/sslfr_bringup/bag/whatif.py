@@ -22,10 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES
 
-PHASE_NAMES = {0: 'NIGHT', 1: 'PRE_DAWN', 2: 'TRACKING', 3: 'STOWING', 4: 'MANUAL', 5: 'STOW',
-               6: 'MAINTENANCE'}
-LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'STOW', 3: 'ESTOP'}
 
 
 @dataclass
@@ -272,7 +270,7 @@ class WhatIfResult:
 
 
 def compare(recorded: Decisions, new: Decisions, grid_s: float = 1.0,
-            joints: tuple[str, ...] = ('mirrors', 'mobile_structure', 'secondary_reflector'),
+            joints: tuple[str, ...] = JOINTS,
             tolerance_s: float = 300.0) -> WhatIfResult:
     """Compare a recorded run with a what-if run over the interval both cover.
 

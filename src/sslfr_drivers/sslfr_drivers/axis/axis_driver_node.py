@@ -48,12 +48,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
+from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
 from sslfr_common.node import run_node
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_drivers.axis.core import (
-    AXES, AXIS_LIMITS, HOME_SWITCHES, SEED_STEP_ANGLE, STOW_POSITIONS, Action, AxisConfig,
+    HOME_SWITCHES, Action, AxisConfig,
     AxisSupervisor, BoardState, Calibration, SoftLimits, StallDetector,
 )
 from sslfr_drivers.axis.board_session import AxisBoardSession, BoardRefused
@@ -74,7 +75,7 @@ PARAMETERS: dict[str, tuple] = {
     'request_timeout': (_F, 0.25, 'board answer time-out per try [s] (STATUS polls use min(this, 2 / control_rate))', (0.01, 5.0)),
     'link_timeout': (_F, 1.0, 'no answer for this long -> link down, reconnect [s]', (0.1, 30.0)),
     'heartbeat_period': (_F, 0.25, 'PING when nothing was sent for this long [s] (board watchdog is 1 s)', (0.02, 0.9)),
-    'step_angle': (_F, SEED_STEP_ANGLE, 'motor rotation per step [rad/step] (seed 000: 0.006 deg)', (1e-7, 0.5)),
+    'step_angle': (_F, STEP_ANGLE, 'motor rotation per step [rad/step] (seed 000: 0.006 deg)', (1e-7, 0.5)),
     'gear_ratio': (_F, 1.0, 'motor angle per joint angle [-]', (1e-3, 1e4)),
     'offset': (_F, 0.0, 'joint angle at step count 0 [rad]', (-2 * math.pi, 2 * math.pi)),
     'invert': (_B, False, 'positive steps turn the joint negative', None),
@@ -101,22 +102,22 @@ PARAMETERS: dict[str, tuple] = {
 
 
 def _axis_default(axis: str, name: str):
-    lo, hi = AXIS_LIMITS[axis]
+    lo, hi = JOINT_RANGE[axis]
     return {
-        'lower_limit': lo, 'upper_limit': hi, 'stow_position': STOW_POSITIONS[axis],
-        'home_switch': 'sleep', 'home_position': STOW_POSITIONS[axis],
+        'lower_limit': lo, 'upper_limit': hi, 'stow_position': STOW_POSITION[axis],
+        'home_switch': 'sleep', 'home_position': STOW_POSITION[axis],
     }[name]
 
 
 def build_config(axis: str, p: dict) -> tuple[AxisConfig, StallDetector]:
     """Validate a full parameter dict into the core's config (ValueError with the reason)."""
-    if axis not in AXES:
-        raise ValueError(f'axis {axis!r} is not one of {", ".join(AXES)}')
+    if axis not in JOINTS:
+        raise ValueError(f'axis {axis!r} is not one of {", ".join(JOINTS)}')
     if p['home_switch'] not in HOME_SWITCHES:
         raise ValueError(f"home_switch {p['home_switch']!r} is not low | high | sleep")
     cal = Calibration(p['step_angle'], p['gear_ratio'], p['offset'], p['invert'])
     limits = SoftLimits(p['lower_limit'], p['upper_limit'])
-    mech = AXIS_LIMITS[axis]
+    mech = JOINT_RANGE[axis]
     if limits.lower < mech[0] - 1e-9 or limits.upper > mech[1] + 1e-9:
         raise ValueError(f'soft limits [{limits.lower:.4f}, {limits.upper:.4f}] rad exceed the '
                          f'mechanical range [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
@@ -198,7 +199,7 @@ class AxisDriver(rclpy.lifecycle.Node):
     def _declare(self) -> None:
         axis = self.declare_parameter(
             'axis', 'mirrors', ParameterDescriptor(description=PARAMETERS['axis'][2], read_only=True)).value
-        axis = axis if axis in AXES else 'mirrors'       # build_config reports the bad name
+        axis = axis if axis in JOINTS else 'mirrors'       # build_config reports the bad name
         for name, (kind, default, desc, rng) in PARAMETERS.items():
             if name == 'axis':
                 continue

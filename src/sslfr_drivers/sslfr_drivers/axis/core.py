@@ -22,26 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: Seed 000 section 3.4: stepper motors and drivers "with a step of 0.006 deg".
-SEED_STEP_ANGLE = math.radians(0.006)
+from sslfr_common.contract import STEP_ANGLE
 
-#: Mechanical joint ranges [rad] (seed 000 section 3.5.2: mirrors -45..+90 deg;
-#: mobile structure and secondary reflector tilt 0..90 deg in magnitude toward
-#: either end, so -pi/2..+pi/2 signed, rest at 0 - the limit switch layout of the
-#: simulated boards, sslfr_drivers.sim.axis.AXES).
-AXIS_LIMITS = {
-    'mirrors': (-math.pi / 4, math.pi / 2),
-    'mobile_structure': (-math.pi / 2, math.pi / 2),
-    'secondary_reflector': (-math.pi / 2, math.pi / 2),
-}
-
-#: Stow (defocus) position per axis [rad], also where the SLEEP switch (the home
-#: reference) closes: mirrors go to the sleeping position +pi/2 (seed 000 section
-#: 3.5.2, "no dust is deposited on the mirrors"); the other two axes go back to
-#: their 0 rad rest position.
-STOW_POSITIONS = {'mirrors': math.pi / 2, 'mobile_structure': 0.0, 'secondary_reflector': 0.0}
-
-AXES = tuple(AXIS_LIMITS)
 
 
 # --------------------------------------------------------------------------- calibration
@@ -64,7 +46,7 @@ class Calibration:
         True when positive steps turn the joint in the negative direction.
     """
 
-    step_angle: float = SEED_STEP_ANGLE
+    step_angle: float = STEP_ANGLE
     gear_ratio: float = 1.0
     offset: float = 0.0
     invert: bool = False

@@ -30,9 +30,10 @@ from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
+from sslfr_common.contract import STEP_ANGLE
 from sslfr_drivers.link.protocol import FLAG_RESPONSE, Frame, PayloadError
 
-DEFAULT_STEP_RAD = math.radians(0.006)
+DEFAULT_STEP_RAD = STEP_ANGLE      # [rad/step] seed 000: 0.006 deg
 
 SENSOR_REQUEST_RANGE = range(0x40, 0x60)
 SENSOR_REPLY_RANGE = range(0xC0, 0xE0)

@@ -63,48 +63,14 @@ Refused requests (reset while hot, release without e-stop, nothing to reset) ret
 """
 from __future__ import annotations
 
-import enum
 import math
 import time
 from dataclasses import dataclass, field, replace
 
-#: Axis names (docs/architecture.md).
-AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
-
-#: Which axis each limit switch of seed 000 section 3.5.1 belongs to.
-SWITCH_AXIS = {
-    'initial': 'mirrors',            # beta_0 = -pi/4, sunrise end (seed 000 section 4)
-    'last': 'mirrors',               # beta_0 = +pi/4, sunset end
-    'sleeping': 'mirrors',           # beta_0 = +pi/2, sleeping position
-    'longitudinal_1': 'mobile_structure',     # beta_M = 0, starting position
-    'longitudinal_2': 'secondary_reflector',  # beta_a = 0, starting position
-}
-SWITCHES = tuple(SWITCH_AXIS)
-
-#: Nominal joint angle [rad] at which each switch is closed in normal operation.
-DEFAULT_SWITCH_POSITIONS = {
-    'initial': -math.pi / 4, 'last': math.pi / 4, 'sleeping': math.pi / 2,
-    'longitudinal_1': 0.0, 'longitudinal_2': 0.0,
-}
-
-#: Thermocouples on the absorber tube (seed 000 section 3.5.3).
-SENSORS = ('inlet', 'outlet')
+from sslfr_common.contract import JOINTS, SWITCH_AXIS, SWITCH_POSITION, SWITCHES, THERMOCOUPLES, Level, Phase, driver_node
 
 #: Watchable nodes (default node names, docs/architecture.md).
-WATCHABLE = ('planner', 'mirrors_driver', 'mobile_structure_driver',
-             'secondary_reflector_driver', 'absorber_board', 'irradiance', 'gps')
-
-#: Phase codes (sslfr_interfaces/TrackerPhase).
-PHASE_TRACKING = 2
-
-
-class Level(enum.IntEnum):
-    """SafetyState levels (sslfr_interfaces/msg/SafetyState.msg)."""
-
-    OK = 0
-    WARN = 1
-    STOW = 2
-    ESTOP = 3
+WATCHABLE = ('planner', *(driver_node(j) for j in JOINTS), 'absorber_board', 'irradiance', 'gps')
 
 
 class SystemClock:
@@ -164,7 +130,7 @@ class SafetyConfig:
     valid_max: float = 1100.0             # [degC]
     switch_window: float = 0.05           # [rad] closure expected within this of nominal
     switch_lookback: float = 1.0          # [s] measured angles that make up the axis' path
-    switch_positions: dict = field(default_factory=lambda: dict(DEFAULT_SWITCH_POSITIONS))
+    switch_positions: dict = field(default_factory=lambda: dict(SWITCH_POSITION))
     stuck_switch_travel: float = 0.1      # [rad] travel with a switch closed at homing
     status_max_age: float = 1.0           # [s] axis status older than this is unknown
     beam_max_age: float = 5.0             # [s] beam older than this is unknown
@@ -303,8 +269,8 @@ class SafetyCore:
         self.config.validate()
         self.clock = clock or SystemClock()
         self.start = self.clock.steady()
-        self.sensors = {s: _Sensor() for s in SENSORS}
-        self.axes = {a: _Axis() for a in AXES}
+        self.sensors = {s: _Sensor() for s in THERMOCOUPLES}
+        self.axes = {a: _Axis() for a in JOINTS}
         self.switch_closed: dict[str, bool | None] = {s: None for s in SWITCHES}
         self.switch_ack: set[str] = set()        # acknowledged trips, re-armed when open
         self.heard: dict[str, float] = {}        # node -> last arrival [steady s]
@@ -344,7 +310,7 @@ class SafetyCore:
     # ----------------------------------------------------------------- inputs
     def on_temperature(self, sensor: str, value: float, arrival: float | None = None,
                        open_circuit: bool = False) -> None:
-        """A thermocouple sample [degC] (``sensor`` in :data:`SENSORS`).
+        """A thermocouple sample [degC] (``sensor`` in :data:`THERMOCOUPLES`).
 
         NaN, +/-inf, a value outside ``valid_min..valid_max`` or ``open_circuit``
         mark the thermocouple faulty (STOW). A valid value above
@@ -434,9 +400,9 @@ class SafetyCore:
         """A ``tracker/phase``: phase code and the planner's site source."""
         now = self._now(arrival)
         self.heartbeat('planner', now)
-        if phase == PHASE_TRACKING and self.phase != PHASE_TRACKING:
+        if phase == Phase.TRACKING and self.phase != Phase.TRACKING:
             self.tracking_since = now
-        elif phase != PHASE_TRACKING:
+        elif phase != Phase.TRACKING:
             self.tracking_since = None
         self.phase = int(phase)
         self.site_source = str(site_source)
@@ -525,7 +491,7 @@ class SafetyCore:
             if 'estop' in self.latched:
                 return True, 'e-stop already engaged'
             self._latch(Condition('estop', Level.ESTOP, 'operator e-stop (safety/estop): every axis stopped',
-                                  axes=AXES, latched=True))
+                                  axes=JOINTS, latched=True))
             self.evaluate(now)
             return True, 'e-stop engaged: every axis stopped'
         if 'estop' not in self.latched:
@@ -609,7 +575,7 @@ class SafetyCore:
     def _live_conditions(self, now: float) -> list[Condition]:
         cfg = self.config
         out: list[Condition] = []
-        tracking = self.phase == PHASE_TRACKING
+        tracking = self.phase == Phase.TRACKING
         # thermocouple silent / stuck (latched once detected)
         beam_known = self.beam_arrival is not None and now - self.beam_arrival <= cfg.beam_max_age
         sun_on = tracking and (not beam_known or self.beam >= cfg.stuck_min_beam)
@@ -669,7 +635,7 @@ class SafetyCore:
         conds = self._live_conditions(now)
         level = max((c.level for c in conds), default=Level.OK)
         reasons = tuple(c.reason for c in sorted(conds, key=lambda c: (-c.level, c.key)))
-        axes = tuple(a for a in AXES if any(a in c.axes for c in conds if c.level == Level.ESTOP))
+        axes = tuple(a for a in JOINTS if any(a in c.axes for c in conds if c.level == Level.ESTOP))
         stow = any(c.level == Level.STOW for c in conds) or any(
             c.key.startswith(('switch:', 'stuck_switch:')) for c in conds)
         old = self._state

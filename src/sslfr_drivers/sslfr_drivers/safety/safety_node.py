@@ -39,7 +39,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
 
-from sslfr_drivers.safety.core import AXES, SWITCHES, WATCHABLE, Level, SafetyConfig, SafetyCore
+from sslfr_common.contract import JOINTS, SWITCHES, Level
+from sslfr_drivers.safety.core import WATCHABLE, SafetyConfig, SafetyCore
 from sslfr_common.node import run_node
 
 _D = SafetyConfig()
@@ -176,7 +177,7 @@ class SafetyNode(Node):
         self._subscribe(LimitSwitches, 'limit_switches', self._on_switches)
         self._subscribe(TrackerPhase, 'tracker/phase', self._on_phase)
         self._subscribe(JointTrajectory, 'tracker/trajectory', self._on_trajectory)
-        for axis in AXES:
+        for axis in JOINTS:
             self._subscribe(AxisStatus, f'axes/{axis}/status', lambda m, a=axis: self._on_axis(a, m))
         self._subscribe(NavSatFix, 'gps/fix', self._on_fix)
         self._subscribe(Irradiance, 'irradiance/beam', self._on_beam)

@@ -28,11 +28,12 @@ from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
 
+from sslfr_common.contract import SWITCHES
+from sslfr_common.node import run_node
 from sslfr_drivers.sensors import max6675
-from sslfr_drivers.sensors.debounce import SWITCH_NAMES, SwitchDebouncer
+from sslfr_drivers.sensors.debounce import SwitchDebouncer
 from sslfr_drivers.link.sensor_messages import SwitchSample, ThermocoupleSample
 from sslfr_drivers.sensors.board_node import RateMeter, SensorBoardNode, board_status
-from sslfr_common.node import run_node
 
 PARAMS = {
     'port': ('', 'absorber board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -126,8 +127,8 @@ class AbsorberBoardNode(SensorBoardNode):
                 first = self._debouncer.states is None
                 changed = self._debouncer.update(msg.bits, t)
                 if first:  # initial states: "changed" at the first sample
-                    self._changed_ros = {n: stamp for n in SWITCH_NAMES}
-                    changed = list(SWITCH_NAMES)
+                    self._changed_ros = {n: stamp for n in SWITCHES}
+                    changed = list(SWITCHES)
                 else:
                     for name in changed:
                         st = self._debouncer.states[name]
@@ -163,7 +164,7 @@ class AbsorberBoardNode(SensorBoardNode):
             return
         msg = LimitSwitches()
         msg.header.stamp = self.get_clock().now().to_msg()
-        for name in SWITCH_NAMES:
+        for name in SWITCHES:
             setattr(msg, name, bool(d.states[name].closed))
             t = self._changed_ros.get(name)
             if t is not None:
@@ -177,7 +178,7 @@ class AbsorberBoardNode(SensorBoardNode):
                  'inlet_faults': self._fault_counts['inlet'],
                  'outlet_faults': self._fault_counts['outlet'],
                  'switch_rate_hz': f'{self._switch_meter.rate():.1f}',
-                 'switches': ','.join(n for n in SWITCH_NAMES
+                 'switches': ','.join(n for n in SWITCHES
                                       if self._debouncer.states and self._debouncer.states[n].closed)
                  or 'none',
                  'switch_bounces': self._debouncer.bounces, 'queue_dropped': self._queue_dropped}

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-SWITCH_NAMES = ('initial', 'last', 'sleeping', 'longitudinal_1', 'longitudinal_2')
+from sslfr_common.contract import SWITCHES
 
 
 @dataclass
@@ -48,7 +48,7 @@ class SwitchDebouncer:
         Switch names in bit order.
     """
 
-    def __init__(self, hold_time: float = 0.03, names: tuple = SWITCH_NAMES):
+    def __init__(self, hold_time: float = 0.03, names: tuple = SWITCHES):
         if not (hold_time >= 0.0) or not math.isfinite(hold_time):
             raise ValueError(f'hold_time must be a finite value >= 0 s, got {hold_time!r}')
         self.hold_time = float(hold_time)

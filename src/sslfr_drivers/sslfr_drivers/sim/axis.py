@@ -31,17 +31,10 @@ import math
 import random
 from dataclasses import dataclass
 
+from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.sim.base import Refuse, SimBoard
 
-AXES = {
-    # name: (lo, hi, sleep) joint limits [rad] (seed 000 section 4 and team conventions:
-    # mirrors -pi/4..+pi/2, sleeping at +pi/2; structure and reflector tilts of
-    # magnitude 0..pi/2 on either side, rest at 0)
-    'mirrors': (-math.pi / 4, math.pi / 2, math.pi / 2),
-    'mobile_structure': (-math.pi / 2, math.pi / 2, 0.0),
-    'secondary_reflector': (-math.pi / 2, math.pi / 2, 0.0),
-}
 
 
 @dataclass
@@ -64,8 +57,8 @@ class AxisConfig:
     @classmethod
     def for_axis(cls, axis: str, **kw) -> 'AxisConfig':
         """Configuration of the named axis: end-switch angles ``lo``, ``hi`` and the
-        sleeping angle [rad] from :data:`AXES`; ``kw`` sets the other fields."""
-        lo, hi, sleep = AXES[axis]
+        sleeping angle [rad] from the contract (JOINT_RANGE, STOW_POSITION); ``kw`` sets the other fields."""
+        (lo, hi), sleep = JOINT_RANGE[axis], STOW_POSITION[axis]
         return cls(axis=axis, lo=lo, hi=hi, sleep=sleep, **kw)
 
 

@@ -55,11 +55,11 @@ import random
 import tempfile
 import time
 
+from sslfr_common.contract import JOINT_RANGE, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
 from sslfr_drivers.sensors import max6675
 
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.sensors.debounce import SWITCH_NAMES
 from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
 from sslfr_drivers.sim.world import AbsorberThermal, GpsReceiver, Sky, ThermalParameters
 from sslfr_drivers.sim.base import Refuse, SimBoard
@@ -252,14 +252,25 @@ class GpsSim(_SensorSim):
 
 
 # ------------------------------------------------------------------- absorber
-#: Switch geometry used when axis angles are known [rad]: (axis, test)
-SWITCH_RULES = {
-    'initial': ('mirrors', lambda a: a <= math.radians(-45.0) + 1e-3),
-    'last': ('mirrors', lambda a: abs(a - math.radians(45.0)) <= math.radians(0.5)),
-    'sleeping': ('mirrors', lambda a: a >= math.pi / 2 - 1e-3),
-    'longitudinal_1': ('mobile_structure', lambda a: a <= 1e-3),
-    'longitudinal_2': ('secondary_reflector', lambda a: a <= 1e-3),
-}
+#: Switch geometry used when axis angles are known [rad]: (axis, test). The switch ->
+#: axis table and the nominal angles are the contract's; the closed bands are the
+#: simulated mechanism's (the initial switch is an end stop, the others narrow cams).
+_SWITCH_BAND = {name: math.radians(0.5) if name == 'last' else 1e-3 for name in SWITCHES}
+
+
+def _switch_rule(name: str):
+    pos, band = SWITCH_POSITION[name], _SWITCH_BAND[name]
+    lo, hi = JOINT_RANGE[SWITCH_AXIS[name]]
+    if pos <= lo + 1e-9:                 # an end stop at the low end: closed at or below
+        return lambda a: a <= pos + band
+    if pos >= hi - 1e-9:                 # at the high end
+        return lambda a: a >= pos - band
+    if name.startswith('longitudinal'):  # rest position: closed at or below 0
+        return lambda a: a <= pos + band
+    return lambda a: abs(a - pos) <= band
+
+
+SWITCH_RULES = {name: (SWITCH_AXIS[name], _switch_rule(name)) for name in SWITCHES}
 
 
 class AbsorberSim(_SensorSim):
@@ -342,7 +353,7 @@ class AbsorberSim(_SensorSim):
         bits = self._switch_bits(angles)
         if self._last_bits is not None and bits != self._last_bits:
             changed = bits ^ self._last_bits
-            names = {SWITCH_NAMES[i] for i in range(5) if changed >> i & 1}
+            names = {SWITCHES[i] for i in range(5) if changed >> i & 1}
             if names & self.bounce_next:
                 # contact bounce: the new state chattered over the last 8 ms
                 self.bounce_next -= names
@@ -359,7 +370,7 @@ class AbsorberSim(_SensorSim):
 
     def _switch_bits(self, angles: dict[str, float]) -> int:
         bits = 0
-        for i, name in enumerate(SWITCH_NAMES):
+        for i, name in enumerate(SWITCHES):
             if name in self.switch_override:
                 closed = self.switch_override[name]
             else:
@@ -382,8 +393,8 @@ class AbsorberSim(_SensorSim):
             self.open[target] = active
         elif kind == 'switch':
             name = cmd.get('name')
-            if name not in SWITCH_NAMES:
-                return {'ok': False, 'error': f'switch {name!r}: one of {SWITCH_NAMES}'}
+            if name not in SWITCHES:
+                return {'ok': False, 'error': f'switch {name!r}: one of {SWITCHES}'}
             if cmd.get('closed') is None or not active:
                 self.switch_override.pop(name, None)
             else:

@@ -1,0 +1,196 @@
+"""Parameter tables: every node declares its parameters once, as data (pure Python).
+
+A :class:`ParamTable` is a tuple of :class:`ParamSpec` (name, default, description,
+unit, range or choices) plus an optional cross-parameter check. The same table is
+
+- declared by the node (``sslfr_common.node.declare_parameters``: descriptors with
+  the description, unit and range, so ``ros2 param describe`` shows them),
+- checked at start-up (an invalid value refuses to start, exit 2, one line),
+- checked on every run-time change (refused with the reason, the last good
+  configuration stays: ``sslfr_common.node.ParameterGuard``),
+- and used by ``sslfr up`` / ``sslfr sim`` / ``sslfr doctor`` to validate a site
+  config before anything starts (unknown keys included).
+
+No rclpy here: tables are importable by the CLI and by tests without ROS.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Iterable
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter.
+
+    Attributes
+    ----------
+    name : str
+        Parameter name (dots for groups).
+    default : bool, int, float, str or list
+        Default value; its type is the parameter's type.
+    description : str
+        Meaning, with the unit in brackets.
+    unit : str
+        Unit ('-' for none).
+    lo, hi : float or None
+        Inclusive range for numbers (each element of a number array).
+    choices : tuple of str
+        Allowed values of a string parameter (empty: any).
+    length : int or None
+        Required length of an array parameter.
+    read_only : bool
+        Fixed at start-up (a run-time change is refused).
+    """
+
+    name: str
+    default: Any
+    description: str
+    unit: str = '-'
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[str, ...] = ()
+    length: int | None = None
+    read_only: bool = False
+
+    @property
+    def constraints(self) -> str:
+        """Human-readable constraint, for the descriptor and error messages."""
+        parts = [f'unit: {self.unit}']
+        if self.lo is not None or self.hi is not None:
+            parts.append(f'range [{self.lo}, {self.hi}]')
+        if self.choices:
+            parts.append('one of ' + ', '.join(self.choices))
+        if self.length is not None:
+            parts.append(f'{self.length} values')
+        return '; '.join(parts)
+
+    def check(self, value: Any) -> str | None:
+        """None when ``value`` is valid for this parameter, else a one-line reason
+        naming the parameter, the value and what is allowed."""
+        d = self.default
+        if isinstance(d, bool):
+            return None if isinstance(value, bool) else f'{self.name}: expected true or false, got {value!r}'
+        if isinstance(d, list):
+            if not isinstance(value, (list, tuple)) or isinstance(value, str):
+                return f'{self.name}: expected a list, got {value!r}'
+            if self.length is not None and len(value) != self.length:
+                return f'{self.name}: expected {self.length} values, got {len(value)}'
+            if d and isinstance(d[0], str):
+                bad = [v for v in value if not isinstance(v, str)]
+                return f'{self.name}: expected strings, got {bad[0]!r}' if bad else None
+            for v in value:
+                why = self._check_number(v)
+                if why:
+                    return why
+            return None
+        if isinstance(d, str):
+            if not isinstance(value, str):
+                return f'{self.name}: expected a string, got {value!r}'
+            if self.choices and value not in self.choices:
+                return f'{self.name}: {value!r} is not one of {", ".join(self.choices)}'
+            return None
+        if isinstance(d, int) and (not isinstance(value, int) or isinstance(value, bool)):
+            return f'{self.name}: expected an integer, got {value!r}'
+        return self._check_number(value)
+
+    def _check_number(self, v: Any) -> str | None:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            return f'{self.name}: expected a number, got {v!r}'
+        if not math.isfinite(v):
+            return f'{self.name}: {v} is not a finite number'
+        if (self.lo is not None and v < self.lo) or (self.hi is not None and v > self.hi):
+            unit = '' if self.unit == '-' else f' {self.unit}'
+            return f'{self.name}: {v}{unit} is outside [{self.lo}, {self.hi}]'
+        return None
+
+
+class ParamTable:
+    """The parameters of one node: specs in declaration order + a cross check.
+
+    Parameters
+    ----------
+    specs : iterable of ParamSpec
+    cross_check : callable, optional
+        ``cross_check(values) -> list[str]``: rules between parameters, run only
+        when every single value is valid.
+    """
+
+    def __init__(self, specs: Iterable[ParamSpec],
+                 cross_check: Callable[[dict[str, Any]], list[str]] | None = None):
+        self.specs: tuple[ParamSpec, ...] = tuple(specs)
+        self.by_name: dict[str, ParamSpec] = {s.name: s for s in self.specs}
+        if len(self.by_name) != len(self.specs):
+            raise ValueError('duplicate parameter names in a table')
+        self.cross_check = cross_check
+
+    def __iter__(self):
+        return iter(self.specs)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.by_name
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.by_name)
+
+    def defaults(self) -> dict[str, Any]:
+        """Name -> default value (copies of lists)."""
+        return {s.name: (list(s.default) if isinstance(s.default, list) else s.default) for s in self.specs}
+
+    def with_defaults(self, **defaults: Any) -> 'ParamTable':
+        """The same table with other defaults (e.g. per-axis limits); names with
+        dots are given with ``__`` (``stow__speeds=...``)."""
+        new = {k.replace('__', '.'): v for k, v in defaults.items()}
+        unknown = set(new) - set(self.by_name)
+        if unknown:
+            raise KeyError(f'unknown parameters: {", ".join(sorted(unknown))}')
+        return ParamTable((replace(s, default=new[s.name]) if s.name in new else s for s in self.specs),
+                          self.cross_check)
+
+    def validate(self, values: dict[str, Any]) -> list[str]:
+        """Problems of a complete set of values (empty list: valid)."""
+        errors = []
+        for spec in self.specs:
+            if spec.name not in values:
+                errors.append(f'{spec.name}: missing')
+                continue
+            why = spec.check(values[spec.name])
+            if why:
+                errors.append(why)
+        if not errors and self.cross_check is not None:
+            errors.extend(self.cross_check(values))
+        return errors
+
+    def check_overrides(self, values: dict[str, Any]) -> list[str]:
+        """Problems of a partial set (a site config's node section): unknown names
+        (a misspelt key is refused, with the closest known names) and bad values;
+        the cross check runs on the defaults overlaid with ``values``."""
+        import difflib
+        errors = []
+        for name, value in values.items():
+            spec = self.by_name.get(name)
+            if spec is None:
+                close = difflib.get_close_matches(name, self.names, n=2)
+                hint = f' (did you mean {" or ".join(close)}?)' if close else ''
+                errors.append(f'{name}: not a parameter of this node{hint}')
+                continue
+            why = _strict_type(spec, value) or spec.check(value)
+            if why:
+                errors.append(why)
+        if not errors and self.cross_check is not None:
+            errors.extend(self.cross_check({**self.defaults(), **values}))
+        return errors
+
+
+def _strict_type(spec: ParamSpec, value: Any) -> str | None:
+    """rclpy refuses a params-file value whose YAML type is not the declared one: an
+    integer (``5``) for a double parameter (write ``5.0``), a double for an integer."""
+    d = spec.default
+    if isinstance(d, float) and isinstance(value, int) and not isinstance(value, bool):
+        return f'{spec.name}: {value} is an integer, the parameter is a floating-point number (write {value}.0)'
+    if isinstance(d, list) and d and isinstance(d[0], float) and isinstance(value, (list, tuple)):
+        if any(isinstance(v, int) and not isinstance(v, bool) for v in value):
+            return f'{spec.name}: write every element as a floating-point number (e.g. 1.0, not 1)'
+    return None
