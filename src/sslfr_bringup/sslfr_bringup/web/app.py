@@ -48,6 +48,7 @@ from .live import DayBuffer, LiveState
 
 STATIC = Path(__file__).resolve().parent / 'static'
 COOKIE = 'sslfr_session'
+PUSHER = web.AppKey('pusher', asyncio.Task)
 REPORT_TIMEOUT = 300.0
 
 
@@ -426,10 +427,10 @@ class OperatorApp:
         ])
 
         async def start_pusher(app_):
-            app_['pusher'] = asyncio.create_task(self.pusher())
+            app_[PUSHER] = asyncio.create_task(self.pusher())
 
         async def stop_pusher(app_):
-            app_['pusher'].cancel()
+            app_[PUSHER].cancel()
 
         app.on_startup.append(start_pusher)
         app.on_cleanup.append(stop_pusher)

@@ -192,7 +192,7 @@ function drawSouth(s) {
 function drawSide(s) {
   const svg = $('view-side');
   const g = geometry(s);
-  const len = 1.2;
+  const len = 0.75, y0 = -0.25;
   svg.textContent = '';
   const root = el('g', {}, svg);
   const sw = 0.012;
@@ -200,22 +200,22 @@ function drawSide(s) {
   el('text', { x: -1.5, y: 0.2, 'font-size': 0.09, fill: '#555' }, root).textContent = 'S end';
   el('text', { x: 1.25, y: 0.2, 'font-size': 0.09, fill: '#555' }, root).textContent = 'N end';
   const axes = s.axes || {};
-  const h = Math.min(1.5, g.f) * 0.9;
+  const h = 1.2;
   const seg = (b, y, color, id) => {
     if (b === null || b === undefined) return;
-    el('line', { x1: -len * Math.cos(b), y1: y + len * Math.sin(b), x2: len * Math.cos(b), y2: y - len * Math.sin(b),
+    el('line', { x1: -len * Math.cos(b), y1: y0 + y + len * Math.sin(b), x2: len * Math.cos(b), y2: y0 + y - len * Math.sin(b),
       stroke: color, 'stroke-width': sw * 2, id, 'data-angle': b.toFixed(6) }, root);
   };
   seg(axes.mobile_structure && axes.mobile_structure.measured, 0, '#1e3a8a', 'side-structure');
   seg(axes.secondary_reflector && axes.secondary_reflector.measured, -h, '#111', 'side-reflector');
-  el('line', { x1: 0, y1: 0.22, x2: 0, y2: 0, stroke: '#6b7280', 'stroke-width': sw }, root);
+  el('line', { x1: 0, y1: 0.22, x2: 0, y2: y0, stroke: '#6b7280', 'stroke-width': sw }, root);
   const sun = s.sun;
   if (sun && sun.longitudinal !== null) {
     const th = sun.longitudinal;
-    const dx = -Math.sin(th), dy = -Math.cos(th), L = 1.6;
-    el('line', { x1: dx * L, y1: dy * L, x2: 0, y2: 0, stroke: sun.above_horizon ? '#f59e0b' : '#9ca3af',
+    const dx = -Math.sin(th), dy = -Math.cos(th), L = 1.5;
+    el('line', { x1: dx * L, y1: y0 + dy * L, x2: 0, y2: y0, stroke: sun.above_horizon ? '#f59e0b' : '#9ca3af',
       'stroke-width': sw, id: 'side-sun' }, root);
-    el('circle', { cx: dx * L, cy: dy * L, r: 0.06, fill: sun.above_horizon ? '#fbbf24' : '#d1d5db' }, root);
+    el('circle', { cx: dx * L, cy: y0 + dy * L, r: 0.06, fill: sun.above_horizon ? '#fbbf24' : '#d1d5db' }, root);
   }
 }
 
