@@ -103,8 +103,13 @@ class WebNode(Node):
         return out
 
     def log(self, level: str, text: str) -> None:
-        {'info': self.get_logger().info, 'warn': self.get_logger().warning,
-         'error': self.get_logger().error}.get(level, self.get_logger().info)(text)
+        logger = self.get_logger()       # one call site per severity (rclpy refuses to mix them)
+        if level == 'error':
+            logger.error(text)
+        elif level == 'warn':
+            logger.warning(text)
+        else:
+            logger.info(text)
 
     async def call(self, cmd: commands.Command) -> dict:
         client = self.clients_[cmd.service]

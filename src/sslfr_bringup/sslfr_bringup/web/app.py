@@ -50,6 +50,7 @@ STATIC = Path(__file__).resolve().parent / 'static'
 COOKIE = 'sslfr_session'
 PUSHER = web.AppKey('pusher', asyncio.Task)
 REPORT_TIMEOUT = 300.0
+POLL = 0.05            # [s] how often the pusher looks for a change (a lone change waits <= this)
 
 
 class Backend(Protocol):
@@ -217,17 +218,21 @@ class OperatorApp:
             self.counters['events_sent'] += 1
 
     async def pusher(self) -> None:
-        """Send the state to every connected page when it changed, at most every
-        ``push_period``; a new day-plot sample as soon as it is taken."""
+        """Send the state to every connected page when it changed: within
+        :data:`POLL` of a change, at most once per ``push_period``; a new day-plot
+        sample as soon as it is taken."""
         last_state, last_buf = -1, self.backend.buffer.version
         period = float(self.cfg['push_period'])
+        tick = min(POLL, period)
+        loop = asyncio.get_running_loop()
+        last_push = 0.0
         while True:
-            await asyncio.sleep(period)
+            await asyncio.sleep(tick)
             if not self._clients:
                 continue
             st = self.backend.state
-            if st.version != last_state:
-                last_state = st.version
+            if st.version != last_state and loop.time() - last_push >= period - 1e-3:
+                last_state, last_push = st.version, loop.time()
                 self._broadcast(self._event('state', st.snapshot(self.backend.ros_time())))
             buf = self.backend.buffer
             if buf.version != last_buf:
