@@ -215,3 +215,26 @@ def test_bag_download_is_a_zip_and_names_cannot_escape(tmp_path, pwfile):
             assert (await client.get(f'/api/bags/{evil}/download')).status == 404, evil
         assert (await client.get('/api/bags/sslfr_2026-06-21/report/..%2F..%2Fpw')).status == 404
     run(tmp_path, pwfile, body, backend=RecordingBackend(bag_dir=str(root)))
+
+
+def test_recorded_day_listed_and_its_report_made_once_and_served(tmp_path, pwfile):
+    from daybag import SUNRISE, write_day
+    root = tmp_path / 'bags'
+    write_day(root / 'sslfr_2026-06-21', SUNRISE - 900, SUNRISE + 1800)
+
+    async def body(client, backend, op):
+        j = await (await client.get('/api/bags')).json()
+        (b,) = j['bags']
+        assert b['name'] == 'sslfr_2026-06-21' and b['date'] == '2026-06-21' and b['problem'] == ''
+        assert b['start'] == pytest.approx(SUNRISE - 900, abs=1) and b['messages'] > 1000
+        r = await client.get('/api/bags/sslfr_2026-06-21/report')
+        rep = await r.json()
+        assert r.status == 200, rep
+        assert 'sunrise' in rep['text'].lower() and rep['plots']
+        made = (tmp_path / 'reports' / 'sslfr_2026-06-21' / 'report.txt').stat().st_mtime_ns
+        png = await client.get(rep['plots'][0])
+        assert png.status == 200 and (await png.read())[:8] == b'\x89PNG\r\n\x1a\n'
+        again = await (await client.get('/api/bags/sslfr_2026-06-21/report')).json()
+        assert again['text'] == rep['text']
+        assert (tmp_path / 'reports' / 'sslfr_2026-06-21' / 'report.txt').stat().st_mtime_ns == made  # cached
+    run(tmp_path, pwfile, body, backend=RecordingBackend(bag_dir=str(root)))

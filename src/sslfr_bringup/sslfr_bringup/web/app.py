@@ -369,7 +369,7 @@ class OperatorApp:
     async def _make_report(self, bag: Path, out: Path) -> tuple[int, str]:
         out.mkdir(parents=True, exist_ok=True)
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, '-m', 'sslfr_bringup.report', str(bag), '--out', str(out),
+            sys.executable, '-m', 'sslfr_bringup.cli', 'report', str(bag), '--out', str(out),
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
             env={**os.environ, 'MPLBACKEND': 'Agg'})
         try:
@@ -379,6 +379,8 @@ class OperatorApp:
             await proc.wait()
             return -1, f'no report after {REPORT_TIMEOUT:.0f} s'
         text = data.decode('utf-8', errors='replace')
+        if proc.returncode == 0 and not text.strip():
+            return 1, 'the report printed nothing'
         if proc.returncode == 0:
             (out / 'report.txt').write_text(text, encoding='utf-8')
         return proc.returncode, text
