@@ -5,7 +5,8 @@
 The browser loads the page, sees the phase change (NIGHT/PRE_DAWN -> TRACKING) and the
 measured angles change, is refused a command without login, logs in with the operator
 password, presses Stow and sees the planner's phase become STOW. A screenshot of the
-page is kept as an artifact: out/test-artifacts/web-operator-page.png (path printed).
+page is kept as an artifact: out/test-artifacts/web-operator-page.png (and -phone.png at a
+phone's 390 px width, where nothing may be wider than the screen; paths printed).
 Page load time and the state-to-page delay are printed (README, measured figures).
 
 Set-up installs chromium + chromium-driver when root on Debian (scripts/setup-browser.sh);
@@ -158,6 +159,17 @@ def test_operator_page_in_chromium_against_the_simulated_tracker(sim, browser):
     shot = ARTIFACTS / 'web-operator-page.png'
     assert browser.save_screenshot(str(shot)) and shot.stat().st_size > 10000
     print(f'screenshot: {shot}')
+    # a phone screen (390 x 844 CSS px): one column, nothing wider than the screen
+    browser.set_window_size(390, 844)
+    time.sleep(1.0)
+    width = browser.execute_script('return [document.documentElement.scrollWidth, window.innerWidth]')
+    assert width[0] <= width[1] + 1, f'page {width[0]} px wide on a {width[1]} px screen'
+    for wide in ('card-axes', 'card-commands', 'card-drawing'):
+        box = browser.find_element('id', wide).rect
+        assert box['x'] >= 0 and box['x'] + box['width'] <= width[1] + 1, (wide, box)
+    phone = ARTIFACTS / 'web-operator-page-phone.png'
+    browser.save_screenshot(str(phone))
+    print(f'screenshot (phone): {phone}')
     audit = (tmp / 'audit.jsonl').read_text()
     assert '"command": "stow"' in audit and '127.0.0.1' in audit
     print(f'browser test took {time.monotonic() - t0:.0f} s after the page address was known')

@@ -32,6 +32,8 @@ from .web.live import DayBuffer, LiveState
 from .web.params import SPECS, coerce, validate
 
 REMOTE_RETRY, REMOTE_REFRESH = 2.0, 60.0       # [s, steady] get_parameters: until answered / then
+SAMPLE_PERIOD = 0.5                            # [s, steady] check whether a day-plot sample is due
+DISCOVERY_WAIT = 2.0                           # [s, wall] a new service client's wait for its server
 
 
 def _srv_class(type_name: str):
@@ -66,14 +68,17 @@ class WebNode(Node):
                                      lambda m, n=name: st.on_temperature(n, m), 10)
         for axis in JOINTS:
             self.create_subscription(AxisStatus, f'axes/{axis}/status', st.on_axis, 10)
-        self.clients_ = {name: self.create_client(_srv_class(typ), name)
-                         for name, (_, typ) in commands.all_service_names(JOINTS).items()}
-        self._param_clients = {n: self.create_client(GetParameters, f'{n}/get_parameters')
-                               for n in remote.REMOTE_PARAMS}
+        # Service clients are made when first needed: every entity costs the executor
+        # time at each wake-up (~45 messages/s), so idle clients are not kept around.
+        # (the e-stop's client is made at once: no discovery wait when it is pressed)
+        self._service_types = commands.all_service_names(JOINTS)
+        self.clients_ = {'safety/estop': self.create_client(_srv_class(self._service_types['safety/estop'][1]),
+                                                            'safety/estop')}
+        self._param_clients: dict = {}
+        self._remote_asked: dict = {}
         self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
-        self._remote_pending: set[str] = set()
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(0.1, self._sample, clock=steady)
+        self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
         self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         self.op = OperatorApp(self.cfg, self)
@@ -112,7 +117,14 @@ class WebNode(Node):
             logger.info(text)
 
     async def call(self, cmd: commands.Command) -> dict:
-        client = self.clients_[cmd.service]
+        client = self.clients_.get(cmd.service)
+        if client is None:        # first use (from the web thread; rclpy's node calls are locked)
+            client = self.clients_[cmd.service] = self.create_client(
+                _srv_class(self._service_types[cmd.service][1]), cmd.service)
+            for _ in range(int(DISCOVERY_WAIT / 0.05)):   # let discovery match the new client
+                if client.service_is_ready():
+                    break
+                await asyncio.sleep(0.05)
         if not client.service_is_ready():
             return {'success': False, 'message': f'service {cmd.service} is not available (is its node running?)'}
         loop = asyncio.get_running_loop()
@@ -140,18 +152,31 @@ class WebNode(Node):
 
     def _steady_tick(self) -> None:
         now = self._steady.now().nanoseconds / 1e9
-        for node, client in self._param_clients.items():
-            if node in self._remote_pending or now < self._remote_due[node] or not client.service_is_ready():
+        for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
+            client = self._param_clients.get(node)
+            if now < due:
                 continue
-            names = list(remote.REMOTE_PARAMS[node])
-            self._remote_pending.add(node)
-            self._remote_due[node] = now + REMOTE_RETRY
-            fut = client.call_async(GetParameters.Request(names=names))
-            fut.add_done_callback(lambda f, n=node, nm=names, t=now: self._on_remote(n, nm, f, t))
+            if client is None:
+                self._param_clients[node] = self.create_client(GetParameters, f'{node}/get_parameters')
+                continue
+            asked = self._remote_asked.get(node)
+            if asked is None and client.service_is_ready():
+                self._remote_asked[node] = now
+                names = list(remote.REMOTE_PARAMS[node])
+                fut = client.call_async(GetParameters.Request(names=names))
+                fut.add_done_callback(lambda f, n=node, nm=names, t=now: self._on_remote(n, nm, f, t))
+            elif asked is not None and now - asked > REMOTE_RETRY:      # no answer: start again
+                self._drop_param_client(node)
         self._publish_diagnostics()
 
+    def _drop_param_client(self, node: str) -> None:
+        self._remote_asked.pop(node, None)
+        client = self._param_clients.pop(node, None)
+        if client is not None:
+            self.destroy_client(client)
+
     def _on_remote(self, node: str, names: list[str], fut, asked: float) -> None:
-        self._remote_pending.discard(node)
+        self._drop_param_client(node)
         try:
             values = fut.result().values
         except Exception as exc:  # noqa: BLE001 - retried at the next tick

@@ -134,48 +134,55 @@ def fix_dict(m) -> dict:
 
 # ------------------------------------------------------------------ the live state
 class LiveState:
-    """Latest value of every shown topic; thread-safe (ROS thread writes, web reads)."""
+    """Latest message of every shown topic; thread-safe (ROS thread writes, web reads).
+
+    The callbacks only keep a reference to the message and its arrival time (cheap at
+    the graph's ~45 msg/s); messages are turned into JSON-ready dicts only when read
+    (:meth:`get`, :meth:`snapshot`), i.e. when a page is open or a plot sample is due.
+    """
+
+    #: key -> converter of its messages
+    CONVERT: dict[str, Callable] = {'phase': phase_dict, 'safety': safety_dict, 'sun': sun_dict,
+                                    'beam': beam_dict, 'gps': fix_dict, 'axes': axis_dict,
+                                    'temperatures': temperature_dict}
+    NESTED = ('axes', 'temperatures')
 
     def __init__(self, axes: tuple[str, ...] = JOINTS, wall: Callable[[], float] = time.time):
         self.axes, self.wall = tuple(axes), wall
         self._lock = threading.Lock()
-        self._data: dict[str, Any] = {'axes': {}, 'temperatures': {}}
+        self._msgs: dict[str, Any] = {}          # 'phase' or 'axes/mirrors' -> message
         self._arrived: dict[str, float] = {}
         self.version = 0
         self.info: dict[str, Any] = {}          # remote parameters (limits, geometry), static-ish
 
-    def _set(self, key: str, value: Any, sub: str | None = None) -> None:
+    def _set(self, key: str, msg: Any) -> None:
+        now = self.wall()
         with self._lock:
-            now = self.wall()
-            if sub is None:
-                self._data[key] = value
-                self._arrived[key] = now
-            else:
-                self._data[key][sub] = value
-                self._arrived[f'{key}/{sub}'] = now
+            self._msgs[key] = msg
+            self._arrived[key] = now
             self.version += 1
 
     def on_phase(self, m) -> None:
-        self._set('phase', phase_dict(m))
+        self._set('phase', m)
 
     def on_safety(self, m) -> None:
-        self._set('safety', safety_dict(m))
+        self._set('safety', m)
 
     def on_axis(self, m) -> None:
         if m.axis in self.axes:
-            self._set('axes', axis_dict(m), m.axis)
+            self._set(f'axes/{m.axis}', m)
 
     def on_sun(self, m) -> None:
-        self._set('sun', sun_dict(m))
+        self._set('sun', m)
 
     def on_temperature(self, name: str, m) -> None:
-        self._set('temperatures', temperature_dict(m), name)
+        self._set(f'temperatures/{name}', m)
 
     def on_beam(self, m) -> None:
-        self._set('beam', beam_dict(m))
+        self._set('beam', m)
 
     def on_fix(self, m) -> None:
-        self._set('gps', fix_dict(m))
+        self._set('gps', m)
 
     def set_info(self, key: str, value: Any) -> None:
         with self._lock:
@@ -184,21 +191,28 @@ class LiveState:
                 self.version += 1
 
     def get(self, key: str, sub: str | None = None) -> Any:
+        """The latest message of ``key`` (``sub``: axis or sensor name) as a dict, or None."""
         with self._lock:
-            d = self._data.get(key)
-            return d.get(sub) if (sub is not None and isinstance(d, dict)) else d
+            msg = self._msgs.get(f'{key}/{sub}' if sub else key)
+        return None if msg is None else self.CONVERT[key](msg)
 
     def snapshot(self, ros_time: float | None = None) -> dict:
         """Everything the page shows, with each value's age [s wall] in ``ages``."""
         with self._lock:
             now = self.wall()
-            out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in self._data.items()}
-            out['ages'] = {k: round(now - t, 3) for k, t in self._arrived.items()}
-            out['info'] = dict(self.info)
-            out['server_time'] = now
-            out['ros_time'] = ros_time
-            out['version'] = self.version
-            return out
+            msgs = dict(self._msgs)
+            out: dict[str, Any] = {'ages': {k: round(now - t, 3) for k, t in self._arrived.items()},
+                                   'info': dict(self.info), 'server_time': now, 'ros_time': ros_time,
+                                   'version': self.version}
+        for key in self.NESTED:
+            out[key] = {}
+        for key, msg in msgs.items():
+            top, _, sub = key.partition('/')
+            if sub:
+                out[top][sub] = self.CONVERT[top](msg)
+            else:
+                out[top] = self.CONVERT[top](msg)
+        return out
 
 
 # ------------------------------------------------------------------ day buffer
@@ -231,6 +245,8 @@ class DayBuffer:
         period after the last one (a new solar day clears the buffer; time going back
         by more than a period, e.g. a replay restarted, clears it too). True if sampled."""
         if not math.isfinite(t) or t <= 0:
+            return False
+        if self.t and 0.0 <= t - self.t[-1] < self.period:      # the usual case: nothing to do
             return False
         phase = state.get('phase') or {}
         lon = (phase.get('site') or {}).get('longitude')
