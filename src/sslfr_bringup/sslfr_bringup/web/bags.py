@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterator
 
-from ..bag.metadata import BagError, read_metadata
 
 NAME_RE = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]{0,200}$')
 CHUNK = 1 << 20
@@ -45,6 +44,7 @@ def _bag_files(d: Path) -> list[Path]:
 
 def list_bags(root: str | os.PathLike) -> list[BagEntry]:
     """Every bag directory directly under ``root``, newest first."""
+    from ..bag.metadata import BagError, read_metadata   # here: the node imports it only when asked (-5 MB)
     root = Path(root).expanduser()
     out: list[BagEntry] = []
     try:
