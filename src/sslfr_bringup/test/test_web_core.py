@@ -349,3 +349,19 @@ def test_report_freshness_follows_the_bag(tmp_path):
     later = (out / 'report.txt').stat().st_mtime_ns + 10 ** 9
     os.utime(d / 'b_0.mcap', ns=(later, later))                  # the bag grew after the report
     assert not bags.report_is_fresh(d, out)
+
+
+# ------------------------------------------------------------------ ./sslfr web-password
+def test_web_password_cli_writes_a_hash_and_refuses_weak_passwords(tmp_path, monkeypatch, capsys):
+    from sslfr_bringup.web import password_cli
+    target = tmp_path / 'conf' / 'pw'
+    monkeypatch.setattr('sys.stdin', io.StringIO('short\n'))
+    assert password_cli.main(['--stdin', '--file', str(target)]) == 1
+    assert not target.exists() and 'at least 8' in capsys.readouterr().err
+    monkeypatch.setattr('sys.stdin', io.StringIO('a good passphrase\n'))
+    assert password_cli.main(['--stdin', '--file', str(target)]) == 0
+    assert auth.verify_password('a good passphrase', target.read_text())
+    answers = iter(['another passphrase', 'another passphrasX'])
+    monkeypatch.setattr('getpass.getpass', lambda prompt='': next(answers))
+    assert password_cli.main(['--file', str(target)]) == 1                 # the two differ: unchanged
+    assert auth.verify_password('a good passphrase', target.read_text())

@@ -1,7 +1,7 @@
 """The ``web`` node's parameters, declared in ONE place (pure Python, no rclpy).
 
 Same pattern as :mod:`sslfr_planner.planner_params` (whose :class:`ParamSpec` and
-:func:`check_value` are reused): a default, a description with the unit, a range or
+:func:`check_specs` are reused): a default, a description with the unit, a range or
 choices. Every parameter is read-only at runtime (the server binds once); a bad value
 at start-up stops the node with one line naming each bad parameter (exit code 2).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import ipaddress
 from typing import Any
 
-from sslfr_planner.planner_params import ParamSpec, check_value
+from sslfr_planner.planner_params import ParamSpec, check_specs
 
 #: The password file `./sslfr web-password` writes and the node reads.
 DEFAULT_PASSWORD_FILE = '~/.config/sslfr/web_password'
@@ -81,14 +81,7 @@ def coerce(values: dict[str, Any]) -> dict[str, Any]:
 def validate(values: dict[str, Any]) -> list[str]:
     """Check a complete set; return the problems (empty: valid). ``bind_address`` must
     be a literal IPv4/IPv6 address (a host name could resolve to every interface)."""
-    errors = []
-    for spec in SPECS:
-        if spec.name not in values:
-            errors.append(f'{spec.name}: missing')
-            continue
-        why = check_value(spec, values[spec.name])
-        if why:
-            errors.append(why)
+    errors = check_specs(SPECS, values)
     addr = values.get('bind_address')
     if isinstance(addr, str):
         try:
