@@ -12,12 +12,14 @@ from __future__ import annotations
 import asyncio
 import importlib
 import sys
+from functools import partial
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -58,16 +60,18 @@ class WebNode(Node):
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         st = self.state
-        self.create_subscription(TrackerPhase, 'tracker/phase', st.on_phase, latched)
-        self.create_subscription(SafetyState, 'safety/state', st.on_safety, 10)
-        self.create_subscription(SunPosition, 'tracker/sun', st.on_sun, 10)
-        self.create_subscription(Irradiance, 'irradiance/beam', st.on_beam, 10)
-        self.create_subscription(NavSatFix, 'gps/fix', st.on_fix, 10)
+        # no QoS-event handlers: each is one more entity for the executor at every wake-up
+        sub = partial(self.create_subscription, event_callbacks=SubscriptionEventCallbacks(
+            use_default_callbacks=False))
+        sub(TrackerPhase, 'tracker/phase', st.on_phase, latched)
+        sub(SafetyState, 'safety/state', st.on_safety, 10)
+        sub(SunPosition, 'tracker/sun', st.on_sun, 10)
+        sub(Irradiance, 'irradiance/beam', st.on_beam, 10)
+        sub(NavSatFix, 'gps/fix', st.on_fix, 10)
         for name in ('inlet', 'outlet'):
-            self.create_subscription(Temperature, f'absorber/{name}_temperature',
-                                     lambda m, n=name: st.on_temperature(n, m), 10)
+            sub(Temperature, f'absorber/{name}_temperature', lambda m, n=name: st.on_temperature(n, m), 10)
         for axis in JOINTS:
-            self.create_subscription(AxisStatus, f'axes/{axis}/status', st.on_axis, 10)
+            sub(AxisStatus, f'axes/{axis}/status', st.on_axis, 10)
         # Service clients are made when first needed: every entity costs the executor
         # time at each wake-up (~45 messages/s), so idle clients are not kept around.
         # (the e-stop's client is made at once: no discovery wait when it is pressed)
