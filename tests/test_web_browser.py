@@ -4,7 +4,8 @@
 
 The browser loads the page, sees the phase change (NIGHT -> PRE_DAWN -> TRACKING) and the
 measured angles change, is refused a command without login, logs in with the operator
-password, presses Stow and sees the planner's phase become STOW. A screenshot of the
+password, presses Stow and sees the planner's phase become STOW, then switches to
+maintenance and jogs the mirrors by -0.5 deg through the driver (a 30 deg jog is refused). A screenshot of the
 page is kept as an artifact: out/test-artifacts/web-operator-page.png (and -phone.png at a
 phone's 390 px width, where nothing may be wider than the screen; paths printed).
 Page load time and the state-to-page delay are printed (README, measured figures).
@@ -161,6 +162,27 @@ def test_operator_page_in_chromium_against_the_simulated_tracker(browser, sim):
           'the day plots after a reload')
     assert browser.find_elements('css selector', '#plot-angles path'), 'no angle curves after the reload'
     _wait(browser, lambda: text('phase-name') == 'STOW', 15, 'phase STOW after the reload')
+
+    # maintenance, then jog the mirrors through the driver's own service (and beyond the limit: refused)
+    browser.find_element('id', 'cmd-mode-maintenance').click()
+    _wait(browser, lambda: text('phase-name') == 'MAINTENANCE', 15, 'phase MAINTENANCE')
+    measured = lambda: browser.execute_script('return page.last.axes.mirrors.measured')  # noqa: E731
+    time.sleep(1.0)
+    before = measured()
+    jog = browser.find_element('id', 'jog-deg')
+    jog.clear()
+    jog.send_keys('0.5')
+    browser.find_element('id', 'jog-minus').click()          # stowed mirrors sit at the upper limit (+90 deg)
+    _wait(browser, lambda: 'jog mirrors −0.5' in text('cmd-log'), 15, "the jog's answer")
+    first = browser.find_element('css selector', '#cmd-log li').text
+    assert 'done' in first and 'jogging' in first, first
+    _wait(browser, lambda: abs(measured() - before + 0.5 * 3.14159265 / 180) < 0.002, 20, 'the mirrors jogged 0.5 deg')
+    jog.clear()
+    jog.send_keys('30')
+    browser.find_element('id', 'jog-minus').click()
+    _wait(browser, lambda: 'jog mirrors −30' in text('cmd-log'), 15, 'the refusal')
+    first = browser.find_element('css selector', '#cmd-log li').text
+    assert 'REFUSED' in first and 'beyond the jog limit' in first, first
 
     # a phone screen (390 x 844 CSS px): one column, nothing wider than the screen
     browser.set_window_size(390, 844)
