@@ -129,6 +129,9 @@ if [ -z "$APT_ROS" ]; then
   fi
 fi
 
+# --- 4b. Debian's chromium for the operator page's browser test (scripts/setup-browser.sh)
+bash "$ROOT/scripts/setup-browser.sh"
+
 # --- 5. colcon build -------------------------------------------------------------
 # shellcheck disable=SC1091
 . "$ROOT/scripts/env.sh"

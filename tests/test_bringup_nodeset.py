@@ -35,7 +35,7 @@ def site(tmp_path):
 def test_default_node_set_is_the_tracker():
     ns = nodeset.load()
     names = [n.name for n in ns.nodes]
-    assert sorted(names) == sorted(['gps', 'planner', *AXES, 'absorber_board', 'irradiance', 'safety', 'recorder'])
+    assert sorted(names) == sorted(['gps', 'planner', *AXES, 'absorber_board', 'irradiance', 'safety', 'recorder', 'web'])
     assert [n.name for n in ns.lifecycle_nodes()] == list(AXES)
     assert {n.parameters['axis'] for n in ns.lifecycle_nodes()} == {'mirrors', 'mobile_structure', 'secondary_reflector'}
     groups = ns.stop_groups()

@@ -64,7 +64,9 @@ def test_console_script_installed_where_ros2_run_looks(package, exe, kind, ros_e
         assert out.returncode == 0, out.stderr
         assert 'usage' in out.stdout.lower()
     else:  # a node: starts, then stops cleanly on SIGINT
-        proc = NodeProcess([str(path)], ros_env, tmp_path / f'{exe}.log')
+        # (the operator page: any free port, not 8080 that a running tracker may hold)
+        extra = ['--ros-args', '-p', 'port:=0', '-p', f'audit_file:={tmp_path / "audit"}'] if exe == 'web' else []
+        proc = NodeProcess([str(path), *extra], ros_env, tmp_path / f'{exe}.log')
         # up = its node (default name = the executable's) is in the graph; start-up
         # takes longer on a loaded machine, so wait for it instead of a fixed sleep
         up = ros.spin_until(lambda: exe in ros.node.get_node_names() or not proc.running(), 60)

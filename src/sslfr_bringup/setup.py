@@ -8,6 +8,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={package_name: ['web/static/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -15,15 +16,16 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools'],
-    zip_safe=True,
+    zip_safe=False,   # the operator page serves web/static/* from the package directory
     maintainer='SSLFR tracker maintainers',
     maintainer_email='maintainers@sslfr-tracker.org',
-    description='SSLFR bringup: node set, launch, configs, CLI, recorder, replay, report',
+    description='SSLFR bringup: node set, launch, configs, CLI, recorder, replay, report, operator page',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'sslfr = sslfr_bringup.cli:main',
             'recorder = sslfr_bringup.recorder_node:main',
+            'web = sslfr_bringup.web_node:main',
         ],
     },
 )

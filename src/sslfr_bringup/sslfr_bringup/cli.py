@@ -23,6 +23,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'replay': ('sslfr_bringup.replay', 'replay a recorded bag with /clock'),
     'report': ('sslfr_bringup.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
+    'web-password': ('sslfr_bringup.web.password_cli', 'set the operator password of the web page (stored as a scrypt hash)'),
     'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),
 }
 

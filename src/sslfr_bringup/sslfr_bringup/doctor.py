@@ -11,7 +11,7 @@ from pathlib import Path
 #: build. kind 'cli' answers ``--help``; kind 'node' starts with defaults and stops
 #: cleanly on SIGINT. Kept in one place; tests/test_foundation.py checks every one.
 EXECUTABLES: dict[str, dict[str, str]] = {
-    'sslfr_bringup': {'sslfr': 'cli', 'recorder': 'node'},
+    'sslfr_bringup': {'sslfr': 'cli', 'recorder': 'node', 'web': 'node'},
     'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node',
                       'sim_board': 'cli', 'xbee_hub': 'cli', 'gps': 'node', 'absorber_board': 'node',
                       'irradiance': 'node'},

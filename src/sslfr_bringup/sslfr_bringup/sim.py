@@ -384,6 +384,9 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
         ros.shutdown()
         return 1
     clock.set_anchor(max(anchor, time.monotonic()))
+    url = _page_url(logs)
+    if url:
+        say(f'sslfr sim: operator page at {url} (docs/operator.md)')
     if clock.anchor - anchor > 0.05:
         say(f'sslfr sim: sensor simulators run {speed * (clock.anchor - anchor):.0f} s (sim) ahead of /clock '
             f'(the node set took {clock.anchor - anchor:.1f} s longer than the anchor margin)')
@@ -498,6 +501,16 @@ def _report(bag_root: Path, out: Path) -> int:
     code = int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
     print(f'plots: {out / "report"}/*.png')
     return code
+
+
+def _page_url(logs: Path) -> str | None:
+    """The operator page's address, as the ``web`` node logged it (port 0 in a sim)."""
+    import re
+    try:
+        m = re.search(r'operator page at (\S+)', (logs / 'web.log').read_text(errors='replace'))
+    except OSError:
+        return None
+    return m.group(1) if m else None
 
 
 def _hhmm(sod: float) -> str:

@@ -203,20 +203,26 @@ def _check_number(spec: ParamSpec, v: Any) -> str | None:
     return None
 
 
-def validate(values: dict[str, Any]) -> list[str]:
-    """Check a complete parameter set; return the list of problems (empty: valid).
-
-    Cross-parameter rules: ``step <= horizon``; ``collector.tracking_start`` and
-    ``collector.tracking_end`` are both set or both unset (-1) and start < end.
-    """
+def check_specs(specs, values: dict[str, Any]) -> list[str]:
+    """Check every parameter of ``specs`` in ``values`` (missing or invalid); one line each."""
     errors = []
-    for spec in SPECS:
+    for spec in specs:
         if spec.name not in values:
             errors.append(f'{spec.name}: missing')
             continue
         why = check_value(spec, values[spec.name])
         if why:
             errors.append(why)
+    return errors
+
+
+def validate(values: dict[str, Any]) -> list[str]:
+    """Check a complete parameter set; return the list of problems (empty: valid).
+
+    Cross-parameter rules: ``step <= horizon``; ``collector.tracking_start`` and
+    ``collector.tracking_end`` are both set or both unset (-1) and start < end.
+    """
+    errors = check_specs(SPECS, values)
     if errors:
         return errors
     if values['step'] > values['horizon']:

@@ -1,0 +1,91 @@
+"""The ``web`` node's parameters, declared in ONE place (pure Python, no rclpy).
+
+Same pattern as :mod:`sslfr_planner.planner_params` (whose :class:`ParamSpec` and
+:func:`check_specs` are reused): a default, a description with the unit, a range or
+choices. Every parameter is read-only at runtime (the server binds once); a bad value
+at start-up stops the node with one line naming each bad parameter (exit code 2).
+"""
+from __future__ import annotations
+
+import ipaddress
+from typing import Any
+
+from sslfr_planner.planner_params import ParamSpec, check_specs
+
+#: The password file `./sslfr web-password` writes and the node reads.
+DEFAULT_PASSWORD_FILE = '~/.config/sslfr/web_password'
+
+SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec('bind_address', '127.0.0.1',
+              'IP address the page is served on: 127.0.0.1 (this machine only, the default), '
+              "the Pi's LAN address to open it to the local network; never every interface "
+              'unless 0.0.0.0 / :: is given explicitly', read_only=True),
+    ParamSpec('port', 8080, 'TCP port of the page (0: any free port, logged at start-up)', '-',
+              0, 65535, read_only=True),
+    ParamSpec('open_view', True,
+              'true: anyone who reaches the page sees the live view and the recorded days; '
+              'false: viewing needs the operator login too. Commands always need it',
+              read_only=True),
+    ParamSpec('password_file', DEFAULT_PASSWORD_FILE,
+              'scrypt hash of the operator password, written by `./sslfr web-password` '
+              '(re-read when it changes; missing: commands are refused)', read_only=True),
+    ParamSpec('session_timeout', 3600.0,
+              'A login session ends after this long without a request [s]', 's', 60.0, 86400.0,
+              read_only=True),
+    ParamSpec('login_max_failures', 5,
+              'Failed logins allowed per client address within login_window before it is '
+              'refused until the window has passed [-]', '-', 1, 1000, read_only=True),
+    ParamSpec('login_window', 300.0, 'Window of the login rate limit [s]', 's', 1.0, 86400.0,
+              read_only=True),
+    ParamSpec('push_period', 0.25,
+              'The page is sent the live state at most this often, when it changed [s, wall]',
+              's', 0.05, 1.0, read_only=True),
+    ParamSpec('plot_period', 30.0,
+              'One sample of the day plots per this much ROS time [s]', 's', 1.0, 3600.0,
+              read_only=True),
+    ParamSpec('max_jog', 0.2,
+              "Largest |delta| the page may ask of a jog [rad]; the driver's own max_jog and "
+              'soft limits apply too', 'rad', 0.0, 3.1416, read_only=True),
+    ParamSpec('bag_dir', '',
+              "Directory of the recorded bags ('' = ask the recorder node for its output_dir)",
+              read_only=True),
+    ParamSpec('report_dir', '~/.cache/sslfr/web_reports',
+              'Where day reports made for the page are kept [directory]', read_only=True),
+    ParamSpec('audit_file', '~/.local/state/sslfr/web_commands.jsonl',
+              "Every command (and every refusal) is appended here as a JSON line with its origin "
+              "('' = only the node's log)", read_only=True),
+    ParamSpec('service_timeout', 5.0, 'Longest wait for a service answer [s, wall]', 's', 0.5, 60.0,
+              read_only=True),
+    ParamSpec('max_request_bytes', 16384, 'Larger request bodies are refused (HTTP 413) [bytes]',
+              'bytes', 256, 1048576, read_only=True),
+)
+
+SPEC_BY_NAME = {s.name: s for s in SPECS}
+
+
+def defaults() -> dict[str, Any]:
+    """Name -> default of every parameter."""
+    return {s.name: s.default for s in SPECS}
+
+
+def coerce(values: dict[str, Any]) -> dict[str, Any]:
+    """Accept an integer for a double parameter (YAML ``8`` for 8.0)."""
+    out = dict(values)
+    for spec in SPECS:
+        v = out.get(spec.name)
+        if isinstance(spec.default, float) and isinstance(v, int) and not isinstance(v, bool):
+            out[spec.name] = float(v)
+    return out
+
+
+def validate(values: dict[str, Any]) -> list[str]:
+    """Check a complete set; return the problems (empty: valid). ``bind_address`` must
+    be a literal IPv4/IPv6 address (a host name could resolve to every interface)."""
+    errors = check_specs(SPECS, values)
+    addr = values.get('bind_address')
+    if isinstance(addr, str):
+        try:
+            ipaddress.ip_address(addr)
+        except ValueError:
+            errors.append(f'bind_address: {addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)')
+    return errors
