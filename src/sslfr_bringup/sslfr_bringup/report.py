@@ -16,7 +16,7 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
   H = integral of G_b dt [kWh/m^2] (trapezoids, gaps > 120 s not bridged);
 - link faults per axis (time not LINK_UP, frames lost / bad, fault bits);
 - the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25;
-  :func:`sslfr_planner.analysis.day_energy`) fed with the recorded beam irradiance and
+  :func:`sslfr_planner.analysis.performance.day_energy`) fed with the recorded beam irradiance and
   once with the ideal axis angles, once with the measured ones (ideal vs achieved).
 
 Pure analysis (no rclpy): messages are decoded through the bag's own schemas.
@@ -372,10 +372,10 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
     :func:`sslfr_planner.daytable.evaluate`; an axis without status counts as ideal.
     """
     try:
-        from sslfr_planner.analysis import day_energy
+        from sslfr_planner.analysis.optics import OpticalParameters
+        from sslfr_planner.analysis.performance import day_energy
         from sslfr_planner.day_planner import make_collector
         from sslfr_planner.daytable import evaluate
-        from sslfr_planner.optics import OpticalParameters
         from sslfr_planner.site import Site
     except ImportError:
         return {'note': 'energy estimate unavailable (sslfr_planner not installed)'}
@@ -387,8 +387,7 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
         return {'note': 'energy estimate unavailable (no valid beam samples)'}
     c = make_collector(planner_config(config))
     table = evaluate(t, Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0)), c)
-    params = OpticalParameters(n_per_side=c.n_per_side, mirror_width=c.mirror_width, gap=c.gap,
-                               receiver_height=c.receiver_height, tube_diameter=c.tube_diameter)
+    params = OpticalParameters(geometry=c.geometry)
     ideal = {a: np.asarray(getattr(table, a), dtype=float) for a in AXES}
     held = dict(ideal)
     for axis, (ta, va) in measured.items():
@@ -401,7 +400,7 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
     e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
                         params, c.azimuth) / 1000.0
     missing = [a for a in AXES if a not in measured]
-    note = 'seed 000 optical model (docs/optics.md), recorded beam irradiance'
+    note = 'seed 000 optical model on the 3-D ray trace (docs/optics.md), recorded beam irradiance'
     if missing:
         note += '; no status for ' + ', '.join(missing) + ' (taken as ideal)'
     return {'ideal_kwh': e_ideal, 'achieved_kwh': e_held, 'note': note}

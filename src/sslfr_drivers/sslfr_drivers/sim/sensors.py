@@ -55,6 +55,8 @@ import random
 import tempfile
 import time
 
+from sslfr_planner import raytrace
+
 from .. import max6675, veml7700
 from .. import messages as m
 from ..debounce import SWITCH_NAMES
@@ -328,7 +330,10 @@ class AbsorberSim(_SensorSim):
         if sim_dt > 0:
             sun = self.sky.sun(utc)
             dni = self.sky.dni(utc) if sun.above_horizon else 0.0
-            power = self.thermal.focused_power(dni, sun.transversal, angles.get('mirrors'))
+            # the mirrors turn about the tilted rows: theta_t in their frame (planner's command)
+            tt = float(raytrace.transversal_angle(raytrace.sun_vector(sun.zenith, sun.azimuth),
+                                                  angles.get('mobile_structure', 0.0)))
+            power = self.thermal.focused_power(dni, tt, angles.get('mirrors'))
             self.thermal.step(sim_dt, power)
         if self.now >= self._next_thermo:
             self._next_thermo = max(self._next_thermo + self.thermo_period, self.now)
