@@ -113,8 +113,14 @@ def output_file(text: str) -> str:
         raise argparse.ArgumentTypeError(f'directory {parent} does not exist')
     if not os.path.isdir(parent):
         raise argparse.ArgumentTypeError(f'{parent} is not a directory')
-    if not os.access(parent, os.W_OK | os.X_OK) or (os.path.exists(text) and not os.access(text, os.W_OK)):
+    if os.path.exists(text) and not os.access(text, os.W_OK):
         raise argparse.ArgumentTypeError(f'cannot write {text} (permission denied)')
+    try:  # the real test (root passes os.access everywhere): create and remove a file there
+        import tempfile
+        with tempfile.NamedTemporaryFile(dir=parent, prefix='.sslfr-probe-'):
+            pass
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f'cannot write in {parent} ({exc.strerror or exc})') from None
     return text
 
 

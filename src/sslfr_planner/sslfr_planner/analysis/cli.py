@@ -39,10 +39,10 @@ SEED_TUBES = {'horizontal': (-2.037, -0.037), 'tilting': (-1.005, 1.005)}
 SEED_COSTS = {'one_movement': 5299.53, 'three_movements': 5865.98}
 #: years the analysis accepts: the pandas clock of the clear-sky model and the delta-T model
 YEARS = (1800, 2200)
-#: the most time steps of one year the analysis computes (a year at 60 s)
-MAX_YEAR_SAMPLES = 525_600
-#: the most time steps of one year the tilt search computes (a year at 300 s)
-MAX_TILT_SAMPLES = 105_120
+#: the most time steps of one year the analysis computes (a leap year at 60 s)
+MAX_YEAR_SAMPLES = 527_040
+#: the most time steps of one year the tilt search computes (a leap year at 300 s)
+MAX_TILT_SAMPLES = 105_408
 
 _YEAR_SPAN = 366 * 86400.0
 

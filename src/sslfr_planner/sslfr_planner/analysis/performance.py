@@ -31,6 +31,8 @@ from .optics import OpticalParameters
 
 #: power models of :func:`annual_energy`
 MODELS = ('trace', 'eq18', 'seed001')
+#: instants traced at once by :func:`annual_energy` (memory ~ 0.3 GB)
+_YEAR_CHUNK = 8192
 
 
 @dataclass(frozen=True)
@@ -250,21 +252,25 @@ def annual_energy(sky: YearSky, site: AnalysisSite, params: OpticalParameters, l
     if model not in MODELS:
         raise ValueError(f"unknown model {model!r}: one of {', '.join(MODELS)}")
     b0, bm, ba, sun = commands(law, sky.zenith, sky.azimuth, sky.t, site, params.geometry)
-    if model == 'seed001':
-        q = optics.power_seed001(sky.dni, sun, b0, bm, ba, params, per_mirror=True)
-        q_endless = None
-    else:
+    q = np.zeros(sky.t.size)
+    q_endless = np.zeros(sky.t.size) if model != 'seed001' else None
+    for k in range(0, sky.t.size, _YEAR_CHUNK):   # bounded memory whatever the step
+        sl = slice(k, k + _YEAR_CHUNK)
+        if model == 'seed001':
+            q[sl] = optics.power_seed001(sky.dni[sl], sun[sl], b0[sl], bm[sl], ba[sl], params)
+            continue
         incidence = '3d' if model == 'trace' else 'transversal'
-        tr = optics.trace(sun, b0, bm, ba, params)
+        tr = optics.trace(sun[sl], b0[sl], bm[sl], ba[sl], params)
         half_open = params.cavity_aperture / 2.0
-        direct_bound = np.minimum(tr.tube_half, half_open)
-        weight = sky.dni[:, None] * optics.optical_yield(params) * optics.incidence_factor(tr, sun, bm, incidence)
+        bounds = [np.minimum(tr.tube_half, half_open), half_open]
+        weight = (sky.dni[sl, None] * optics.optical_yield(params)
+                  * optics.incidence_factor(tr, sun[sl], bm[sl], incidence))
         rho = params.cavity_reflectivity
-        d, e = raytrace.mirror_area_hitting(tr, [direct_bound, half_open])
-        q = weight * (d + rho * (e - d))
-        d, e = raytrace.mirror_area_hitting(tr, [direct_bound, half_open], tube=(-np.inf, np.inf))
-        q_endless = weight * (d + rho * (e - d))
-    energy = q.sum(axis=-1) * sky.step / 3600.0
+        d, e = raytrace.mirror_area_hitting(tr, bounds)
+        q[sl] = np.sum(weight * (d + rho * (e - d)), axis=-1)
+        d, e = raytrace.mirror_area_hitting(tr, bounds, tube=(-np.inf, np.inf))
+        q_endless[sl] = np.sum(weight * (d + rho * (e - d)), axis=-1)
+    energy = q * sky.step / 3600.0
     days = ((sky.t - sky.t[0] // 86400 * 86400) // 86400).astype(int)
     daily = np.bincount(days, weights=energy)
     area = float(np.max(optics.installation_area(np.abs(bm), np.abs(ba), params.geometry)))
