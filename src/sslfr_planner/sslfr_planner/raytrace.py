@@ -263,29 +263,41 @@ def _clip(px, py, cnt, a, b, c):
     """Clip convex polygons (vertices px, py (N, V), counts cnt (N,)) by a q + b s <= c.
 
     Sutherland-Hodgman, vectorised; returns polygons with at most V + 1 vertices.
+    Polygons wholly inside the half-plane are kept as they are, wholly outside emptied;
+    only the others are clipped (most rows, most of the time: the work stays small).
     """
     nrows, nv = px.shape
     k = np.arange(nv)
     live = k[None, :] < cnt[:, None]
     d = a[:, None] * px + b[:, None] * py - c[:, None]
+    inside = d <= 0.0
+    out_n = nv + 1  # a convex polygon gains at most one vertex per half-plane
+    ox = np.concatenate([px, np.zeros((nrows, 1))], axis=1)
+    oy = np.concatenate([py, np.zeros((nrows, 1))], axis=1)
+    ocnt = cnt.copy()
+    ocnt[~np.any(live & inside, axis=1)] = 0
+    work = np.flatnonzero(np.any(live & ~inside, axis=1) & np.any(live & inside, axis=1))
+    if work.size == 0:
+        return ox, oy, ocnt
+    px, py, d, live, inside, cnt = px[work], py[work], d[work], live[work], inside[work], cnt[work]
+    n = work.size
     nxt = np.where(k[None, :] + 1 < cnt[:, None], k[None, :] + 1, 0)
     qx = np.take_along_axis(px, nxt, axis=1)
     qy = np.take_along_axis(py, nxt, axis=1)
     dq = np.take_along_axis(d, nxt, axis=1)
-    inside = d <= 0.0
     crosses = live & ((d < 0.0) & (dq > 0.0) | (d > 0.0) & (dq < 0.0))
     with np.errstate(divide='ignore', invalid='ignore'):
         f = np.where(crosses, d / (d - dq), 0.0)
     ix, iy = px + f * (qx - px), py + f * (qy - py)
     # candidates in order: vertex k (if inside), then the crossing on edge k (if any)
-    cx = np.stack([px, ix], axis=2).reshape(nrows, 2 * nv)
-    cy = np.stack([py, iy], axis=2).reshape(nrows, 2 * nv)
-    keep = np.stack([live & inside, crosses], axis=2).reshape(nrows, 2 * nv)
-    out_n = nv + 1  # a convex polygon gains at most one vertex per half-plane
+    cx = np.stack([px, ix], axis=2).reshape(n, 2 * nv)
+    cy = np.stack([py, iy], axis=2).reshape(n, 2 * nv)
+    keep = np.stack([live & inside, crosses], axis=2).reshape(n, 2 * nv)
     order = np.argsort(~keep, axis=1, kind='stable')[:, :out_n]
-    ox = np.take_along_axis(cx, order, axis=1)
-    oy = np.take_along_axis(cy, order, axis=1)
-    return ox, oy, np.minimum(keep.sum(axis=1), out_n)
+    ox[work] = np.take_along_axis(cx, order, axis=1)
+    oy[work] = np.take_along_axis(cy, order, axis=1)
+    ocnt[work] = np.minimum(keep.sum(axis=1), out_n)
+    return ox, oy, ocnt
 
 
 def _area(px, py, cnt):
