@@ -15,7 +15,7 @@ import sys
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'plan': ('sslfr_planner.cli_plan', 'per-step day table (sun, incidence angles, axis setpoints) as CSV'),
     'field': ('sslfr_planner.cli_field', 'LEPTEN mirror lines: exact model fitted with the common-drive law'),
-    'analyse': ('sslfr_planner.cli_analyse', 'optical power with tracking error, annual energy, EAR, LCOE, tilts'),
+    'analyse': ('sslfr_planner.analysis.cli', 'optical power with tracking error, annual energy, EAR, LCOE, tilts'),
     'up': ('sslfr_bringup.up', 'start the whole node set (real boards) as supervised processes'),
     'sim': ('sslfr_bringup.sim', 'run the node set against simulated boards over a simulated day'),
     'record': ('sslfr_bringup.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),

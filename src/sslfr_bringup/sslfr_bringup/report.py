@@ -5,18 +5,20 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 
 - site and date; sunrise / solar noon / sunset (from ``tracker/phase``);
 - time spent in each phase (a phase holds until the next tracker/phase message);
-- per-axis tracking error, RMS / max / 95th percentile [mrad] during TRACKING:
-  measured vs the commanded setpoint (``axes/<axis>/status``: measured - setpoint,
-  or ``joint_states`` positions when there is no status) and measured vs the ideal
-  command of :func:`sslfr_planner.daytable.evaluate` at the same instants (when that
-  module is installed; otherwise "ideal unavailable");
+- per-axis tracking error, RMS / max / 95th percentile [mrad], only while the axis is
+  tracking: phase TRACKING and not inside one of the axis' deliberate moves (see
+  :func:`axis_moves`): measured vs the commanded setpoint (``axes/<axis>/status``)
+  and measured vs the ideal command of :func:`sslfr_planner.daytable.evaluate` at the
+  same instants (when that module is installed; otherwise "ideal unavailable");
+- per-axis moves, reported separately: count, total duration and the largest
+  (PRE_DAWN's slew from the sleeping position, stows, a law's repositioning);
 - stow events (``safety/state`` level >= STOW) with reasons and durations, and
   commanded stows (phase STOW);
 - max absorber temperatures; max beam irradiance and the day's beam irradiation
   H = integral of G_b dt [kWh/m^2] (trapezoids, gaps > 120 s not bridged);
 - link faults per axis (time not LINK_UP, frames lost / bad, fault bits);
 - the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25;
-  :func:`sslfr_planner.analysis.day_energy`) fed with the recorded beam irradiance and
+  :func:`sslfr_planner.analysis.performance.day_energy`) fed with the recorded beam irradiance and
   once with the ideal axis angles, once with the measured ones (ideal vs achieved).
 
 Pure analysis (no rclpy): messages are decoded through the bag's own schemas.
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +41,14 @@ from .bag.reader import BagReader
 from .nodeset import node_params
 
 MAX_GAP_S = 120.0
+#: a setpoint moving faster than this is a deliberate move, not sun tracking [rad/s]: the
+#: longitudinal laws' jump bound (0.05 deg in 1 s, docs/optics.md), ten times the fastest
+#: sun-following axis rate (~0.004 deg/s)
+MOVE_RATE = math.radians(0.05)
+#: a move ends when the axis is back within this of its setpoint [rad] (~10 motor steps)
+SETTLE = 1e-3
+#: a move not settled after this long ends anyway: what follows counts as tracking error [s]
+MOVE_CAP = 300.0
 
 
 def _t(header, log_ns: int) -> float:
@@ -108,6 +119,7 @@ class DayReport:
     events: dict = field(default_factory=dict)
     phase_time: dict = field(default_factory=dict)
     tracking: dict = field(default_factory=dict)          # axis -> {'setpoint': ErrorStats, 'ideal': ErrorStats|None}
+    moves: dict = field(default_factory=dict)             # axis -> list of axis_moves() dicts
     ideal_note: str = ''
     stows: list = field(default_factory=list)             # dicts: start, end, duration, level, reasons
     commanded_stows: list = field(default_factory=list)
@@ -165,6 +177,50 @@ def intervals(t: np.ndarray, active: np.ndarray, end: float) -> list[tuple[int, 
         else:
             i += 1
     return out
+
+
+def axis_moves(t: np.ndarray, setpoint: np.ndarray, measured: np.ndarray) -> list[dict]:
+    """Deliberate moves of one axis, from its status samples (times [s], angles [rad]).
+
+    A move starts where the setpoint changes faster than :data:`MOVE_RATE` (a jump of
+    the setpoint: PRE_DAWN's slew from the sleeping position, a stow, a law's
+    repositioning; sun tracking moves the setpoints at most ~0.004 deg/s) and ends at
+    the first sample, after the setpoint has stopped jumping, where the axis is within
+    :data:`SETTLE` of it, or :data:`MOVE_CAP` seconds after it started (an axis that
+    never arrives is then judged as tracking, so a fault is never hidden). Returns
+    dicts: i0, i1 (sample range [i0, i1)), start, end [s], duration [s], size (the
+    angle travelled |measured(end) - measured(start)| [rad], NaN if unknown), settled (bool).
+    """
+    t = np.asarray(t, dtype=float)
+    sp = np.asarray(setpoint, dtype=float)
+    me = np.asarray(measured, dtype=float)
+    n = t.size
+    if n < 2:
+        return []
+    dt_ = np.diff(t)
+    jump = np.abs(np.diff(sp)) > MOVE_RATE * np.maximum(dt_, 1e-3) + 1e-9
+    off = ~(np.abs(me - sp) <= SETTLE)   # NaN counts as off
+    moves = []
+    k = 0
+    starts = np.flatnonzero(jump) + 1    # sample i is the first at the new setpoint
+    while k < starts.size:
+        i0 = int(starts[k]) - 1
+        i = i0 + 1
+        last_jump = i
+        while i < n and t[i] - t[i0] <= MOVE_CAP:
+            if i < n - 1 and jump[i]:
+                last_jump = i + 1
+            elif i >= last_jump and not off[i]:
+                break
+            i += 1
+        settled = i < n and not off[i] and t[i] - t[i0] <= MOVE_CAP
+        i1 = i                               # samples [i0, i1) are the move
+        end = float(t[i] if settled else t[i - 1])
+        last = i if settled else i - 1
+        moves.append({'i0': i0, 'i1': i1, 'start': float(t[i0]), 'end': end, 'duration': end - float(t[i0]),
+                      'size': float(abs(me[last] - me[i0])), 'settled': bool(settled)})
+        k = int(np.searchsorted(starts, i1 + 1, side='left'))
+    return moves
 
 
 def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None) -> float:
@@ -312,6 +368,10 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         if len(pt):
             ph = np.asarray(pv['phase'])[np.clip(np.searchsorted(pt, t, side='right') - 1, 0, None)]
             mask = (ph == 2) & (t >= pt[0])
+        moves = axis_moves(t, v['setpoint'], v['measured'])
+        for mv in moves:   # tracking only: the deliberate moves are reported on their own
+            mask[mv['i0']:mv['i1']] = False
+        rep.moves[axis] = moves
         err = v['measured'] - v['setpoint']
         entry = {'setpoint': ErrorStats.of(err[mask]), 'ideal': None}
         ideal, note = ideal_cache.get(axis, (None, None))
@@ -369,10 +429,10 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
     :func:`sslfr_planner.daytable.evaluate`; an axis without status counts as ideal.
     """
     try:
-        from sslfr_planner.analysis import day_energy
+        from sslfr_planner.analysis.optics import OpticalParameters
+        from sslfr_planner.analysis.performance import day_energy
         from sslfr_planner.day_planner import make_collector
         from sslfr_planner.daytable import evaluate
-        from sslfr_planner.optics import OpticalParameters
         from sslfr_planner.site import Site
     except ImportError:
         return {'note': 'energy estimate unavailable (sslfr_planner not installed)'}
@@ -384,8 +444,10 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
         return {'note': 'energy estimate unavailable (no valid beam samples)'}
     c = make_collector(planner_config(config))
     table = evaluate(t, Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0)), c)
-    params = OpticalParameters(n_per_side=c.n_per_side, mirror_width=c.mirror_width, gap=c.gap,
-                               receiver_height=c.receiver_height, tube_diameter=c.tube_diameter)
+    try:
+        params = OpticalParameters(geometry=c.geometry)
+    except ValueError as exc:
+        return {'note': f'energy estimate unavailable ({exc})'}
     ideal = {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}
     held = dict(ideal)
     for axis, (ta, va) in measured.items():
@@ -398,7 +460,7 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
     e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
                         params, c.azimuth) / 1000.0
     missing = [a for a in JOINTS if a not in measured]
-    note = 'seed 000 optical model (docs/optics.md), recorded beam irradiance'
+    note = 'seed 000 optical model on the 3-D ray trace (docs/optics.md), recorded beam irradiance'
     if missing:
         note += '; no status for ' + ', '.join(missing) + ' (taken as ideal)'
     return {'ideal_kwh': e_ideal, 'achieved_kwh': e_held, 'note': note}
@@ -428,13 +490,24 @@ def render_text(rep: DayReport) -> str:
         lines.append('time in phase   ' + ', '.join(f'{k} {v / 3600:.2f} h'
                                                  for k, v in sorted(rep.phase_time.items(),
                                                                     key=lambda kv: -kv[1])))
-    lines.append('tracking error (during TRACKING; |error|)')
+    lines.append('tracking error (while tracking: phase TRACKING, outside moves; |error|)')
     if not rep.tracking:
         lines.append('  no axes/<axis>/status in the bag')
     for axis, e in rep.tracking.items():
         lines.append(f'  {axis:<20} vs setpoint  {e["setpoint"].text()}')
         if e['ideal'] is not None:
             lines.append(f'  {"":<20} vs ideal     {e["ideal"].text()}')
+    if rep.moves:
+        lines.append('moves (setpoint jumps: pre-dawn slew, stows, repositioning)')
+    for axis, moves in rep.moves.items():
+        if not moves:
+            lines.append(f'  {axis:<20} none')
+            continue
+        big = max(moves, key=lambda m: m['size'] if np.isfinite(m['size']) else -1.0)
+        unsettled = sum(not m['settled'] for m in moves)
+        lines.append(f'  {axis:<20} {len(moves)} move(s), {sum(m["duration"] for m in moves):.0f} s in all; largest '
+                     f'{math.degrees(big["size"]):.2f} deg in {big["duration"]:.0f} s at {utc(big["start"])}'
+                     + (f'; {unsettled} not settled within {MOVE_CAP:.0f} s' if unsettled else ''))
     if rep.ideal_note:
         lines.append(f'  ({rep.ideal_note})')
     lines.append(f'stow events     {len(rep.stows)} safety stow(s), {len(rep.commanded_stows)} commanded')
@@ -518,8 +591,11 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(10, 3.5))
         for a in rep.tracking:
             t, v = rep.series[f'status_{a}']
-            ax.plot(*_decimate(hours(t), 1e3 * (v['measured'] - v['setpoint'])), label=a, lw=0.8)
-        ax.set_ylabel('measured - setpoint [mrad]')
+            err = 1e3 * (v['measured'] - v['setpoint'])
+            for mv in rep.moves.get(a, []):
+                err[mv['i0']:mv['i1']] = np.nan   # moves are not tracking error
+            ax.plot(*_decimate(hours(t), err), label=a, lw=0.8)
+        ax.set_ylabel('measured - setpoint, outside moves [mrad]')
         ax.set_xlabel('hour of the day [UTC]')
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)

@@ -65,7 +65,7 @@ def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: b
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f'must be a number {describe()}, got {text!r}') from None
+            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}') from None
         ok = math.isfinite(value)
         if ok and not (zero and value == 0.0):
             if lo is not None:
@@ -73,7 +73,7 @@ def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: b
             if ok and hi is not None:
                 ok = value <= hi
         if not ok:
-            raise argparse.ArgumentTypeError(f'must be a number {describe()}, got {text!r}')
+            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}')
         return value
     parse.__name__ = 'number'
     return parse
@@ -129,16 +129,23 @@ def output_dir(text: str):
     return path
 
 
+#: Largest text input (configs, metadata.yaml) read [bytes].
+MAX_TEXT_BYTES = 16 * 1024 * 1024
+
+
 def read_text_file(path, what: str = 'file') -> str:
     """UTF-8 text of an input file, or :class:`CliError` naming the file and what is wrong."""
     from pathlib import Path
     p = Path(path)
     try:
-        data = p.read_bytes()
+        with open(p, 'rb') as fh:
+            data = fh.read(MAX_TEXT_BYTES + 1)
     except IsADirectoryError:
         raise CliError(f'{what} {p} is a directory, not a file') from None
     except OSError as exc:
         raise CliError(f'{what} {p}: {exc.strerror or exc}') from None
+    if len(data) > MAX_TEXT_BYTES:
+        raise CliError(f'{what} {p} is larger than {MAX_TEXT_BYTES >> 20} MiB: not a config or metadata file')
     try:
         text = data.decode('utf-8')
     except UnicodeDecodeError as exc:
@@ -147,6 +154,101 @@ def read_text_file(path, what: str = 'file') -> str:
     if '\0' in text:
         raise CliError(f'{what} {p} is not a text file (it holds NUL bytes)')
     return text
+
+
+def time_step(span: float, max_samples: int, what: str = 'the run'):
+    """argparse type factory: a time step [s] > 0 whose sample count over ``span`` [s] is bounded.
+
+    An upper bound on the work a step implies: ``span / step`` samples at most
+    ``max_samples``; the refusal states the smallest step allowed.
+    """
+    smallest = span / max_samples
+
+    def parse(s: str) -> float:
+        value = finite_float(s)
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f'must be > 0 s, got {s}')
+        if value > span:
+            raise argparse.ArgumentTypeError(f'must be <= {span:g} s, got {s}')
+        if span / value > max_samples:
+            raise argparse.ArgumentTypeError(
+                f'{s} s would need {span / value:.3g} samples for {what}; at most {max_samples:,} '
+                f'(step >= {smallest:g} s)')
+        return value
+    parse.__name__ = 'step'
+    return parse
+
+
+def output_file(text: str) -> str:
+    """argparse type: a file path that can be created or replaced (checked before any work).
+
+    Refused: an empty path, an existing directory, a parent that is missing, is not a
+    directory or is not writable.
+    """
+    import os
+
+    if not text:
+        raise argparse.ArgumentTypeError('empty path')
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f'{text} is a directory; expected a file path')
+    parent = os.path.dirname(os.path.abspath(text))
+    if not os.path.exists(parent):
+        raise argparse.ArgumentTypeError(f'directory {parent} does not exist')
+    if not os.path.isdir(parent):
+        raise argparse.ArgumentTypeError(f'{parent} is not a directory')
+    if os.path.exists(text) and not os.access(text, os.W_OK):
+        raise argparse.ArgumentTypeError(f'cannot write {text} (permission denied)')
+    try:  # the real test (root passes os.access everywhere): create and remove a file there
+        import tempfile
+        with tempfile.NamedTemporaryFile(dir=parent, prefix='.sslfr-probe-'):
+            pass
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f'cannot write in {parent} ({exc.strerror or exc})') from None
+    return text
+
+
+def write_atomically(path: str, write) -> None:
+    """Write a file through ``write(tmp_path)`` then rename it into place (nothing half-written).
+
+    The temporary file sits beside ``path`` and is removed if ``write`` fails.
+    """
+    import os
+    import tempfile
+
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix='.' + os.path.basename(path) + '.', suffix='.tmp', dir=directory)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def load_yaml_file(path: str, what: str = 'config'):
+    """Read a YAML file whose top level must be a mapping; CliError naming the file otherwise.
+
+    Refuses, with one line: a missing or unreadable file, bytes that are not UTF-8
+    text (an image, random bytes), invalid YAML, and a document that is not a mapping.
+    """
+    import yaml
+
+    text = read_text_file(path, what)
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}' if mark is not None else ''
+        raise CliError(f'{what} {path}: not valid YAML{where}') from None
+    if doc is None:
+        return {}
+    if not isinstance(doc, dict):
+        raise CliError(f'{what} {path}: the top level must be a mapping of node names, got {type(doc).__name__}')
+    return doc
 
 
 # ROS names, checked with the rules rcl/rmw apply (rmw validate_node_name.c,

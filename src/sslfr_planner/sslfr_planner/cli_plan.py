@@ -18,11 +18,13 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, PHASE_NAMES
 
-from ._cliutil import OneLineParser, finite_float, run
+from ._cliutil import OneLineParser, finite_float, output_file, run, time_step, write_atomically
 from .collector import LAWS, Collector
 from .daytable import plan_day
 from .site import Site
 
+#: the most rows one day table may have (a step of 0.1 s; ~100 MB of CSV)
+MAX_ROWS = 864_000
 HEADER = ('utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,'
           'mobile_structure_deg,secondary_reflector_deg')
 
@@ -43,7 +45,8 @@ def parser() -> OneLineParser:
     p.add_argument('--lon', type=finite_float, required=True, help='longitude [deg], east positive')
     p.add_argument('--elevation', type=finite_float, default=0.0, help='elevation [m] (default 0)')
     p.add_argument('--date', type=_date, default=None, help='UTC date YYYY-MM-DD (default: today, UTC)')
-    p.add_argument('--step', type=finite_float, default=1.0, help='time step [s] (default 1)')
+    p.add_argument('--step', type=time_step(86400.0, MAX_ROWS, 'a day'), default=1.0,
+                   help=f'time step [s] (default 1; at least {86400.0 / MAX_ROWS:g}: {MAX_ROWS:,} rows a day)')
     p.add_argument('--mode', choices=LAWS, default='continuous',
                    help='longitudinal law of the mobile structure and secondary reflector')
     p.add_argument('--collector-azimuth', type=finite_float, default=0.0,
@@ -52,7 +55,8 @@ def parser() -> OneLineParser:
     p.add_argument('--temperature', type=finite_float, default=12.0, help='mean air temperature [degC]')
     p.add_argument('--delta-t', type=finite_float, default=None,
                    help='TT - UT [s] (default: Espenak-Meeus model)')
-    p.add_argument('--out', default=None, help='output CSV file (default: stdout)')
+    p.add_argument('--out', type=output_file, default=None,
+                   help='output CSV file (default: stdout; written only when complete)')
     return p
 
 
@@ -75,8 +79,6 @@ def _main(argv) -> int:
         raise ValueError(f'latitude must be within -90..90 deg, got {a.lat:g}')
     if not -180.0 <= a.lon <= 180.0:
         raise ValueError(f'longitude must be within -180..180 deg, got {a.lon:g}')
-    if not 0.0 < a.step <= 86400.0:
-        raise ValueError(f'step must be > 0 and <= 86400 s, got {a.step:g}')
     if not 10.0 <= a.pressure <= 1200.0:
         raise ValueError(f'pressure must be within 10..1200 hPa, got {a.pressure:g}')
     day = a.date or datetime.datetime.now(datetime.timezone.utc).date()
@@ -86,8 +88,10 @@ def _main(argv) -> int:
     table = plan_day(day, site, collector, a.step)
     text = HEADER + '\n' + '\n'.join(format_rows(table)) + '\n'
     if a.out:
-        with open(a.out, 'w', encoding='ascii') as fh:
-            fh.write(text)
+        def write(path):
+            with open(path, 'w', encoding='ascii') as fh:
+                fh.write(text)
+        write_atomically(a.out, write)
     else:
         sys.stdout.write(text)
         sys.stdout.flush()

@@ -1,19 +1,128 @@
-"""Collector (tracker) description: geometry, tracking law, actuators, day cycle.
+"""Collector (tracker) description: field geometry, tracking law, actuators, day cycle.
 
 SI units and radians. Defaults are seed 000 Table 3 (the Almeria SSLFR) and seed 000
 section 4 (mechanical ranges, sleeping position, 0.006 deg per motor step).
+
+:class:`FieldGeometry` is the one definition of the mirror field and receiver
+geometry: the tracker (:class:`Collector`), the 3-D ray model
+(:mod:`sslfr_planner.raytrace`) and the offline analysis
+(:class:`sslfr_planner.analysis.optics.OpticalParameters`) all hold one.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
 
-#: the longitudinal laws of :mod:`sslfr_planner.laws`
-LAWS = ('continuous', 'optimum_fixed', 'horizontal', 'daily')
+from . import geometry as _geometry
+
+#: the longitudinal laws of :mod:`sslfr_planner.laws` (docs/optics.md compares them)
+LAWS = ('continuous', 'eq16', 'optimum_fixed', 'daily', 'horizontal')
+#: laws whose setpoints move during the day (the others hold one value per day or forever)
+MOVING_LAWS = ('continuous', 'eq16')
 #: axis names, in the order of every per-axis tuple (the contract's joints)
 AXES = JOINTS
+
+
+def _finite(owner: str, obj, names) -> None:
+    for name in names:
+        v = getattr(obj, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f'{owner} {name} must be a finite number, got {v!r}')
+
+
+@dataclass(frozen=True)
+class FieldGeometry:
+    """Mirror field and receiver of a linear Fresnel collector (seed 000 Table 3, Fig. 4).
+
+    Frame (docs/conventions.md): x west (across the rows), p along the rows toward the
+    collector's +p ("south") end, z up; the origin is the centre of the central row,
+    which is also the pivot of the mobile structure's longitudinal tilt beta_M. The
+    absorber tube's axis passes through its own pivot at height ``aim_height`` =
+    f + D/2 straight above the origin and tilts by beta_a about it (seed 001 Fig. 4,
+    eqs. 31-32).
+
+    Attributes
+    ----------
+    n_per_side : int
+        Mirrors on each side of the central one, n [-] (12).
+    mirror_width : float
+        W_M [m] (0.06).
+    mirror_length : float
+        L_M, length of the mirror rows [m] (2.0).
+    gap : float
+        d, gap between consecutive mirrors [m] (0.024).
+    receiver_height : float
+        f, receiver height above the mirror pivots [m] (1.5).
+    tube_diameter : float
+        D, absorber tube diameter [m] (0.0486).
+    tube_left, tube_right : float
+        L_a^l and L_a^r, positions of the tube's ends along the tube from its pivot,
+        +p positive [m] (seed 000 section 5.1, the three-movement tracker: +/-1.005;
+        the classic horizontal LFR's tube is at -2.037..-0.037).
+    """
+
+    n_per_side: int = 12
+    mirror_width: float = 0.06
+    mirror_length: float = 2.0
+    gap: float = 0.024
+    receiver_height: float = 1.5
+    tube_diameter: float = 0.0486
+    tube_left: float = 1.005
+    tube_right: float = -1.005
+
+    def __post_init__(self):
+        _finite('collector', self, ('mirror_width', 'mirror_length', 'gap', 'receiver_height', 'tube_diameter',
+                                    'tube_left', 'tube_right'))
+        if isinstance(self.n_per_side, bool) or not isinstance(self.n_per_side, int) or self.n_per_side < 0:
+            raise ValueError(f'n_per_side must be an integer >= 0, got {self.n_per_side!r}')
+        checks = [
+            (self.mirror_width > 0, 'mirror_width must be > 0 m'),
+            (self.mirror_length > 0, 'mirror_length must be > 0 m'),
+            (self.gap >= 0, 'gap must be >= 0 m'),
+            (self.receiver_height > 0, 'receiver_height must be > 0 m'),
+            (self.tube_diameter >= 0, 'tube_diameter must be >= 0 m'),
+            (self.tube_left > self.tube_right, 'tube_left must be > tube_right'),
+        ]
+        for ok, text in checks:
+            if not ok:
+                raise ValueError(text)
+
+    @property
+    def n_mirrors(self) -> int:
+        """2n + 1 [-]."""
+        return 2 * self.n_per_side + 1
+
+    @property
+    def aim_height(self) -> float:
+        """Height of the tube's axis (the aim point) above the mirror pivots, f + D/2 [m]
+        (seed 000 eq. 14)."""
+        return self.receiver_height + self.tube_diameter / 2.0
+
+    @property
+    def tube(self) -> tuple[float, float]:
+        """(L_a^r, L_a^l) [m]."""
+        return (self.tube_right, self.tube_left)
+
+    def mirror_positions(self) -> np.ndarray:
+        """Pivot positions x_i of the 2n+1 mirrors, west positive [m] (seed 000 eq. 15)."""
+        return _geometry.mirror_positions(self.n_per_side, self.mirror_width, self.gap)
+
+    def receiver_angles(self) -> np.ndarray:
+        """Signed angle psi_i from each mirror to the aim point [rad] (seed 000 eq. 14)."""
+        return _geometry.receiver_angles(self.mirror_positions(), self.receiver_height, self.tube_diameter)
+
+    def mirror_labels(self) -> list[str]:
+        """Labels as in seed 000 Figs. 21-24: '12L', ..., '1L', 'C', '1R', ..., '12R'."""
+        n = self.n_per_side
+        return [f'{n - k}L' for k in range(n)] + ['C'] + [f'{k}R' for k in range(1, n + 1)]
+
+    def field_width(self) -> float:
+        """Mirror field width W = 2 n (W_M + d) + W_M [m] (seed 000 eq. 28, seed 001 eq. 22)."""
+        return 2 * self.n_per_side * (self.mirror_width + self.gap) + self.mirror_width
 
 
 @dataclass(frozen=True)
@@ -22,16 +131,8 @@ class Collector:
 
     Attributes
     ----------
-    n_per_side : int
-        Mirrors on each side of the central one, n [-] (seed 000 Table 3: 12).
-    mirror_width : float
-        W_M [m] (0.06).
-    gap : float
-        d, gap between consecutive mirrors [m] (0.024).
-    receiver_height : float
-        f, receiver height above the mirror pivots [m] (1.5).
-    tube_diameter : float
-        D, absorber tube diameter [m] (0.0486).
+    geometry : FieldGeometry
+        The mirror field and receiver (seed 000 Table 3 by default).
     azimuth : float
         Azimuth of the collector axis, clockwise from north [rad]; 0 = north-south
         (seed 004 eqs. 1-2; seed 004's gamma_col is -azimuth).
@@ -69,11 +170,7 @@ class Collector:
         for the seed 000 field (positions from n_per_side, mirror_width, gap).
     """
 
-    n_per_side: int = 12
-    mirror_width: float = 0.06
-    gap: float = 0.024
-    receiver_height: float = 1.5
-    tube_diameter: float = 0.0486
+    geometry: FieldGeometry = field(default_factory=FieldGeometry)
     azimuth: float = 0.0
     law: str = 'continuous'
     mirror_min: float = JOINT_RANGE['mirrors'][0]
@@ -91,24 +188,14 @@ class Collector:
     lepten_positions: tuple = field(default_factory=tuple)
 
     def __post_init__(self):
-        def finite(name):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f'collector {name} must be a finite number, got {v!r}')
-            return v
-        for name in ('mirror_width', 'gap', 'receiver_height', 'tube_diameter', 'azimuth', 'mirror_min',
-                     'mirror_max', 'sleeping', 'tilt_max', 'structure_rest', 'reflector_rest', 'step_angle',
-                     'pre_dawn_lead', 'stow_duration', 'tracking_step', 'lepten_radius'):
-            finite(name)
-        if not isinstance(self.n_per_side, int) or self.n_per_side < 0:
-            raise ValueError(f'n_per_side must be an integer >= 0, got {self.n_per_side!r}')
+        if not isinstance(self.geometry, FieldGeometry):
+            raise ValueError(f'collector geometry must be a FieldGeometry, got {self.geometry!r}')
+        _finite('collector', self, ('azimuth', 'mirror_min', 'mirror_max', 'sleeping', 'tilt_max', 'structure_rest',
+                                    'reflector_rest', 'step_angle', 'pre_dawn_lead', 'stow_duration',
+                                    'tracking_step', 'lepten_radius'))
         if self.law not in LAWS:
             raise ValueError(f'law must be one of {", ".join(LAWS)}; got {self.law!r}')
         checks = [
-            (self.mirror_width > 0, 'mirror_width must be > 0 m'),
-            (self.gap >= 0, 'gap must be >= 0 m'),
-            (self.receiver_height > 0, 'receiver_height must be > 0 m'),
-            (self.tube_diameter >= 0, 'tube_diameter must be >= 0 m'),
             (-math.pi <= self.mirror_min < self.mirror_max <= math.pi,
              'mirror range must satisfy -pi <= mirror_min < mirror_max <= pi'),
             (self.mirror_min <= self.sleeping <= self.mirror_max, 'sleeping must lie in the mirror range'),
@@ -119,7 +206,7 @@ class Collector:
             (0 <= self.pre_dawn_lead <= 6 * 3600, 'pre_dawn_lead must be within 0..21600 s'),
             (0 <= self.stow_duration <= 6 * 3600, 'stow_duration must be within 0..21600 s'),
             (0 <= self.tracking_step <= 6 * 3600, 'tracking_step must be within 0..21600 s'),
-            (0 <= self.lepten_radius < self.receiver_height, 'lepten_radius must be in [0, receiver_height)'),
+            (0 <= self.lepten_radius < self.geometry.receiver_height, 'lepten_radius must be in [0, receiver_height)'),
         ]
         for ok, text in checks:
             if not ok:

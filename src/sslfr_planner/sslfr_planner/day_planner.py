@@ -30,7 +30,7 @@ import numpy as np
 from sslfr_common.contract import JOINTS, Phase
 
 from . import daytable, spa
-from .collector import Collector
+from .collector import Collector, FieldGeometry
 from .daytable import DayTable, evaluate
 from .events import H0_DEG, SunEvents, sun_events
 from .site import Site
@@ -56,11 +56,12 @@ def make_site(cfg: dict, fix: SiteFix) -> Site:
 
 def make_collector(cfg: dict) -> Collector:
     """Core :class:`Collector` from the collector.* parameters (SI, radians)."""
-    return Collector(n_per_side=int(cfg['collector.n_per_side']),
-                     mirror_width=float(cfg['collector.mirror_width']),
-                     gap=float(cfg['collector.gap']),
-                     receiver_height=float(cfg['collector.receiver_height']),
-                     tube_diameter=float(cfg['collector.tube_diameter']),
+    geometry = FieldGeometry(n_per_side=int(cfg['collector.n_per_side']),
+                             mirror_width=float(cfg['collector.mirror_width']),
+                             gap=float(cfg['collector.gap']),
+                             receiver_height=float(cfg['collector.receiver_height']),
+                             tube_diameter=float(cfg['collector.tube_diameter']))
+    return Collector(geometry=geometry,
                      azimuth=float(cfg['collector.azimuth']),
                      law=cfg['collector.law'],
                      pre_dawn_lead=float(cfg['collector.pre_dawn_lead']),
@@ -227,7 +228,7 @@ class DayPlanner:
         """NIGHT / STOW pose at instants t: mirrors sleeping, longitudinal axes at rest [rad].
 
         The longitudinal values are the core's own NIGHT commands (``daytable._resting``:
-        the rest position under the 'continuous' law, the fixed/day's value otherwise).
+        the rest position under the moving laws, the fixed/day's value otherwise).
         """
         bm, ba = daytable._resting(t, self.site, self.collector)
         return np.stack([np.full(t.size, self.collector.sleeping), bm, ba], axis=1)

@@ -10,9 +10,11 @@ grid are aligned on absolute multiples of 600 s, so the same nodes serve it).
 
 Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
 
-* TRACKING (2): the sun is up (e_0 above h0, :mod:`events`). mirrors = beta_0 =
-  theta_t/2 (seed 000 eq. 13), mobile_structure / secondary_reflector = the
-  collector's longitudinal law (:mod:`laws`), all clipped to the mechanical ranges.
+* TRACKING (2): the sun is up (e_0 above h0, :mod:`events`). mobile_structure /
+  secondary_reflector = the collector's longitudinal law (:mod:`laws`); mirrors =
+  beta_0 = theta_t'/2, seed 000 eq. 13 with the transversal angle measured in the
+  plane perpendicular to the tilted rows (:func:`raytrace.central_mirror_tilt`;
+  theta_t/2 when the rows are horizontal); all clipped to the mechanical ranges.
   With ``collector.tracking_step`` > 0 the commands are those of the middle of the
   current step interval (kept inside [sunrise, sunset]): seed 003's 15-min steps.
 * PRE_DAWN (1): less than ``pre_dawn_lead`` before the next sunrise: the initial
@@ -21,7 +23,8 @@ Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
 * STOWING (3): less than ``stow_duration`` after the last sunset: mirrors to the
   sleeping position (section 4.4); longitudinal axes as at NIGHT.
 * NIGHT (0): mirrors sleeping (+pi/2); the longitudinal axes at their rest position
-  under the 'continuous' law, at their (fixed / day's) value under the other laws.
+  under the moving laws ('continuous', 'eq16'), at their (fixed / day's) value under
+  the other laws.
 
 If a night is shorter than pre_dawn_lead + stow_duration, PRE_DAWN wins.
 Polar day: TRACKING all day; polar night: NIGHT all day.
@@ -36,8 +39,8 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, Phase
 
-from . import laws, spa
-from .collector import Collector
+from . import laws, raytrace, spa
+from .collector import MOVING_LAWS, Collector
 from .events import SCAN_STEP, SunEvents, crossings, events_around, events_from_crossings, solar_transit
 from .site import Site
 
@@ -102,21 +105,33 @@ def _declination_at_noons(t, site: Site, collector: Collector):
     return decl[inv.reshape(-1)]
 
 
-def _commands(zenith, longitudinal, transversal, t, site: Site, c: Collector):
-    """TRACKING commands (beta_0, beta_M, beta_a) [rad] from the sun at instants t."""
-    mirrors = np.clip(transversal / 2.0, c.mirror_min, c.mirror_max)
-    bm, ba = _longitudinal(zenith, longitudinal, t, site, c)
+def _commands(zenith, azimuth, t, site: Site, c: Collector):
+    """TRACKING commands (beta_0, beta_M, beta_a) [rad] from the sun at instants t.
+
+    beta_0 = theta_t' / 2 (seed 000 eq. 13 in the frame of the tilted rows,
+    :func:`sslfr_planner.raytrace.central_mirror_tilt`): the mirrors turn about the
+    rows, so with the structure tilted by beta_M they follow the sun's angle in the
+    plane perpendicular to the tilted rows; for beta_M = 0 it is theta_t / 2.
+    """
+    sun = raytrace.sun_vector(zenith, azimuth, c.azimuth)
+    bm, ba = _longitudinal(zenith, azimuth, t, site, c, sun)
+    mirrors = np.clip(raytrace.central_mirror_tilt(sun, bm), c.mirror_min, c.mirror_max)
     return mirrors, bm, ba
 
 
-def _longitudinal(zenith, longitudinal, t, site: Site, c: Collector):
+def _longitudinal(zenith, azimuth, t, site: Site, c: Collector, sun=None):
     """(beta_M, beta_a) [rad] of the collector's law at instants ``t`` (clipped to tilt_max).
 
-    ``zenith`` [rad] and ``longitudinal`` theta_l [rad] are the sun's at ``t``.
+    ``zenith`` and ``azimuth`` [rad] are the sun's at ``t``; ``sun`` its unit vector in
+    the collector frame if already computed.
     """
     n = np.shape(t)
     if c.law == 'continuous':
-        bm, ba = laws.continuous(zenith, longitudinal)
+        if sun is None:
+            sun = raytrace.sun_vector(zenith, azimuth, c.azimuth)
+        bm, ba = laws.continuous(sun, c.geometry)
+    elif c.law == 'eq16':
+        bm, ba = laws.eq16(zenith, site.latitude, c.azimuth)
     elif c.law == 'optimum_fixed':
         m, a = laws.optimum_fixed(site.latitude, c.azimuth)
         bm, ba = np.full(n, m), np.full(n, a)
@@ -129,12 +144,13 @@ def _longitudinal(zenith, longitudinal, t, site: Site, c: Collector):
 
 def _resting(t, site: Site, c: Collector):
     """Longitudinal commands (beta_M, beta_a) at NIGHT / STOWING [rad] (module docstring)."""
-    if c.law == 'continuous':
+    if c.law in MOVING_LAWS:
         return np.full(np.shape(t), c.structure_rest), np.full(np.shape(t), c.reflector_rest)
-    return _longitudinal(np.zeros(np.shape(t)), np.ones(np.shape(t)), t, site, c)
+    return _longitudinal(np.zeros(np.shape(t)), np.zeros(np.shape(t)), t, site, c)
 
 
 #: public names of the law helpers (used by the planner node and the analysis tools)
+tracking_commands = _commands
 longitudinal_commands = _longitudinal
 resting_commands = _resting
 
@@ -215,19 +231,18 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
             sample = np.clip(sample, lo_j, hi_j)
             us, inv = np.unique(sample, return_inverse=True)
             s_sun = spa.sun_position(us, site, collector_azimuth=c.azimuth, grid=grid)
-            m, b1, b2 = _commands(s_sun.zenith, s_sun.longitudinal, s_sun.transversal, us, site, c)
+            m, b1, b2 = _commands(s_sun.zenith, s_sun.azimuth, us, site, c)
             inv = inv.reshape(-1)
             mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m[inv], b1[inv], b2[inv]
         else:
-            m, b1, b2 = _commands(sun.zenith[i0:i1], sun.longitudinal[i0:i1], sun.transversal[i0:i1],
-                                  t[i0:i1], site, c)
+            m, b1, b2 = _commands(sun.zenith[i0:i1], sun.azimuth[i0:i1], t[i0:i1], site, c)
             mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m, b1, b2
     # --- PRE_DAWN: the commands of the sunrise instant (10 ms after the crossing: e_0 is
     # then 4e-5 deg above h0, clear of the refraction switch of eq. 42)
     if pre_dawn:
         rises = np.array([ct[j] for j, _, _ in pre_dawn]) + RISE_EPSILON
         r_sun = spa.sun_position(rises, site, collector_azimuth=c.azimuth, grid=grid)
-        m, b1, b2 = _commands(r_sun.zenith, r_sun.longitudinal, r_sun.transversal, rises, site, c)
+        m, b1, b2 = _commands(r_sun.zenith, r_sun.azimuth, rises, site, c)
         for n, (_, i0, i1) in enumerate(pre_dawn):
             mirrors[i0:i1], bm[i0:i1], ba[i0:i1] = m[n], b1[n], b2[n]
 

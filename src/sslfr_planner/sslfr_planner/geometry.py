@@ -1,7 +1,7 @@
 """Tracker geometry: projection (incidence) angles and mirror tilts (numpy, no rclpy).
 
 Frames and signs (docs/conventions.md has the figure and worked numbers; the same
-frame as :mod:`sslfr_planner.optics`):
+frame as :mod:`sslfr_planner.raytrace`):
 
 * azimuths are clockwise from north (east positive), like the SPA's eq. 46;
 * the collector axis has azimuth gamma_c (0: the classic north-south axis; seed 004's

@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from .collector import LAWS
+
 ALMERIA_LAT = 36 + 50 / 60 + 7 / 3600      # 36 deg 50' 07" N (seed 000 section 5.1)
 ALMERIA_LON = -(2 + 24 / 60 + 8 / 3600)    # 2 deg 24' 08" W
 
@@ -100,9 +102,11 @@ SPECS: tuple[ParamSpec, ...] = (
     # --- collector (see sslfr_planner.collector.Collector)
     ParamSpec('collector.law', 'continuous',
               'Longitudinal law of mobile structure and secondary reflector: continuous '
-              '(seed 000 eq. 16), optimum_fixed (seed 001), horizontal (0/0: single-axis '
-              'trackers, seeds 003 and 004), daily (seed 000 section 1)',
-              '-', choices=('continuous', 'optimum_fixed', 'horizontal', 'daily')),
+              '(rays centred on the tube at every instant, 3-D trace; the most annual energy '
+              'without jumps, docs/optics.md), eq16 (seed 000 eq. 16 as published), '
+              'optimum_fixed (seed 001), daily (seed 000 section 1), horizontal (0/0: '
+              'single-axis trackers, seeds 003 and 004)',
+              '-', choices=LAWS),
     ParamSpec('collector.azimuth', 0.0,
               'Collector axis azimuth [rad], clockwise from true north (0: north-south axis); '
               "seed 004's gamma_col = -4.6 deg (west positive) is +0.0803 rad here",
@@ -113,7 +117,7 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec('collector.central_mirror', True,
               'true: 2n+1 mirror lines with a central one (seed 000); false: 2n lines, none on '
               'the axis (seeds 003, 004). The published mirrors joint is always the common '
-              'drive angle beta_0 = theta_t / 2 (seed 000 eq. 11)'),
+              "drive angle beta_0 = theta_t' / 2 (seed 000 eq. 13 in the tilted rows' frame)"),
     ParamSpec('collector.mirror_width', 0.06, 'Mirror width W_M [m]', 'm', 0.001, 5.0),
     ParamSpec('collector.gap', 0.024, 'Gap between consecutive mirrors d [m]', 'm', 0.0, 5.0),
     ParamSpec('collector.receiver_height', 1.5,

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from sslfr_planner import laws
-from sslfr_planner.collector import Collector
 from sslfr_common.contract import Phase
+from sslfr_planner import laws, raytrace
+from sslfr_planner.collector import Collector, FieldGeometry
 from sslfr_planner.daytable import evaluate, plan_day
 from sslfr_planner.events import sun_events
 from sslfr_planner.site import Site
@@ -57,27 +57,41 @@ def test_axis_commands_per_phase(june):
     assert np.all(june.mirrors[night] == c.sleeping)
     assert np.all(june.mobile_structure[night] == 0.0) and np.all(june.secondary_reflector[night] == 0.0)
     tr = p == TRACKING
-    np.testing.assert_allclose(june.mirrors[tr], np.clip(june.transversal[tr] / 2, -math.pi / 4, math.pi / 2))
-    np.testing.assert_allclose(np.abs(june.mobile_structure[tr]), june.zenith[tr] / 2)  # seed 000 eq. 16
+    # mirrors: seed 000 eq. 13 in the tilted rows' frame (theta_t / 2 when the rows are horizontal)
+    sun = raytrace.sun_vector(june.zenith[tr], june.azimuth[tr])
+    tilted = raytrace.transversal_angle(sun, june.mobile_structure[tr])
+    np.testing.assert_allclose(june.mirrors[tr], np.clip(tilted / 2, -math.pi / 4, math.pi / 2))
+    flat = np.abs(june.mobile_structure[tr]) < 1e-9
+    np.testing.assert_allclose(june.mirrors[tr][flat], june.transversal[tr][flat] / 2)
     np.testing.assert_allclose(june.mobile_structure[tr], june.secondary_reflector[tr])
+    # the continuous law: theta_z/2 toward the sun at noon, through 0 when the sun crosses the
+    # east-west vertical plane (summer mornings and evenings: rows face north)
+    noon = int(np.argmin(june.zenith))
+    assert 0.0 < june.mobile_structure[noon] - june.zenith[noon] / 2 < math.radians(0.5)
+    assert june.mobile_structure[tr][0] < 0 and june.mobile_structure[tr][-1] < 0
     # PRE_DAWN holds the commands of the sunrise instant
     at_rise = evaluate(np.array([june.events.sunrise + 0.01]), ALMERIA, c)
     pdw = p == PRE_DAWN
     np.testing.assert_allclose(june.mirrors[pdw], at_rise.mirrors[0], atol=1e-6)
     np.testing.assert_allclose(june.mobile_structure[pdw], at_rise.mobile_structure[0], atol=1e-6)
-    # sunrise at beta_0 = -45 deg, sunset at +45 deg (seed 000 section 4)
-    assert math.isclose(june.mirrors[pdw][0], -math.pi / 4, abs_tol=1e-3)
-    assert abs(june.mirrors[tr][-1] - math.pi / 4) < math.radians(0.5)
+    # horizontal rows: sunrise at beta_0 = -45 deg, sunset at +45 deg (seed 000 section 4)
+    flat = plan_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='horizontal'), 10.0)
+    assert math.isclose(flat.mirrors[flat.phase == PRE_DAWN][0], -math.pi / 4, abs_tol=1e-3)
+    assert abs(flat.mirrors[flat.phase == TRACKING][-1] - math.pi / 4) < math.radians(0.5)
 
 
 def test_noon_signs_northern_and_southern_hemisphere():
     for lat, sign in ((36.8, 1.0), (-27.6, -1.0)):
         site = Site.from_degrees(lat, 0.0)
         ev = sun_events(dt.date(2026, 3, 20), site)
-        tab = evaluate(np.array([ev.solar_noon - 7200, ev.solar_noon, ev.solar_noon + 7200]), site, Collector())
+        instants = np.array([ev.solar_noon - 7200, ev.solar_noon, ev.solar_noon + 7200])
+        tab = evaluate(instants, site, Collector())
         assert tab.transversal[0] < 0 < tab.transversal[2]          # morning -, afternoon +
         assert abs(tab.transversal[1]) < 1e-4
         assert np.sign(tab.mobile_structure[1]) == sign             # rows face the sun
+        assert 0 < abs(tab.mobile_structure[1]) - tab.zenith[1] / 2 < math.radians(1.0)
+        tab = evaluate(instants, site, Collector(law='eq16'))
+        assert np.all(np.sign(tab.mobile_structure) == sign)        # eq. 16: rows face the equator
         assert math.isclose(abs(tab.mobile_structure[1]), tab.zenith[1] / 2, rel_tol=1e-12)
 
 
@@ -100,15 +114,24 @@ def test_horizontal_and_daily_laws():
     local_day = np.floor((tab.t + math.degrees(ALMERIA.longitude) * 240.0) / 86400.0)
     assert np.ptp(tab.mobile_structure[local_day == local_day[-1]]) == 0.0
     assert len(np.unique(tab.mobile_structure)) == 2
-    noon = evaluate(np.array([ev.solar_noon]), ALMERIA, Collector())
-    # (latitude - declination)/2 = the continuous law at solar noon (refraction ~ 1e-4 rad apart)
+    noon = evaluate(np.array([ev.solar_noon]), ALMERIA, Collector(law='eq16'))
+    # (latitude - declination)/2 = seed 000 eq. 16 at solar noon (refraction ~ 1e-4 rad apart)
     assert abs(tab.mobile_structure[0] - noon.mobile_structure[0]) < 2e-4
     assert math.isclose(tab.mobile_structure[0], (math.radians(36.8353) - math.radians(23.44)) / 2, abs_tol=1e-3)
 
 
-def test_continuous_law_signs():
-    bm, ba = laws.continuous(np.array([1.0, 1.0, 0.5]), np.array([0.3, -0.3, 0.0]))
-    np.testing.assert_array_equal(bm, [0.5, -0.5, 0.25])
+def test_law_signs():
+    bm, ba = laws.eq16(np.array([1.0, 0.5]), 0.6)
+    np.testing.assert_array_equal(bm, [0.5, 0.25])
+    np.testing.assert_array_equal(laws.eq16(np.array([1.0]), -0.6)[0], [-0.5])      # southern site
+    np.testing.assert_array_equal(laws.eq16(np.array([1.0]), 0.6, math.pi)[0], [-0.5])  # +p end north
+    g = FieldGeometry()
+    # the sun toward +p (south) -> rows face south; toward -p -> north; in the east-west plane -> flat
+    suns = raytrace.sun_vector(np.radians([40.0, 40.0, 40.0]), np.radians([180.0, 0.0, 90.0]))
+    bm, ba = laws.continuous(suns, g)
+    assert bm[0] > 0 and bm[1] < 0 and abs(bm[2]) < 1e-12
+    np.testing.assert_allclose(bm[0], -bm[1], rtol=1e-12)
+    np.testing.assert_array_equal(bm, ba)
     assert laws.optimum_fixed(-0.5) == (-0.25, -0.5)
     assert laws.optimum_fixed(0.5, math.pi) == (-0.25, -0.5)
 
@@ -169,7 +192,7 @@ T1 = dt.datetime(2100, 12, 31, tzinfo=dt.timezone.utc).timestamp()
 
 @settings(max_examples=40, deadline=None)
 @given(lat=st.floats(-89.5, 89.5), lon=st.floats(-180, 180), t=st.floats(T0, T1),
-       law=st.sampled_from(['continuous', 'optimum_fixed', 'horizontal', 'daily']),
+       law=st.sampled_from(['continuous', 'eq16', 'optimum_fixed', 'horizontal', 'daily']),
        gc=st.floats(-math.pi, math.pi))
 def test_property_no_nan_and_inside_mechanical_ranges(lat, lon, t, law, gc):
     c = Collector(law=law, azimuth=gc)

@@ -57,11 +57,12 @@ def test_mirror_tilts_seed000_left_right_and_central():
 
 
 def test_mirror_tilts_agree_with_the_optics_module():
-    from sslfr_planner import optics
+    from sslfr_planner.analysis import optics
     p = optics.OpticalParameters()
     tt = np.radians(np.linspace(-80, 80, 33))
-    x = g.mirror_positions(p.n_per_side, p.mirror_width, p.gap)
-    np.testing.assert_allclose(g.mirror_tilts(tt, x, p.receiver_height, p.tube_diameter),
+    geo = p.geometry
+    x = g.mirror_positions(geo.n_per_side, geo.mirror_width, geo.gap)
+    np.testing.assert_allclose(g.mirror_tilts(tt, x, geo.receiver_height, geo.tube_diameter),
                                optics.ideal_tilts(tt, p), atol=1e-15)
 
 

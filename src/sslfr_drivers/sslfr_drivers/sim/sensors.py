@@ -56,8 +56,9 @@ import tempfile
 import time
 
 from sslfr_common.contract import JOINT_RANGE, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
-from sslfr_drivers.sensors import max6675
+from sslfr_planner import raytrace
 
+from sslfr_drivers.sensors import max6675
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
@@ -341,7 +342,10 @@ class AbsorberSim(_SensorSim):
         if sim_dt > 0:
             sun = self.sky.sun(utc)
             dni = self.sky.dni(utc) if sun.above_horizon else 0.0
-            power = self.thermal.focused_power(dni, sun.transversal, angles.get('mirrors'))
+            # the mirrors turn about the tilted rows: theta_t in their frame (planner's command)
+            tt = float(raytrace.transversal_angle(raytrace.sun_vector(sun.zenith, sun.azimuth),
+                                                  angles.get('mobile_structure', 0.0)))
+            power = self.thermal.focused_power(dni, tt, angles.get('mirrors'))
             self.thermal.step(sim_dt, power)
         if self.now >= self._next_thermo:
             self._next_thermo = max(self._next_thermo + self.thermo_period, self.now)

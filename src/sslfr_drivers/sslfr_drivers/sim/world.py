@@ -3,14 +3,14 @@
 * :class:`Sky` - sun position and clear-sky beam irradiance for a site, from the
   same models as the rest of the system: the planner's NREL SPA
   (``sslfr_planner.spa``; transversal angle as seed 000 eq. 9) and
-  ``sslfr_planner.beam.clear_sky_dni`` (Ineichen-Perez with the Linke turbidity
+  ``sslfr_planner.analysis.beam.clear_sky_dni`` (Ineichen-Perez with the Linke turbidity
   climatology), tabulated per day at one-minute nodes and interpolated.
 * :class:`GpsReceiver` - a u-blox-like receiver emitting RMC, GGA, GSA and GSV each
   second: position noise (first-order Gauss-Markov), satellites, fix loss and
   re-acquisition, and a clock offset to provoke time jumps.
 * :class:`AbsorberThermal` - inlet and outlet temperatures of the absorber tube:
   a lumped heat balance heated by the power the mirror field focuses on the tube
-  (seed 000 eqs. 17-24 through ``sslfr_planner.optics.transversal_capture``, so a
+  (seed 000 eqs. 17-24 through ``sslfr_planner.analysis.optics.transversal_capture``, so a
   mirror tracking error or stowed mirrors cut the heating), cooled by the fluid flow
   and by losses to ambient.
 
@@ -49,7 +49,7 @@ class Sky:
 
     The sun comes from the planner's NREL SPA (``sslfr_planner.spa.sun_position``,
     the ephemeris of the whole system) and the beam from
-    ``sslfr_planner.beam.clear_sky_dni``; both are evaluated for a whole UTC day at
+    ``sslfr_planner.analysis.beam.clear_sky_dni``; both are evaluated for a whole UTC day at
     one-minute nodes in one vectorised call (~10 ms) and interpolated linearly (the
     azimuth through its sine and cosine), so a simulator tick costs microseconds.
     Interpolation error: < 0.01 deg in zenith, 0 outside the minute around midnight
@@ -76,7 +76,7 @@ class Sky:
         key = (self.latitude_deg, self.longitude_deg, self.elevation, day)
         tab = self._tables.get(key)
         if tab is None:
-            from sslfr_planner.beam import clear_sky_dni
+            from sslfr_planner.analysis.beam import clear_sky_dni
             from sslfr_planner.site import Site
             from sslfr_planner.spa import sun_position as spa
             t = day * 86400.0 + 60.0 * np.arange(1441)
@@ -255,7 +255,7 @@ class AbsorberThermal:
     with T_out = T the tube/outlet temperature and T_in = T_amb + (T - T_amb) * 0.1
     (the inlet thermocouple sits at the cold end, warmed a little by conduction).
     P_abs = DNI * L_M * sum_i C_i(epsilon) * eta_opt, C_i from seed 000 eqs. 17-24
-    (``sslfr_planner.optics.transversal_capture``) for the mirror tracking error
+    (``sslfr_planner.analysis.optics.transversal_capture``) for the mirror tracking error
     epsilon = beta_0,ideal - beta_0,measured (eq. 17), times the cavity acceptance of
     :class:`ThermalParameters`; mirrors far from focus (e.g. the sleeping position)
     catch nothing.
@@ -265,24 +265,25 @@ class AbsorberThermal:
         self.p = params or ThermalParameters()
         self.temperature = self.p.ambient
         self.power = 0.0
-        from sslfr_planner.optics import OpticalParameters
+        from sslfr_planner.analysis.optics import OpticalParameters
         self._optics = OpticalParameters()
 
     def focused_power(self, dni: float, transversal: float, mirror_angle: float | None) -> float:
-        """Power reaching the tube [W] for DNI [W/m^2], theta_t [rad] and the measured
+        """Power reaching the tube [W] for DNI [W/m^2], theta_t [rad] (in the frame of the
+        tilted rows, ``sslfr_planner.raytrace.transversal_angle``) and the measured
         central-mirror angle beta_0 [rad] (None: perfectly tracked, beta_0 = theta_t/2)."""
         if dni <= 0.0 or not math.isfinite(dni) or abs(transversal) >= math.pi / 2:
             return 0.0
-        from sslfr_planner.optics import transversal_capture
+        from sslfr_planner.analysis.optics import transversal_capture
         error = 0.0 if mirror_angle is None or not math.isfinite(mirror_angle) \
             else transversal / 2.0 - mirror_angle
         # the seed's model sends every missed ray into the cavity (rho_rc); a beam moved
         # by 2 epsilon f beyond the secondary reflector's half aperture misses it too
-        shift = 2.0 * abs(error) * self._optics.receiver_height / self.p.cavity_half_aperture
+        shift = 2.0 * abs(error) * self._optics.geometry.receiver_height / self.p.cavity_half_aperture
         if shift >= 1.0:
             return 0.0
         caught = float(transversal_capture(transversal, self._optics, error=error).sum())
-        return (dni * self._optics.mirror_length * caught * self.p.optical_efficiency
+        return (dni * self._optics.geometry.mirror_length * caught * self.p.optical_efficiency
                 * (1.0 - shift * shift))
 
     def step(self, dt: float, power: float) -> None:

@@ -5,26 +5,34 @@ tracker by.
   (seed 000 section 5.2, eqs. 17-24; the table behind its Figs. 22-24).
 * :func:`annual_energy`: energy absorbed over a year (seed 000 eq. 25) for a
   longitudinal law, with the installation area (eqs. 27-28, seed 001 eqs. 21-25),
-  the energy-to-area ratio (eq. 26) and, with costs, the LCOE (eq. 29).
+  the energy-to-area ratio (eq. 26), the end-loss efficiency and, with costs, the
+  LCOE (eq. 29).
 * :func:`tilt_search`: seed 001's brute-force search of the EAR over the two
   longitudinal tilts in [0, latitude].
+* :func:`day_energy`: the energy of a recorded day from the angles actually held.
 
-Sun positions come from the project's NREL SPA (sslfr_planner.spa via
-:func:`sun_positions`), beam irradiance from sslfr_planner.beam. Units: SI and
-radians; energies in Wh unless a name says otherwise.
+Every power comes from the 3-D trace (:mod:`sslfr_planner.raytrace` through
+:mod:`.optics`); the axes follow the planner's own laws and mirror command
+(:mod:`sslfr_planner.daytable`), so the analysis judges exactly what the tracker
+commands. Sun positions: the project's NREL SPA; beam irradiance: :mod:`.beam`.
+Units: SI and radians; energies in Wh unless a name says otherwise.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import date, datetime, timezone
 
 import numpy as np
 
+from .. import raytrace
+from ..collector import LAWS, Collector, FieldGeometry
 from . import optics
 from .optics import OpticalParameters
 
-#: The longitudinal laws the analysis knows (seed 000 eq. 16, seed 001, classic LFR).
-LAWS = ('continuous', 'optimum_fixed', 'horizontal', 'daily')
+#: power models of :func:`annual_energy`
+MODELS = ('trace', 'eq18', 'seed001')
+#: instants traced at once by :func:`annual_energy` (memory ~ 0.3 GB)
+_YEAR_CHUNK = 8192
 
 
 @dataclass(frozen=True)
@@ -69,7 +77,7 @@ class Costs:
 # --- sun positions and laws ------------------------------------------------------------
 
 def _site(site: AnalysisSite):
-    from .site import Site
+    from ..site import Site
     return Site.from_degrees(site.latitude_deg, site.longitude_deg, site.elevation)
 
 
@@ -78,28 +86,29 @@ def sun_positions(t, site: AnalysisSite):
 
     The project's NREL SPA (:func:`sslfr_planner.spa.sun_position`, fast path).
     """
-    from .spa import sun_position
+    from ..spa import sun_position
 
     pos = sun_position(np.asarray(t, dtype=float), _site(site))
     return pos.zenith, pos.azimuth
 
 
-def longitudinal_tilts(law: str, zenith, azimuth, t, site: AnalysisSite):
-    """Tilts (beta_M, beta_a) of the mobile structure and the reflector [rad].
+def commands(law: str, zenith, azimuth, t, site: AnalysisSite, geometry: FieldGeometry | None = None):
+    """The tracker's TRACKING commands (beta_0, beta_M, beta_a) [rad] and the sun vector.
 
-    The planner's own laws (:mod:`sslfr_planner.laws` through the day table), so the
-    analysis judges exactly what the tracker commands: ``continuous`` (seed 000
-    eq. 16), ``optimum_fixed`` (seed 001 eqs. 16, 19), ``horizontal``, ``daily``.
-    Signs as docs/conventions.md (positive faces the south end).
+    The planner's own code (:func:`sslfr_planner.daytable.tracking_commands`): the
+    longitudinal law (``continuous``, ``eq16``, ``optimum_fixed``, ``daily``,
+    ``horizontal``) and the mirrors' command in the tilted rows' frame.
+    Returns (beta_0, beta_M, beta_a, sun (..., 3)).
     """
-    from .collector import Collector
-    from .daytable import longitudinal_commands
+    from ..daytable import tracking_commands
 
     if law not in LAWS:
         raise ValueError(f'unknown law {law!r}; expected one of {", ".join(LAWS)}')
-    _, tl = optics.projection_angles(zenith, azimuth, site.collector_azimuth)
-    collector = Collector(law=law, azimuth=site.collector_azimuth)
-    return longitudinal_commands(np.asarray(zenith, dtype=float), tl, np.asarray(t, dtype=float), _site(site), collector)
+    c = Collector(law=law, azimuth=site.collector_azimuth, geometry=geometry or FieldGeometry())
+    z = np.asarray(zenith, dtype=float)
+    a = np.asarray(azimuth, dtype=float)
+    b0, bm, ba = tracking_commands(z, a, np.asarray(t, dtype=float), _site(site), c)
+    return b0, bm, ba, raytrace.sun_vector(z, a, site.collector_azimuth)
 
 
 # --- seed 000 section 5.2: tracking error ------------------------------------------------
@@ -111,8 +120,8 @@ class ErrorRow:
     day: date
     hour: float                  # solar time [h]
     error: float                 # tracking error epsilon [rad]
-    transversal: float           # theta_t at that instant [rad]
-    loss_per_mirror: np.ndarray  # (Q_i - Q_i^e) / Q_i * 100 [%], order of optics.mirror_labels
+    transversal: float           # theta_t' at that instant (tilted rows' frame) [rad]
+    loss_per_mirror: np.ndarray  # (Q_i - Q_i^e) / Q_i * 100 [%], order of FieldGeometry.mirror_labels
     loss_total: float            # (Q - Q^e) / Q * 100 [%] (seed 000 eq. 24)
 
 
@@ -122,18 +131,19 @@ def solar_time_instant(day: date, hour: float, site: AnalysisSite) -> float:
     Solar noon is the sun's transit from the SPA (:func:`sslfr_planner.events.solar_transit`);
     the seed's 9:00/12:00/15:00 (Figs. 21-24) are solar hours, 15 deg of hour angle each.
     """
-    from .events import local_mean_noon, solar_transit
+    from ..events import local_mean_noon, solar_transit
 
     s = _site(site)
     return solar_transit(local_mean_noon(day, s), s) + 3600.0 * (hour - 12.0)
 
 
-def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours):
+def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours, law: str = 'eq16'):
     """Power loss caused by tracking errors (seed 000 eqs. 17-24, Figs. 22-24).
 
-    As in the seed's transversal study, l_abs, DNI and eta_opt's angle dependence are
-    held constant, so the loss of mirror i is (C_i - C_i^e) / C_i with C the caught
-    beam width of :func:`sslfr_planner.optics.transversal_capture`.
+    The collector follows ``law`` (seed 000's tracker: eq. 16); the central mirror is
+    held epsilon below its ideal tilt (eq. 17, every mirror the same: one drive). As in
+    the seed's transversal study, l_abs and eta_opt are held constant: the tube is
+    endless, so the loss of mirror i is (Q_i - Q_i^e) / Q_i from the 3-D trace.
 
     Parameters
     ----------
@@ -148,21 +158,22 @@ def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hou
     list of ErrorRow
         Rows with the sun below the horizon are skipped.
     """
-    eta = optics.optical_yield(params)
     rows = []
+    errs = np.asarray(errors, dtype=float)
     for day in days:
         for hour in hours:
             t = solar_time_instant(day, hour, site)
             zen, azi = sun_positions(np.array([t]), site)
             if zen[0] >= np.pi / 2:
                 continue
-            tt, _ = optics.projection_angles(zen, azi, site.collector_azimuth)
-            ideal = eta * optics.transversal_capture(tt, params)[0]
-            for err in errors:
-                real = eta * optics.transversal_capture(tt, params, error=err)[0]
-                rows.append(ErrorRow(day, hour, float(err), float(tt[0]),
-                                     100.0 * (ideal - real) / ideal,
-                                     float(100.0 * (ideal.sum() - real.sum()) / ideal.sum())))
+            b0, bm, ba, sun = commands(law, zen, azi, np.array([t]), site, params.geometry)
+            tilts = np.concatenate([b0, b0[0] - errs])
+            q = optics.power(1.0, sun[0], tilts, bm[0], ba[0], params, per_mirror=True, endless=True)
+            ideal, real = q[0], q[1:]
+            tt = float(raytrace.transversal_angle(sun[0], bm[0]))
+            for k, err in enumerate(errs):
+                rows.append(ErrorRow(day, hour, float(err), tt, 100.0 * (ideal - real[k]) / ideal,
+                                     float(100.0 * (ideal.sum() - real[k].sum()) / ideal.sum())))
     return rows
 
 
@@ -176,7 +187,8 @@ class YearResult:
     energy_wh: float            # E (seed 000 eq. 25) [Wh]
     area_m2: float              # A (eq. 27) [m^2]
     tube: tuple[float, float]   # (L_a^r, L_a^l) used [m]
-    model: str                  # 'seed000' or 'seed001'
+    model: str                  # 'trace', 'eq18' or 'seed001'
+    endless_wh: float = 0.0     # E with an endless tube (no end losses) [Wh]
     daily_wh: np.ndarray = field(repr=False, default=None)  # energy per day [Wh]
     lcoe: float | None = None   # [currency/kWh]
 
@@ -184,6 +196,11 @@ class YearResult:
     def ear(self) -> float:
         """Energy-to-area ratio E/A [Wh/m^2] (seed 000 eq. 26)."""
         return self.energy_wh / self.area_m2
+
+    @property
+    def end_loss_efficiency(self) -> float:
+        """Energy with the tube's ends / energy with an endless tube [-] (seed 000 eq. 1, energy-weighted)."""
+        return self.energy_wh / self.endless_wh if self.endless_wh > 0 else float('nan')
 
 
 def year_instants(year: int, step: float = 600.0) -> np.ndarray:
@@ -223,75 +240,93 @@ class YearSky:
 
 
 def annual_energy(sky: YearSky, site: AnalysisSite, params: OpticalParameters, law: str,
-                  model: str = 'seed000', costs: Costs | None = None) -> YearResult:
+                  model: str = 'trace', costs: Costs | None = None) -> YearResult:
     """Energy absorbed over the year by an SSLFR following ``law`` (seed 000 eq. 25) [Wh].
 
-    ``model`` selects the power model: 'seed000' (eq. 18) or 'seed001' (annex eq. 20).
-    The installation area is the largest footprint over the year's tilts (the
-    installation must leave room for every position: for ``continuous`` that is the
-    flat position at sunrise).
+    ``model``: 'trace' (3-D incidence angle), 'eq18' (seed 000 eq. 18 with theta_i in
+    the plane perpendicular to the rows, as the seed evaluates it) or 'seed001' (annex
+    eq. 20). The tube is ``params.geometry``'s. The installation area is the largest
+    footprint over the year's tilts (the installation must leave room for every
+    position: for the moving laws that is the flattest position of the year).
     """
-    bm, ba = longitudinal_tilts(law, sky.zenith, sky.azimuth, sky.t, site)
-    if model == 'seed000':
-        q = optics.power_seed000(sky.dni, sky.zenith, sky.azimuth, bm, ba, params,
-                                 collector_azimuth=site.collector_azimuth)
-    elif model == 'seed001':
-        q = optics.power_seed001(sky.dni, sky.zenith, sky.azimuth, bm, ba, params,
-                                 collector_azimuth=site.collector_azimuth)
-    else:
-        raise ValueError(f"unknown model {model!r}: 'seed000' or 'seed001'")
+    if model not in MODELS:
+        raise ValueError(f"unknown model {model!r}: one of {', '.join(MODELS)}")
+    b0, bm, ba, sun = commands(law, sky.zenith, sky.azimuth, sky.t, site, params.geometry)
+    q = np.zeros(sky.t.size)
+    q_endless = np.zeros(sky.t.size) if model != 'seed001' else None
+    for k in range(0, sky.t.size, _YEAR_CHUNK):   # bounded memory whatever the step
+        sl = slice(k, k + _YEAR_CHUNK)
+        if model == 'seed001':
+            q[sl] = optics.power_seed001(sky.dni[sl], sun[sl], b0[sl], bm[sl], ba[sl], params)
+            continue
+        incidence = '3d' if model == 'trace' else 'transversal'
+        tr = optics.trace(sun[sl], b0[sl], bm[sl], ba[sl], params)
+        half_open = params.cavity_aperture / 2.0
+        bounds = [np.minimum(tr.tube_half, half_open), half_open]
+        weight = (sky.dni[sl, None] * optics.optical_yield(params)
+                  * optics.incidence_factor(tr, sun[sl], bm[sl], incidence))
+        rho = params.cavity_reflectivity
+        d, e = raytrace.mirror_area_hitting(tr, bounds)
+        q[sl] = np.sum(weight * (d + rho * (e - d)), axis=-1)
+        d, e = raytrace.mirror_area_hitting(tr, bounds, tube=(-np.inf, np.inf))
+        q_endless[sl] = np.sum(weight * (d + rho * (e - d)), axis=-1)
     energy = q * sky.step / 3600.0
     days = ((sky.t - sky.t[0] // 86400 * 86400) // 86400).astype(int)
     daily = np.bincount(days, weights=energy)
-    area = float(np.max(optics.installation_area(np.abs(bm), np.abs(ba), params)))
-    result = YearResult(law, float(energy.sum()), area, (params.tube_right, params.tube_left), model, daily)
+    area = float(np.max(optics.installation_area(np.abs(bm), np.abs(ba), params.geometry)))
+    endless = float(q_endless.sum() * sky.step / 3600.0) if q_endless is not None else 0.0
+    result = YearResult(law, float(energy.sum()), area, params.geometry.tube, model, endless, daily)
     if costs is not None:
         kwh = np.full(costs.lifetime, result.energy_wh / 1000.0)
         result.lcoe = optics.lcoe(costs.yearly(), kwh, costs.discount_rate)
     return result
 
 
-def _tube_profile(sky: YearSky, site: AnalysisSite, params: OpticalParameters, beta_m: float,
-                  beta_a: float, density, resolution: float):
+# --- seed 001: the tube's placement and the tilt search --------------------------------------
+
+def _tube_profile(sky: YearSky, site: AnalysisSite, params: OpticalParameters, reflected, beta_a: float,
+                  density, resolution: float):
     """Energy landing on each ``resolution``-long stretch of an unbounded tube [Wh].
 
-    Each instant spreads DNI * T(t) (W per metre of illuminated tube, seed 001 eq. 20
-    without l_a) uniformly over the segment its rays hit (:func:`optics.tube_hit_position`).
+    Each mirror at each instant spreads its seed 001 eq. 20 power per metre of lit tube
+    (``density``, W/m) uniformly over the segment its rays reach (3-D trace).
     Returns (bin centres along the tube [m], energy per bin [Wh]).
     """
-    _, tl = optics.projection_angles(sky.zenith, sky.azimuth, site.collector_azimuth)
-    mu = optics.longitudinal_reflection_angle(tl, beta_m)
-    half = params.mirror_length / 2.0
-    with np.errstate(divide='ignore', invalid='ignore'):
-        u1 = optics.tube_hit_position(-half, mu, beta_m, beta_a, params)
-        u2 = optics.tube_hit_position(half, mu, beta_m, beta_a, params)
-    reach = 4.0 * params.mirror_length + 2.0 * params.receiver_height
-    valid = (np.cos(mu - beta_a) > 1e-9) & np.isfinite(u1) & np.isfinite(u2) & (density > 0)
-    lo = np.clip(np.minimum(u1, u2)[valid], -reach, reach)
-    hi = np.clip(np.maximum(u1, u2)[valid], -reach, reach)
-    per_metre = density[valid] * sky.step / 3600.0  # Wh per metre of illuminated tube
+    g = params.geometry
+    tr = raytrace.trace(None, None, None, beta_a, g, reflected=reflected)
+    lo, hi = tr.hit_segment()
+    reach = 4.0 * g.mirror_length + 2.0 * g.receiver_height
+    valid = tr.valid & np.isfinite(lo) & np.isfinite(hi) & (density > 0)
+    lo = np.clip(lo[valid], -reach, reach)
+    hi = np.clip(hi[valid], -reach, reach)
+    per_metre = density[valid] * sky.step / 3600.0  # Wh per metre of lit tube
     nbins = int(round(2 * reach / resolution))
     edges_lo = np.clip(((lo + reach) / resolution).astype(int), 0, nbins)
     edges_hi = np.clip(((hi + reach) / resolution).astype(int), 0, nbins)
-    diff = np.zeros(nbins + 1)
-    np.add.at(diff, edges_lo, per_metre * resolution)
-    np.add.at(diff, edges_hi, -per_metre * resolution)
+    diff = np.bincount(edges_lo, weights=per_metre * resolution, minlength=nbins + 1)
+    diff -= np.bincount(edges_hi, weights=per_metre * resolution, minlength=nbins + 1)
     energy = np.cumsum(diff)[:nbins]
     centres = -reach + resolution * (np.arange(nbins) + 0.5)
     return centres, energy
 
 
-def _transversal_density(sky: YearSky, site: AnalysisSite, params: OpticalParameters, beta_m: float):
-    """DNI * sum_i eta_i IAM_i l_ci: seed 001 eq. 20 per metre of illuminated tube [W/m]."""
-    tt, _ = optics.projection_angles(sky.zenith, sky.azimuth, site.collector_azimuth)
-    iam = optics.incidence_cosines(sky.zenith, sky.azimuth, beta_m, params, site.collector_azimuth)
-    arc = optics.arc_illuminated(tt, params)
-    return sky.dni * np.sum(optics.optical_yield(params) * iam * arc, axis=-1)
+def _seed001_rays(sky: YearSky, site: AnalysisSite, params: OpticalParameters, beta_m: float):
+    """Rays of the year for a fixed structure tilt and seed 001's power per metre of lit tube.
+
+    Returns (rays, density [W/m] per instant and mirror): DNI eta_opt IAM_i l_ci,i.
+    """
+    g = params.geometry
+    sun = raytrace.sun_vector(sky.zenith, sky.azimuth, site.collector_azimuth)
+    b0 = raytrace.central_mirror_tilt(sun, beta_m)
+    reflected = raytrace.rays(sun, b0, beta_m, g)
+    tr = raytrace.trace(None, None, None, beta_m, g, reflected=reflected)
+    density = sky.dni[:, None] * optics.optical_yield(params) * tr.cos_incidence * optics.arc_illuminated(tr, params)
+    return reflected, np.where(tr.valid, density, 0.0)
 
 
 def best_tube_position(sky: YearSky, site: AnalysisSite, params: OpticalParameters,
                        beta_m: float, beta_a: float, tube_length: float | None = None,
-                       resolution: float = 0.01, density=None):
+                       resolution: float = 0.01, prepared=None):
     """Tube placement (L_a^r, L_a^l) of a given length maximising the year's energy [m].
 
     Replaces the optimisation algorithm of seed 001 ref. [12] (not available): the
@@ -299,19 +334,17 @@ def best_tube_position(sky: YearSky, site: AnalysisSite, params: OpticalParamete
     placement; among placements within 0.1 % of the best energy the one needing the
     smallest installation area wins. Returns ((L_a^r, L_a^l), energy [Wh]).
     """
-    length = tube_length if tube_length is not None else params.tube_left - params.tube_right
-    if density is None:
-        density = _transversal_density(sky, site, params, beta_m)
-    centres, energy = _tube_profile(sky, site, params, beta_m, beta_a, density, resolution)
+    g = params.geometry
+    length = tube_length if tube_length is not None else g.tube_left - g.tube_right
+    reflected, density = prepared if prepared is not None else _seed001_rays(sky, site, params, beta_m)
+    centres, energy = _tube_profile(sky, site, params, reflected, beta_a, density, resolution)
     window = max(1, int(round(length / resolution)))
     csum = np.concatenate([[0.0], np.cumsum(energy)])
     totals = csum[window:] - csum[:-window]            # energy of a tube starting at bin k
     starts = centres[:totals.size] - resolution / 2.0
     near = np.flatnonzero(totals >= 0.999 * totals.max())
     rights = starts[near]
-    lefts = rights + length
-    areas = optics.installation_area(abs(beta_m), abs(beta_a), params,
-                                     tube=(rights, lefts))
+    areas = optics.installation_area(abs(beta_m), abs(beta_a), g, tube=(rights, rights + length))
     k = near[int(np.argmin(areas))]
     return (float(starts[k]), float(starts[k] + length)), float(totals[k])
 
@@ -338,9 +371,10 @@ def tilt_search(sky: YearSky, site: AnalysisSite, params: OpticalParameters, gri
                 max_area: float = 10.0, tube_length: float | None = None) -> TiltSearch:
     """Brute-force EAR over beta_M, beta_a in [0, |latitude|] (seed 001 section 4).
 
-    Each pair gets its best tube placement (:func:`best_tube_position`), its area
-    (seed 001 eqs. 21-25) and EAR = E / A; pairs needing more than ``max_area`` m^2
-    are excluded as in the seed (10 m^2). Southern sites tilt toward the north.
+    Each pair gets its best tube placement (:func:`best_tube_position`, seed 001's
+    model on the 3-D trace), its area (seed 001 eqs. 21-25) and EAR = E / A; pairs
+    needing more than ``max_area`` m^2 are excluded as in the seed (10 m^2). Southern
+    sites tilt toward the north.
     """
     if grid < 2:
         raise ValueError('grid must be >= 2')
@@ -353,11 +387,10 @@ def tilt_search(sky: YearSky, site: AnalysisSite, params: OpticalParameters, gri
     area = np.zeros((grid, grid))
     tubes = np.zeros((grid, grid, 2))
     for i, bm in enumerate(bms):
-        density = _transversal_density(sky, site, params, sign * bm)
+        prepared = _seed001_rays(sky, site, params, sign * bm)
         for j, ba in enumerate(bas):
-            tube, e = best_tube_position(sky, site, params, sign * bm, sign * ba, tube_length,
-                                         density=density)
-            a = float(optics.installation_area(bm, ba, params, tube=tube))
+            tube, e = best_tube_position(sky, site, params, sign * bm, sign * ba, tube_length, prepared=prepared)
+            a = float(optics.installation_area(bm, ba, params.geometry, tube=tube))
             energy[i, j], area[i, j], tubes[i, j] = e, a, tube
             if a <= max_area:
                 ear[i, j] = e / a
@@ -366,24 +399,26 @@ def tilt_search(sky: YearSky, site: AnalysisSite, params: OpticalParameters, gri
 
 def day_energy(t, dni, zenith, azimuth, mirrors, beta_m, beta_a, params: OpticalParameters,
                collector_azimuth: float = 0.0) -> float:
-    """Energy absorbed over recorded samples [Wh] (seed 000 eqs. 18, 20 and 25).
+    """Energy absorbed over recorded samples [Wh] (seed 000 eqs. 18, 20 and 25 on the 3-D trace).
 
     For a recorded day: ``mirrors`` is the central mirror's tilt actually held [rad]
-    (west positive, as the ``mirrors`` joint), so the tracking error of every mirror
-    is epsilon = theta_t / 2 - mirrors (all mirrors share one drive, seed 000 section
-    2.4.1); ``beta_m`` and ``beta_a`` are the longitudinal tilts held [rad] in the optics
-    frame. Pass the ideal angles to get the ideal energy, the measured ones to get the
-    achieved energy. The power is integrated with the trapezoidal rule over ``t`` [s].
+    (west positive, the ``mirrors`` joint; its difference from the ideal command is the
+    tracking error of every mirror, seed 000 eq. 17), ``beta_m`` and ``beta_a`` the
+    longitudinal tilts held [rad]. Pass the ideal angles to get the ideal energy, the
+    measured ones to get the achieved energy. Trapezoidal rule over ``t`` [s].
     """
     t = np.asarray(t, dtype=float)
     if t.size < 2:
         return 0.0
     z = np.asarray(zenith, dtype=float)
-    tt, tl = optics.projection_angles(z, azimuth, collector_azimuth)
-    error = tt / 2.0 - np.asarray(mirrors, dtype=float)
-    cap = optics.transversal_capture(tt, params, error=error)
-    l_abs = optics.illuminated_length(tl, np.asarray(beta_m, dtype=float), np.asarray(beta_a, dtype=float), params)
-    q = np.asarray(dni, dtype=float) * np.where(z < np.pi / 2, l_abs, 0.0) * np.sum(
-        optics.optical_yield(params) * cap, axis=-1)
+    sun = raytrace.sun_vector(z, azimuth, collector_azimuth)
+    q = optics.power(np.where(z < np.pi / 2, np.asarray(dni, dtype=float), 0.0), sun,
+                     np.asarray(mirrors, dtype=float), np.asarray(beta_m, dtype=float),
+                     np.asarray(beta_a, dtype=float), params)
     q = np.nan_to_num(q, nan=0.0)
     return float(np.sum((q[1:] + q[:-1]) / 2.0 * np.diff(t)) / 3600.0)
+
+
+def with_tube(params: OpticalParameters, tube) -> OpticalParameters:
+    """``params`` with the absorber tube placed at (L_a^r, L_a^l) [m]."""
+    return replace(params, geometry=optics.placed(params.geometry, tube))
