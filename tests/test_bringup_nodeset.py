@@ -116,20 +116,73 @@ def test_bad_params_file_refused(tmp_path):
         nodeset.resolve_config('no_such_site')
 
 
-def test_launch_file_compiles_and_reads_the_description(site):
+def _launch_module():
     py_compile.compile(str(LAUNCH), doraise=True)
     spec = importlib.util.spec_from_file_location('tracker_launch', LAUNCH)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)   # must not import `launch` at module level (not installable here)
-    entries = mod._entries(str(site), '/sslfr1')
+    return mod
+
+
+def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
+    mod = _launch_module()
+    entries = mod._entries(str(site), '/sslfr1', str(tmp_path))
     assert [e['name'] for e in entries] == [n.name for n in nodeset.load().start_order()]
     by = {e['name']: e for e in entries}
+    moved = str(tmp_path / 'site.params.yaml')      # the site config, moved under /sslfr1
     assert by['mirrors_driver']['lifecycle'] and not by['planner']['lifecycle']
-    assert by['mirrors_driver']['parameters'] == [str(site), {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors'}]
-    assert by['gps']['parameters'] == [str(site)]
+    assert by['mirrors_driver']['parameters'] == [moved, {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors'}]
+    assert by['gps']['parameters'] == [moved]      # its port comes from the config's gps section
     assert all(e['namespace'] == '/sslfr1' for e in entries)
+    # the node sections reach the namespaced nodes (rcl: a bare `planner:` is the root's only)
+    doc = nodeset.read_params(moved)
+    assert nodeset.node_params(doc, 'planner', '/sslfr1')['longitudinal_law'] == 'continuous'
+    assert nodeset.node_params(doc, 'gps', '/sslfr1')['port'] == '/dev/ttyAMA0'
+    assert nodeset.node_params(doc, 'gps', '/sslfr1')['site.latitude_deg'] == 36.835
+    root = {e['name']: e for e in mod._entries(str(site), '', None, True)}
+    assert root['gps']['parameters'] == [str(site), {'use_sim_time': True}]
     with pytest.raises(ImportError):
         mod.generate_launch_description()   # needs ROS launch (on the Pi)
+
+
+def test_launch_environment_defaults_env_and_arguments(monkeypatch):
+    mod = _launch_module()
+    monkeypatch.delenv('ROS_DOMAIN_ID', raising=False)
+    monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    ns = nodeset.load()
+    assert mod._environment('', '') == {'ROS_DOMAIN_ID': str(ns.domain_id),
+                                         'ROS_AUTOMATIC_DISCOVERY_RANGE': ns.discovery_range}
+    monkeypatch.setenv('ROS_DOMAIN_ID', '7')
+    assert mod._environment('', '')['ROS_DOMAIN_ID'] == '7'
+    assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+
+
+PARAMS_KEYS = {          # every key form rcl knows, one parameter each
+    '/**': 'a', 'planner': 'b', '/planner': 'c', '/sslfr1/planner': 'd', '/**/planner': 'e',
+    'sslfr1/planner': 'f', '/*/planner': 'g', '/sslfr1/*': 'h', '/a/**/planner': 'i',
+}
+
+
+@pytest.mark.parametrize('namespace', ['', '/sslfr1', '/a/b', '/a/b/c'])
+def test_node_params_matches_rclpy_for_every_key_form(namespace, tmp_path, ros_domain):
+    """nodeset.node_params must give exactly what rclpy gives a node from the same file."""
+    import rclpy
+    from rclpy.node import Node
+    path = tmp_path / 'p.yaml'
+    path.write_text(yaml.safe_dump({k: {'ros__parameters': {v: 1, 'order': v}}
+                                    for k, v in PARAMS_KEYS.items()}, sort_keys=False))
+    args = ['x', '--ros-args', '--params-file', str(path)] + (['-r', f'__ns:={namespace}'] if namespace else [])
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, args=args, domain_id=ros_domain)
+    try:
+        node = Node('planner', context=ctx, allow_undeclared_parameters=True,
+                    automatically_declare_parameters_from_overrides=True)
+        real = {k: v.value for k, v in node.get_parameters_by_prefix('').items()
+                if k not in ('use_sim_time', 'start_type_description_service')}
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+    assert nodeset.node_params(nodeset.read_params(path), 'planner', namespace) == real
 
 
 def test_sim_board_argv_fills_placeholders():

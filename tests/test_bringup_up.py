@@ -94,3 +94,43 @@ def test_up_activates_axes_reports_safety_restart_and_stops_axes_first(ros, ros_
     # the axes were stopped (deactivated: motor stopped) before the safety node got SIGINT
     for a in AXES:
         assert 'motor stopped' in (logs / f'{a}_driver.log').read_text()
+
+
+def test_two_collectors_in_their_namespaces_share_a_domain_without_mixing(ros, ros_env, tmp_path):
+    """Two `sslfr up --namespace` sets, each with its own site config whose node section
+    is keyed by the bare node name `planner:` (as the shipped configs are): each planner
+    gets its own section (rcl alone would give a bare key only to the root namespace)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sslfr_interfaces.msg import TrackerPhase
+
+    ups = []
+    phases = {}
+    tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    for ns, lat, temp in (('/c1', 10.0, 18.0), ('/c2', -20.0, 25.0)):
+        site = tmp_path / f'{ns[1:]}.yaml'
+        site.write_text(yaml.safe_dump({'planner': {'ros__parameters': {
+            'site': {'latitude_deg': lat, 'longitude_deg': 5.0, 'temperature': temp},
+            'state_dir': str(tmp_path / ns[1:])}}}))
+        ups.append(subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', 'planner',
+                                     '--namespace', ns, '--log-dir', str(tmp_path / f'logs{ns[1:]}')],
+                                    env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                    start_new_session=True))
+        box = phases.setdefault(ns, [])
+        ros.node.create_subscription(TrackerPhase, f'{ns}/tracker/phase', box.append, tl1)
+    try:
+        assert ros.spin_until(lambda: all(phases.values()), 60), [u.poll() for u in ups]
+        assert phases['/c1'][-1].latitude == 10.0 and phases['/c2'][-1].latitude == -20.0
+        for ns, temp in (('/c1', 18.0), ('/c2', 25.0)):
+            assert _get_param(ros, f'{ns}/planner', 'site.temperature') == temp
+    finally:
+        for u in ups:
+            u.send_signal(signal.SIGTERM)
+        for u in ups:
+            u.communicate(timeout=30)
+    assert all(u.returncode == 0 for u in ups), [u.returncode for u in ups]
+
+
+def _get_param(ros, node: str, name: str):
+    from rcl_interfaces.srv import GetParameters
+    res = ros.call(GetParameters, f'{node}/get_parameters', GetParameters.Request(names=[name]), timeout=30)
+    return res.values[0].double_value

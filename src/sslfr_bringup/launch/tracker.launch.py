@@ -1,26 +1,57 @@
-"""``ros2 launch sslfr_bringup tracker.launch.py [config:=FILE] [namespace:=/ns]``
+"""``ros2 launch sslfr_bringup tracker.launch.py [config:=FILE] [namespace:=/ns]
+[domain_id:=N] [discovery_range:=LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT] [use_sim_time:=true]``
 
 The whole tracker on a Pi with ROS 2 Jazzy from apt. A THIN reader of the one node-set
 description (config/nodeset.yaml via :mod:`sslfr_bringup.nodeset`); `./sslfr up` reads
-the same description. Lifecycle nodes (the axis drivers) are configured, then
-activated, as soon as they start. The supervisor of `./sslfr up` adds what launch
-does not do: restart with backoff and an ordered stop (axes first); the systemd unit
-uses `sslfr up` for that reason (docs/deploy.md).
+the same description and applies it the same way:
+
+- discovery is contained as in `./sslfr up`: ROS_DOMAIN_ID and
+  ROS_AUTOMATIC_DISCOVERY_RANGE are the node set's (domain 42, LOCALHOST: nothing
+  leaves the Pi) unless set in the environment or given as launch arguments;
+- under ``namespace:=/ns`` the site config's node sections are moved with the nodes
+  (rcl matches a bare ``planner:`` section only in the root namespace), so several
+  collectors, each with its own config, share one domain;
+- ``use_sim_time:=true`` reaches every node (replaying a day with ``ros2 bag play --clock``);
+- lifecycle nodes (the axis drivers) are configured, then activated, as soon as they start.
+
+The supervisor of `./sslfr up` adds what launch does not do: restart with backoff and
+an ordered stop (axes first); the systemd unit uses `sslfr up` for that reason
+(docs/deploy.md).
 """
 
 
-def _entries(config: str | None = None, namespace: str | None = None) -> list[dict]:
+def _entries(config: str | None = None, namespace: str | None = None, write_dir: str | None = None,
+             use_sim_time: bool = False) -> list[dict]:
     """Node entries to launch (pure: no `launch` import, tested without ROS launch)."""
     from sslfr_bringup import nodeset
 
     ns = nodeset.load()
     cfg = nodeset.resolve_config(config or None, default=ns.config)
-    return nodeset.launch_entries(ns, cfg, namespace=namespace)
+    return nodeset.launch_entries(ns, cfg, namespace=namespace, write_dir=write_dir,
+                                  use_sim_time=use_sim_time)
+
+
+def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
+    """ROS_DOMAIN_ID / ROS_AUTOMATIC_DISCOVERY_RANGE for the nodes: the launch arguments
+    when given, else the environment's, else the node set's (as `sslfr up`)."""
+    import os
+
+    from sslfr_bringup import nodeset
+
+    ns = nodeset.load()
+    base = {}
+    if domain_id:
+        base['ROS_DOMAIN_ID'] = domain_id
+    if discovery_range:
+        base['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery_range
+    env = nodeset.ros_environment(ns, base={**os.environ, **base})
+    return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
 
 
 def generate_launch_description():
     from launch import LaunchDescription
-    from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+    from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler, \
+        SetEnvironmentVariable
     from launch.events import matches_action
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import LifecycleNode, Node
@@ -29,10 +60,16 @@ def generate_launch_description():
     from lifecycle_msgs.msg import Transition
 
     def _setup(context):
-        config = LaunchConfiguration('config').perform(context)
-        namespace = LaunchConfiguration('namespace').perform(context)
-        actions = []
-        for e in _entries(config, namespace or None):
+        import tempfile
+
+        def arg(name):
+            return LaunchConfiguration(name).perform(context)
+        namespace = arg('namespace')
+        use_sim_time = arg('use_sim_time').lower() in ('true', '1', 'yes')
+        write_dir = tempfile.mkdtemp(prefix='sslfr-launch-') if namespace.strip('/') else None
+        actions = [SetEnvironmentVariable(k, v) for k, v in
+                   _environment(arg('domain_id'), arg('discovery_range')).items()]
+        for e in _entries(arg('config'), namespace or None, write_dir, use_sim_time):
             common = dict(package=e['package'], executable=e['executable'], name=e['name'],
                           namespace=e['namespace'], parameters=e['parameters'],
                           remappings=e['remappings'], output='screen',
@@ -57,5 +94,13 @@ def generate_launch_description():
                               description='site params file (path or name in sslfr_bringup/config); '
                                           'default: the node set\'s (almeria_sslfr.yaml)'),
         DeclareLaunchArgument('namespace', default_value='', description='namespace of the whole tracker'),
+        DeclareLaunchArgument('domain_id', default_value='',
+                              description='ROS_DOMAIN_ID of the nodes (default: $ROS_DOMAIN_ID, else the '
+                                          'node set\'s, 42)'),
+        DeclareLaunchArgument('discovery_range', default_value='',
+                              description='ROS_AUTOMATIC_DISCOVERY_RANGE (default: the environment\'s, '
+                                          'else the node set\'s, LOCALHOST)'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='true: every node takes ROS time from /clock (ros2 bag play --clock)'),
         OpaqueFunction(function=_setup),
     ])

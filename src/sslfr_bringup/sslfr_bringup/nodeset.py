@@ -233,15 +233,50 @@ def read_params(path: str | os.PathLike) -> dict:
     return data
 
 
+def section_matches(key: str, fqn: str) -> bool:
+    """Whether a params-file section ``key`` applies to the node ``fqn`` (``/ns/name``),
+    by rcl's rules (checked against rclpy in the tests): a key without a leading
+    ``/`` is taken from the root (``planner`` is ``/planner``: root namespace only);
+    ``*`` matches one name token, ``**`` any number of tokens (``/**`` every node,
+    ``/**/planner`` a planner in any namespace)."""
+    pattern = [t for t in ('/' + key.lstrip('/')).split('/') if t]
+    name = [t for t in fqn.split('/') if t]
+
+    def match(i: int, j: int) -> bool:
+        if i == len(pattern):
+            return j == len(name)
+        if pattern[i] == '**':
+            return any(match(i + 1, k) for k in range(j, len(name) + 1))
+        return j < len(name) and pattern[i] in ('*', name[j]) and match(i + 1, j + 1)
+    return match(0, 0)
+
+
 def node_params(params: Mapping[str, Any], node: str, namespace: str = '') -> dict:
-    """The parameters a params file gives node ``node``: the ``/**`` section overlaid
-    by the node's own section (``name``, ``/name`` or ``/ns/name``), as rcl does."""
+    """The parameters a params file gives node ``node`` in ``namespace``, as rcl does:
+    every section whose key matches the node's fully qualified name
+    (:func:`section_matches`), in file order, a later section winning."""
     out: dict = {}
-    full = f'{namespace.rstrip("/")}/{node}' if namespace else f'/{node}'
-    for key in ('/**', '**', node, full, full.lstrip('/')):
-        section = params.get(key)
-        if isinstance(section, Mapping):
+    fqn = f'/{namespace.strip("/")}/{node}' if namespace.strip('/') else f'/{node}'
+    for key, section in params.items():
+        if isinstance(section, Mapping) and section_matches(str(key), fqn):
             out.update(_flatten(section.get('ros__parameters') or {}))
+    return out
+
+
+def for_namespace(params: Mapping[str, Any], namespace: str) -> dict:
+    """A site config made for ONE collector, moved under ``namespace``: its sections
+    keyed by a bare node name (``planner``, which rcl matches only in the root
+    namespace) are re-keyed ``/<namespace>/planner``; keys that start with ``/`` or
+    hold wildcards (``/**``, ``/**/planner``) are kept as written. So several
+    collectors, each with its own config under its own namespace, share one domain."""
+    nsp = namespace.strip('/')
+    if not nsp:
+        return dict(params)
+    out = {}
+    for key, section in params.items():
+        k = str(key)
+        bare = not k.startswith('/') and '*' not in k
+        out[f'/{nsp}/{k}' if bare else k] = section
     return out
 
 
@@ -270,8 +305,21 @@ def format_param(value: Any) -> str:
     return str(value)
 
 
+def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike) -> tuple[Path, dict]:
+    """The params file to hand the nodes and its parsed content: ``config`` itself
+    in the root namespace; under a namespace, a copy moved there
+    (:func:`for_namespace`) written to ``write_dir/site.params.yaml``."""
+    params = read_params(config)
+    if not namespace.strip('/'):
+        return Path(config), params
+    params = for_namespace(params, namespace)
+    out = Path(write_dir) / 'site.params.yaml'
+    out.write_text(yaml.safe_dump(params, sort_keys=False))
+    return out, params
+
+
 def node_port(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = None,
-              sim_ports: Mapping[str, str] | None = None) -> str | None:
+              sim_ports: Mapping[str, str] | None = None, namespace: str | None = None) -> str | None:
     """The ``port`` to hand ``node`` on the command line, or None.
 
     Simulation: the simulated board's pty path always. Real boards: the board's udev
@@ -281,18 +329,19 @@ def node_port(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = No
         return None
     if sim_ports is not None:
         return sim_ports.get(node.board)
-    if params is not None and PORT_PARAM in node_params(params, node.name, ns.namespace):
+    nsp = ns.namespace if namespace is None else namespace
+    if params is not None and PORT_PARAM in node_params(params, node.name, nsp):
         return None
     return ns.boards[node.board].device
 
 
 def node_overrides(ns: NodeSet, node: NodeSpec, params: Mapping[str, Any] | None = None,
                    sim_ports: Mapping[str, str] | None = None, use_sim_time: bool = False,
-                   extra: Mapping[str, Any] | None = None) -> dict:
+                   extra: Mapping[str, Any] | None = None, namespace: str | None = None) -> dict:
     """Parameters the node set imposes on ``node`` on top of the site config, in
     increasing precedence: role parameters, ``port``, ``use_sim_time``, ``extra``."""
     out = dict(node.parameters)
-    port = node_port(ns, node, params, sim_ports)
+    port = node_port(ns, node, params, sim_ports, namespace)
     if port:
         out[PORT_PARAM] = port
     if use_sim_time:
@@ -340,19 +389,22 @@ def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
 
 
 def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | None = None,
-                   params: Mapping[str, Any] | None = None) -> list[dict]:
+                   write_dir: str | os.PathLike | None = None, use_sim_time: bool = False) -> list[dict]:
     """What tracker.launch.py turns into ``launch_ros`` actions, in start order.
 
-    Each entry: package, executable, name, namespace, parameters (a list: the params
-    file path, then a dict of role parameters and port), remappings (list of pairs),
-    lifecycle (bool), critical (bool).
+    Each entry: package, executable, name, namespace, parameters (a list: the site
+    params file, moved under the namespace as :func:`site_config` does, then a dict of
+    role parameters, port and use_sim_time), remappings (list of pairs), lifecycle
+    (bool), critical (bool). ``write_dir`` receives the moved config (needed only
+    with a namespace).
     """
-    if params is None:
-        params = read_params(config)
     nsp = ns.namespace if namespace is None else namespace
+    if nsp.strip('/') and write_dir is None:
+        raise NodeSetError('launch_entries: a namespace needs write_dir for the moved site config')
+    config, params = site_config(config, nsp, write_dir or '.')
     out = []
     for node in ns.start_order():
-        overrides = node_overrides(ns, node, params)
+        overrides = node_overrides(ns, node, params, use_sim_time=use_sim_time, namespace=nsp)
         out.append({'package': node.package, 'executable': node.executable, 'name': node.name,
                     'namespace': nsp, 'parameters': [str(config), overrides] if overrides else [str(config)],
                     'remappings': list(node.remaps.items()), 'lifecycle': node.lifecycle,

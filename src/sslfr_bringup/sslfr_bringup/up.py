@@ -53,12 +53,15 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     Each node's overrides (role parameters, port, use_sim_time, ``extra[name]``) are
     written to ``run_dir/<node>.params.yaml`` (the caller owns ``run_dir`` and
     removes it), passed after the site config so they win over its node section.
+    Under a namespace the site config's node sections are moved with it
+    (:func:`nodeset.site_config`).
     """
     import yaml
 
-    params = nodeset_mod.read_params(config)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    namespace = ns.namespace if namespace is None else namespace
+    config, params = nodeset_mod.site_config(config, namespace, run_dir)
     programs, missing = [], []
     for node in ns.start_order():
         exe = finder(node.package, node.executable)
@@ -66,7 +69,7 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
             missing.append(f'{node.name} ({node.package}/{node.executable})')
             continue
         overrides = nodeset_mod.node_overrides(ns, node, params, sim_ports, use_sim_time,
-                                               (extra or {}).get(node.name))
+                                               (extra or {}).get(node.name), namespace=namespace)
         ofile = None
         if overrides:
             ofile = run_dir / f'{node.name}.params.yaml'
