@@ -37,8 +37,9 @@ from pathlib import Path
 
 from sslfr_bringup import faults as faults_mod
 from sslfr_bringup import nodeset as nodeset_mod
-from sslfr_bringup.supervisor import Program, RosSide, Supervisor
+from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import find_executable, select
+from sslfr_planner._cliutil import CliError, OneLineParser, bounded_int, ranged_float
 
 
 class SimClock:
@@ -162,18 +163,35 @@ def acquire_domain(candidates=tuple(range(215, 233)) + tuple(range(102, 0, -1)))
     raise RuntimeError('no free ROS domain id: pass --domain-id')
 
 
+#: Simulated days: ROS time is unsigned seconds since 1970 (a day before it cannot be
+#: simulated) and builtin_interfaces/Time's sec is int32 (until 2038-01-19).
+FIRST_DAY, LAST_DAY = dt.date(1970, 1, 2), dt.date(2038, 1, 18)
+
+
+def sim_date(text: str) -> str:
+    """argparse type: a simulated day YYYY-MM-DD within :data:`FIRST_DAY` .. :data:`LAST_DAY`."""
+    try:
+        d = dt.date.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'must be a date YYYY-MM-DD, got {text!r}') from None
+    if not FIRST_DAY <= d <= LAST_DAY:
+        raise argparse.ArgumentTypeError(f'must be within {FIRST_DAY} .. {LAST_DAY} (ROS time), got {text}')
+    return text
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog='sslfr sim', description=__doc__.split('\n\n')[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='fault specs (times UTC, durations in simulated seconds):\n' + '\n'.join(
             '  ' + line for line in faults_mod.__doc__.split('::')[1].split('\n\nBOARD')[0].strip('\n').splitlines()))
     p.add_argument('--config', default=None, help='site params file (default: almeria_sslfr.yaml, seed 000)')
     p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
-    p.add_argument('--date', default=None, help='simulated day YYYY-MM-DD (default 2026-06-21)')
+    p.add_argument('--date', type=sim_date, default=None, help='simulated day YYYY-MM-DD (default 2026-06-21)')
     p.add_argument('--start', default=None, help='start HH:MM UTC (default 04:00)')
     p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00)')
-    p.add_argument('--speed', type=float, default=None, help='simulated seconds per wall second (default 400)')
+    p.add_argument('--speed', type=ranged_float(0.0, 5000.0, lo_open=True), default=None,
+                   help='simulated seconds per wall second, (0, 5000] (default 400)')
     p.add_argument('--record', default=None, help='bag output directory (default OUT/bags)')
     p.add_argument('--out', default=None, help='output directory: logs, bags, report (default out/sim-DATE)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
@@ -182,10 +200,10 @@ def parser() -> argparse.ArgumentParser:
                         'e.g. mirrors_driver:status_rate=20 (repeatable)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
-    p.add_argument('--domain-id', type=int, default=None,
+    p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else a free id of 215..232 held for the run)')
-    p.add_argument('--seed', type=int, default=1, help='random seed of the simulated boards')
-    p.add_argument('--anchor-margin', type=float, default=None, metavar='S',
+    p.add_argument('--seed', type=bounded_int(0, 2**31 - 1), default=1, help='random seed of the simulated boards')
+    p.add_argument('--anchor-margin', type=ranged_float(0.0, 120.0, unit='s'), default=None, metavar='S',
                    help=f'wall seconds the sensor simulators get to start before the simulated clock '
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
                         f'ahead of /clock, see sim.json sensor_lead_s)')
@@ -193,7 +211,8 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def _wait_links(paths: dict[str, Path], progs: dict[str, Program], timeout: float) -> dict[str, float]:
+def _wait_links(paths: dict[str, Path], progs: dict[str, Program], timeout: float,
+                stop: StopSignals) -> dict[str, float]:
     """Wait for each simulator's pty symlink; return board -> monotonic time it appeared."""
     seen: dict[str, float] = {}
     deadline = time.monotonic() + timeout
@@ -210,15 +229,34 @@ def _wait_links(paths: dict[str, Path], progs: dict[str, Program], timeout: floa
                                        f'see its log') from None
                 continue
             seen[board] = min(time.monotonic(), st.st_mtime - offset)
-        time.sleep(0.005)
+        stop.wait(0.005)
     missing = set(paths) - set(seen)
     if missing:
         raise RuntimeError(f'simulated boards without a pty after {timeout:.0f} s: {", ".join(sorted(missing))}')
     return seen
 
 
-def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated day
-    args = parser().parse_args(argv)
+def main(argv: list[str]) -> int:
+    """``sslfr sim``: 0 at the end of the window (and a report), 1 when the node set
+    cannot run (start-up failed, a node refused its configuration), 2 for bad
+    arguments or configs, 130 when a stop signal ended the run. Every child started is
+    ended whatever signal arrives and whenever (start-up included); the run directory
+    is removed."""
+    with StopSignals() as stop:
+        run = Path(tempfile.mkdtemp(prefix='sslfr-sim-'))   # short paths: UNIX sockets <= 107 bytes
+        try:
+            return _main(parser().parse_args(argv), stop, run)
+        except CliError as exc:
+            print(f'sslfr sim: error: {exc}', file=sys.stderr)
+            return 2
+        except Interrupted as exc:
+            print(f'sslfr sim: stopped by {exc} during start-up', file=sys.stderr)
+            return 130
+        finally:
+            shutil.rmtree(run, ignore_errors=True)
+
+
+def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequence of a simulated day
     t_wall0 = time.monotonic()
     try:
         ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
@@ -254,7 +292,6 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     if logs.exists():
         shutil.rmtree(logs)
     logs.mkdir()
-    run = Path(tempfile.mkdtemp(prefix='sslfr-sim-'))   # short paths: UNIX sockets <= 107 bytes
     clock = SimClock(day0 + start_s, speed)
     site = site_of(params)
     domain_lock = None
@@ -316,169 +353,158 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     ros = RosSide(domain, namespace=ns.namespace, clock_fn=clock.published,
                   clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim', watch=watch)
     ros.start()
-    ros.ready.wait(30)
-    if ros.error is not None:
-        print(f'sslfr sim: ROS side failed: {ros.error}', file=sys.stderr)
-        return 1
-    log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
-    sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
-                     stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
-                     ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('started ', 'lifecycle active')))
-    schedule = faults_mod.Schedule(faults)
-    fired: list[dict] = []
-    end_epoch = day0 + end_s
-    state = {'last_report': 0.0, 'last_rss': 0.0, 'peak_nodes': 0, 'peak_pss': 0, 'peak_boards': 0,
-             'peak_detail': {}}
-
-    # Start-up (nothing of the simulated day is lost to it, however loaded the machine):
-    # 1. the time-dependent boards (sensors) with their clock anchored `anchor_margin` s
-    # ahead (frozen at --start until then) and the axis boards, 2. the nodes, 3. /clock
-    # starts (nothing is published before) when every node is in the ROS graph, the axes
-    # are active, the sensor topics flow and the anchor is reached.
-    timed = {b for b, p in board_progs.items() if any('{anchor}' in a for a in p.argv)}
-    ready = {'ok': True}
-
-    def wait_until(pred, timeout, what):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            sup.step()
-            if pred():
-                return True
-            time.sleep(0.02)
-        ready['ok'] = False
-        print(f'sslfr sim: start-up: {what} not ready after {timeout:.0f} s; going on', file=sys.stderr)
-        return False
-
-    def start_boards(names):
-        for b in names:
-            sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
-        return _wait_links({b: links[b] for b in names}, {b: board_progs[b] for b in names}, timeout=30.0)
-
-    anchor = None
-    margin = float(args.anchor_margin if args.anchor_margin is not None
-                   else simcfg.get('anchor_margin', ANCHOR_MARGIN))
+    sup = None
     try:
-        # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
-        anchor = time.monotonic() + margin
-        for b in sorted(timed):
-            board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
-            sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
-        start_boards([b for b in board_progs if b not in timed])
-        for p in node_progs:
-            sup._spawn(p)  # noqa: SLF001
-        sup.say(f'axis simulators up, nodes started at +{time.monotonic() - t_wall0:.1f} s: '
-                + ', '.join(p.name for p in node_progs))
-        _wait_links({b: links[b] for b in timed}, {b: board_progs[b] for b in timed}, timeout=60.0)
-        sup.say(f'sensor simulators up at +{time.monotonic() - t_wall0:.1f} s')
-        names = {p.name for p in node_progs}
-        wait_until(lambda: names <= ros.graph_nodes, 60.0, 'nodes in the ROS graph: ' + ', '.join(
-            sorted(names - ros.graph_nodes)))
-        lifecycle = [p for p in node_progs if p.lifecycle]
-        wait_until(lambda: all(p.lifecycle_state == 'active' for p in lifecycle)
-                   and all(ros.seen.get(t) for t in watch) and time.monotonic() >= anchor, 60.0,
-                   'axes active / sensor topics ' + ', '.join(t for t in watch if not ros.seen.get(t)))
-        sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
-    except (RuntimeError, KeyboardInterrupt) as exc:
-        print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
-        sup.stop()
-        ros.shutdown()
-        return 1
-    clock.set_anchor(max(anchor, time.monotonic()))
-    url = _page_url(logs)
-    if url:
-        say(f'sslfr sim: operator page at {url} (docs/operator.md)')
-    if clock.anchor - anchor > 0.05:
-        say(f'sslfr sim: sensor simulators run {speed * (clock.anchor - anchor):.0f} s (sim) ahead of /clock '
-            f'(the node set took {clock.anchor - anchor:.1f} s longer than the anchor margin)')
-    t_nodes = time.monotonic()
+        while not ros.ready.is_set():
+            stop.wait(0.05)
+        if ros.error is not None:
+            print(f'sslfr sim: ROS side failed: {ros.error}', file=sys.stderr)
+            return 1
+        log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
+        sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
+                         stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
+                         ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('started ', 'lifecycle active')))
+        schedule = faults_mod.Schedule(faults)
+        fired: list[dict] = []
+        end_epoch = day0 + end_s
+        state = {'last_report': 0.0, 'last_rss': 0.0, 'peak_nodes': 0, 'peak_pss': 0, 'peak_boards': 0,
+                 'peak_detail': {}}
 
-    def tick():
-        now_sim = clock.now()
-        for f, what in schedule.due(now_sim - day0):
-            rec = {'spec': f.spec, 'what': what, 'sim_time': now_sim, 'wall': time.monotonic() - t_wall0}
-            try:
-                if f.kind == 'kill':
-                    if what == 'start':
-                        sup.kill(f.target, hold=True)
+        # Start-up (nothing of the simulated day is lost to it, however loaded the machine):
+        # 1. the time-dependent boards (sensors) with their clock anchored `anchor_margin` s
+        # ahead (frozen at --start until then) and the axis boards, 2. the nodes, 3. /clock
+        # starts (nothing is published before) when every node is in the ROS graph, the axes
+        # are active, the sensor topics flow and the anchor is reached.
+        timed = {b for b, p in board_progs.items() if any('{anchor}' in a for a in p.argv)}
+
+        def wait_until(pred, timeout, what):
+            """Supervise until ``pred()``; a node that refused its configuration, a
+            stop signal or the time-out ends the start-up (RuntimeError)."""
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                sup.step()
+                if sup.fatal:
+                    raise RuntimeError(sup.fatal)
+                if pred():
+                    return
+                stop.wait(0.02)
+            dead = [f'{p.name}: {sup.last_error(p)}' for p in node_progs if p.last_exit is not None]
+            raise RuntimeError(f'{what()} not ready after {timeout:.0f} s'
+                               + (f'; nodes that exited: {"; ".join(dead)}' if dead else ''))
+
+        def start_boards(names):
+            for b in names:
+                sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
+            return _wait_links({b: links[b] for b in names}, {b: board_progs[b] for b in names}, 30.0, stop)
+
+        anchor = None
+        margin = float(args.anchor_margin if args.anchor_margin is not None
+                       else simcfg.get('anchor_margin', ANCHOR_MARGIN))
+        try:
+            # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
+            anchor = time.monotonic() + margin
+            for b in sorted(timed):
+                board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
+                sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
+            start_boards([b for b in board_progs if b not in timed])
+            for p in node_progs:
+                sup._spawn(p)  # noqa: SLF001
+            sup.say(f'axis simulators up, nodes started at +{time.monotonic() - t_wall0:.1f} s: '
+                    + ', '.join(p.name for p in node_progs))
+            _wait_links({b: links[b] for b in timed}, {b: board_progs[b] for b in timed}, 60.0, stop)
+            sup.say(f'sensor simulators up at +{time.monotonic() - t_wall0:.1f} s')
+            names = {p.name for p in node_progs}
+            wait_until(lambda: names <= ros.graph_nodes, 60.0,
+                       lambda: 'nodes in the ROS graph: ' + ', '.join(sorted(names - ros.graph_nodes)))
+            lifecycle = [p for p in node_progs if p.lifecycle]
+            wait_until(lambda: all(p.lifecycle_state == 'active' for p in lifecycle)
+                       and all(ros.seen.get(t) for t in watch) and time.monotonic() >= anchor, 60.0,
+                       lambda: 'axes active ({}) / sensor topics ({})'.format(
+                           ', '.join(p.name for p in lifecycle if p.lifecycle_state != 'active') or 'all',
+                           ', '.join(t for t in watch if not ros.seen.get(t)) or 'all'))
+            sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
+        except RuntimeError as exc:
+            print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
+            return 1
+        clock.set_anchor(max(anchor, time.monotonic()))
+        url = _page_url(logs)
+        if url:
+            say(f'sslfr sim: operator page at {url} (docs/operator.md)')
+        if clock.anchor - anchor > 0.05:
+            say(f'sslfr sim: sensor simulators run {speed * (clock.anchor - anchor):.0f} s (sim) ahead of /clock '
+                f'(the node set took {clock.anchor - anchor:.1f} s longer than the anchor margin)')
+        t_nodes = time.monotonic()
+
+        def tick():
+            now_sim = clock.now()
+            for f, what in schedule.due(now_sim - day0):
+                rec = {'spec': f.spec, 'what': what, 'sim_time': now_sim, 'wall': time.monotonic() - t_wall0}
+                try:
+                    if f.kind == 'kill':
+                        if what == 'start':
+                            sup.kill(f.target, hold=True)
+                        else:
+                            sup.release(f.target)
+                        rec['result'] = 'ok'
                     else:
-                        sup.release(f.target)
-                    rec['result'] = 'ok'
-                else:
-                    from sslfr_drivers.sim.runner import SimControl
-                    ctl = SimControl(controls[f.board], timeout=2.0)
-                    rec['result'] = [ctl.cmd(line).get('ok', False) for line in fault_commands(f, what, speed)]
-            except Exception as exc:  # noqa: BLE001 - a failed injection is reported, the day goes on
-                rec['result'] = f'FAILED: {exc}'
-                print(f'sslfr sim: fault {f.spec} ({what}) could not be injected: {exc}', file=sys.stderr)
-            fired.append(rec)
-            say(f'sslfr sim: fault {f.spec} {what} at {_hhmm(now_sim - day0)} UTC: {rec["result"]}')
-        if time.monotonic() - state['last_rss'] >= 2.0:
-            state['last_rss'] = time.monotonic()
-            mem = sup.rss(full=True)
-            nodes = {k: v for k, v in mem.items() if not k.startswith('sim_')}
-            rss_nodes = sum(v[0] for v in nodes.values())
-            if rss_nodes > state['peak_nodes']:
-                state['peak_nodes'], state['peak_detail'] = rss_nodes, mem
-            state['peak_pss'] = max(state['peak_pss'], sum(v[1] for v in nodes.values()))
-            state['peak_boards'] = max(state['peak_boards'], sum(v[0] for k, v in mem.items() if k.startswith('sim_')))
-        if time.monotonic() - state['last_report'] >= 10.0:
-            state['last_report'] = time.monotonic()
-            say(f'sslfr sim: {_hhmm(now_sim - day0)} UTC (wall {time.monotonic() - t_wall0:.0f} s)')
+                        from sslfr_drivers.sim.runner import SimControl
+                        ctl = SimControl(controls[f.board], timeout=2.0)
+                        rec['result'] = [ctl.cmd(line).get('ok', False) for line in fault_commands(f, what, speed)]
+                except Exception as exc:  # noqa: BLE001 - a failed injection is reported, the day goes on
+                    rec['result'] = f'FAILED: {exc}'
+                    print(f'sslfr sim: fault {f.spec} ({what}) could not be injected: {exc}', file=sys.stderr)
+                fired.append(rec)
+                say(f'sslfr sim: fault {f.spec} {what} at {_hhmm(now_sim - day0)} UTC: {rec["result"]}')
+            if time.monotonic() - state['last_rss'] >= 2.0:
+                state['last_rss'] = time.monotonic()
+                mem = sup.rss(full=True)
+                nodes = {k: v for k, v in mem.items() if not k.startswith('sim_')}
+                rss_nodes = sum(v[0] for v in nodes.values())
+                if rss_nodes > state['peak_nodes']:
+                    state['peak_nodes'], state['peak_detail'] = rss_nodes, mem
+                state['peak_pss'] = max(state['peak_pss'], sum(v[1] for v in nodes.values()))
+                state['peak_boards'] = max(state['peak_boards'], sum(v[0] for k, v in mem.items() if k.startswith('sim_')))
+            if time.monotonic() - state['last_report'] >= 10.0:
+                state['last_report'] = time.monotonic()
+                say(f'sslfr sim: {_hhmm(now_sim - day0)} UTC (wall {time.monotonic() - t_wall0:.0f} s)')
 
-    stop_reason = 'end of the simulated window'
-    try:
-        _supervise(sup, tick, until=lambda: clock.now() >= end_epoch)
-    except KeyboardInterrupt:
-        stop_reason = 'interrupted'
-    took = sup.stop() if not sup.stopping else 0.0
-    ros.shutdown()
-    log_stream.close()
-    wall = time.monotonic() - t_wall0
-    summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
-               'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
-               'startup_s': round(t_nodes - t_wall0, 2),
-               'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,
-               'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
-               'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
-               'clock_messages': ros.clock_published,
-               'peak_rss_nodes_mb': round(state['peak_nodes'] / 2**20, 1),
-               'peak_pss_nodes_mb': round(state['peak_pss'] / 2**20, 1),
-               'peak_rss_sim_boards_mb': round(state['peak_boards'] / 2**20, 1),
-               'rss_pss_at_peak_mb': {k: [round(v[0] / 2**20, 1), round(v[1] / 2**20, 1)]
-                                      for k, v in state['peak_detail'].items()}}
-    (out / 'sim.json').write_text(json.dumps(summary, indent=2))
-    shutil.rmtree(run, ignore_errors=True)
-    say(f'sslfr sim: {stop_reason}; wall time {wall:.1f} s (stop {took:.2f} s); peak RSS of the node set '
-        f'{summary["peak_rss_nodes_mb"]:.0f} MB (PSS {summary["peak_pss_nodes_mb"]:.0f} MB; '
-        f'{len(node_progs)} processes; simulated boards '
-        f'{summary["peak_rss_sim_boards_mb"]:.0f} MB); bag(s) in {bag_root}; logs in {logs}')
-    if missing:
-        say('sslfr sim: ran WITHOUT: ' + '; '.join(missing))
-    if args.no_report:
-        return 0 if stop_reason != 'interrupted' else 130
-    return _report(bag_root, out)
+        why = sup.run(stop, until=lambda: clock.now() >= end_epoch, tick=tick, period=0.02)
+        stop_reason = {'until': 'end of the simulated window', 'signal': 'interrupted',
+                       'fatal': f'stopped: {sup.fatal}'}[why]
+        took = sup.stop_took
+        ros.shutdown()
+        log_stream.close()
+        wall = time.monotonic() - t_wall0
+        summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
+                   'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
+                   'startup_s': round(t_nodes - t_wall0, 2),
+                   'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,
+                   'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
+                   'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
+                   'clock_messages': ros.clock_published,
+                   'peak_rss_nodes_mb': round(state['peak_nodes'] / 2**20, 1),
+                   'peak_pss_nodes_mb': round(state['peak_pss'] / 2**20, 1),
+                   'peak_rss_sim_boards_mb': round(state['peak_boards'] / 2**20, 1),
+                   'rss_pss_at_peak_mb': {k: [round(v[0] / 2**20, 1), round(v[1] / 2**20, 1)]
+                                          for k, v in state['peak_detail'].items()}}
+        (out / 'sim.json').write_text(json.dumps(summary, indent=2))
+        say(f'sslfr sim: {stop_reason}; wall time {wall:.1f} s (stop {took:.2f} s); peak RSS of the node set '
+            f'{summary["peak_rss_nodes_mb"]:.0f} MB (PSS {summary["peak_pss_nodes_mb"]:.0f} MB; '
+            f'{len(node_progs)} processes; simulated boards '
+            f'{summary["peak_rss_sim_boards_mb"]:.0f} MB); bag(s) in {bag_root}; logs in {logs}')
+        if missing:
+            say('sslfr sim: ran WITHOUT: ' + '; '.join(missing))
+        if why == 'fatal':
+            print(f'sslfr sim: {stop_reason}', file=sys.stderr)
+            return 1
+        if args.no_report:
+            return 0 if why == 'until' else 130
+        return _report(bag_root, out)
 
-
-def _supervise(sup: Supervisor, tick, until) -> None:
-    import signal
-    import threading
-    stop_flag = threading.Event()
-
-    def _handler(signum, frame):  # noqa: ARG001
-        stop_flag.set()
-
-    old = {s: signal.signal(s, _handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        while not stop_flag.is_set():
-            sup.step()
-            tick()
-            if until():
-                return
-            stop_flag.wait(0.02)
-        raise KeyboardInterrupt
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
+        if sup is not None and not sup.stopping:
+            sup.stop()
+        ros.shutdown()
 
 
 def _node_programs(ns, config, sim_ports, extra, run_dir):

@@ -33,6 +33,67 @@ from pathlib import Path
 from typing import Callable, TextIO
 
 
+class Interrupted(Exception):
+    """A stop signal arrived; raised at a safe point (never inside a spawn)."""
+
+
+class StopSignals:
+    """SIGINT, SIGTERM and SIGHUP -> a flag, from the moment ``sslfr up`` / ``sslfr
+    sim`` start until they end (use as a context manager around the whole command).
+
+    The handler only sets :attr:`requested`; start-up waits call :meth:`check` (which
+    raises :class:`Interrupted`) and the supervision loop watches the flag, so a
+    signal can never cut a spawn in half and leave an untracked child. Further
+    signals while stopping are ignored.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+    def __init__(self) -> None:
+        self.requested = threading.Event()
+        self.name = ''
+        self._old: dict = {}
+
+    def __enter__(self) -> 'StopSignals':
+        for sig in self.SIGNALS:
+            self._old[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+    def _handler(self, signum, frame) -> None:  # noqa: ARG002 - signal API
+        if not self.requested.is_set():
+            self.name = signal.Signals(signum).name
+            self.requested.set()
+
+    def check(self) -> None:
+        """Raise :class:`Interrupted` when a stop signal has arrived."""
+        if self.requested.is_set():
+            raise Interrupted(self.name)
+
+    def wait(self, seconds: float) -> None:
+        """Sleep up to ``seconds``, then :meth:`check`."""
+        self.requested.wait(seconds)
+        self.check()
+
+
+def _orphan_guard(argv: list[str]) -> list[str]:
+    """``argv`` run so that the kernel sends it SIGTERM if the supervisor dies, even
+    by SIGKILL (``setpriv --pdeathsig``, util-linux, on every Debian/Ubuntu): no node
+    or simulated board outlives ``sslfr up`` / ``sslfr sim``. The spawn happens in
+    the supervisor's main thread (the death signal follows the spawning thread)."""
+    import shutil
+    setpriv = shutil.which('setpriv')
+    return [setpriv, '--pdeathsig', 'TERM', '--', *argv] if setpriv else list(argv)
+
+
+#: A node exiting with this code refused its configuration (sslfr_common.node): it
+#: would refuse it again, so the set stops instead of restarting it forever.
+EXIT_CONFIG_REFUSED = 2
+
+
 @dataclass
 class Program:
     """A supervised process."""
@@ -89,6 +150,8 @@ class Supervisor:
         self.out = out or sys.stderr
         self.ros = ros
         self.stopping = False
+        self.stop_took = 0.0   # [s] how long the ordered stop took
+        self.fatal = ''        # why the set cannot run (a node refused its configuration)
         self.events: list[tuple[float, str, str, str]] = []   # (mono, program, event, detail)
 
     # ------------------------------------------------------------------ reporting
@@ -112,7 +175,8 @@ class Supervisor:
                 p.log_file = open(self.log_dir / f'{p.name}.log', 'ab')  # noqa: SIM115 - closed in close()
             stdout = p.log_file
         try:
-            p.proc = subprocess.Popen(p.argv, env=self.env, stdout=stdout, stderr=subprocess.STDOUT if stdout else None,
+            p.proc = subprocess.Popen(_orphan_guard(p.argv), env=self.env, stdout=stdout,
+                                      stderr=subprocess.STDOUT if stdout else None,
                                       stdin=subprocess.DEVNULL, start_new_session=True)
         except OSError as exc:
             p.proc = None
@@ -173,6 +237,11 @@ class Supervisor:
                 p.failures += 1
                 p.lifecycle_state = ''
                 self._event(p, 'exited', f'code {code} after {up_for:.1f} s')
+                if code == EXIT_CONFIG_REFUSED and p.kind == 'node':
+                    p.next_start = float('inf')
+                    self.fatal = f'{p.name} refused its configuration (exit code {code}): {self.last_error(p)}'
+                    self.say(self.fatal, 2)
+                    continue
                 if not p.restart:
                     p.next_start = float('inf')
                     self.say(f'{p.name} exited (code {code}); not restarted', 3)
@@ -196,6 +265,20 @@ class Supervisor:
             if (p.lifecycle and p.alive() and p.lifecycle_state == 'failed'
                     and p.lifecycle_retry is not None and now >= p.lifecycle_retry):
                 self._activate(p)
+
+    def last_error(self, p: Program) -> str:
+        """The last line a program printed that looks like an error (its log file), or
+        a pointer to its output."""
+        if self.log_dir is None or not (self.log_dir / f'{p.name}.log').exists():
+            return 'see its output above'
+        if p.log_file is not None:
+            p.log_file.flush()
+        lines = [ln.strip() for ln in (self.log_dir / f'{p.name}.log').read_text(errors='replace').splitlines()
+                 if ln.strip()]
+        for ln in reversed(lines):
+            if any(w in ln.lower() for w in ('error', 'invalid', 'refused', 'not starting', 'exception', 'fatal')):
+                return ln
+        return lines[-1] if lines else 'it printed nothing'
 
     # ------------------------------------------------------------------ fault injection
     def kill(self, name: str, hold: bool = True) -> None:
@@ -269,6 +352,7 @@ class Supervisor:
                 self._event(p, 'stopped', f'code {p.proc.returncode}')
         self.say(f'stopped in {took:.2f} s (axes first)')
         self.close()
+        self.stop_took = took
         return took
 
     def close(self) -> None:
@@ -309,30 +393,31 @@ class Supervisor:
     def pids(self) -> list[int]:
         return [p.pid for p in self.programs.values() if p.alive()]
 
-    def run(self, until: Callable[[], bool] | None = None, tick: Callable[[], None] | None = None,
-            period: float = 0.05) -> None:
-        """Supervise until a stop signal (SIGINT/SIGTERM) or ``until()`` is true; then
-        stop in order. ``tick()`` is called every pass (the simulation's fault timer)."""
-        stop_flag = threading.Event()
-
-        def _handler(signum, frame):  # noqa: ARG001
-            stop_flag.set()
-
-        old = {s: signal.signal(s, _handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    def run(self, stop: StopSignals, until: Callable[[], bool] | None = None,
+            tick: Callable[[], None] | None = None, period: float = 0.05) -> str:
+        """Supervise until a stop signal (``stop``), ``until()`` or a node that refused
+        its configuration (:attr:`fatal`); then stop in order. ``tick()`` is called
+        every pass (the simulation's fault timer). Returns why it stopped: 'signal',
+        'until' or 'fatal'."""
+        why = 'signal'
         try:
-            self.start()
-            while not stop_flag.is_set():
+            if not any(p.proc is not None for p in self.programs.values()):
+                self.start()
+            while not stop.requested.is_set():
                 self.step()
+                if self.fatal:
+                    why = 'fatal'
+                    break
                 if tick is not None:
                     tick()
                 if until is not None and until():
+                    why = 'until'
                     break
-                stop_flag.wait(period)
+                stop.requested.wait(period)
         finally:
-            for s, h in old.items():
-                signal.signal(s, h)
             if not self.stopping:
                 self.stop()
+        return why
 
 
 # ---------------------------------------------------------------------------------
@@ -365,6 +450,7 @@ class RosSide(threading.Thread):
         self.watch = dict(watch or {})          # topic -> message type: count arrivals
         self.seen: dict[str, int] = {}
         self.graph_nodes: set[str] = set()      # node names in the ROS graph (refreshed ~2 Hz)
+        self._ctx = None
 
     # called from the supervisor thread
     def request_active(self, name: str) -> None:
@@ -387,8 +473,17 @@ class RosSide(threading.Thread):
         done.wait(timeout + 0.5)
 
     def shutdown(self) -> None:
+        """End the thread (idempotent). A lifecycle call under way (up to 20 s) is cut
+        short by shutting its context down: the thread never outlives this call, so
+        the interpreter never exits under a running rclpy thread (which aborts it)."""
         self._halt.set()
-        self.join(5)
+        if not self.is_alive():
+            return
+        self.join(1.0)
+        if self.is_alive() and self._ctx is not None:
+            import rclpy
+            rclpy.try_shutdown(context=self._ctx)
+        self.join(10.0)
 
     # the thread
     def run(self) -> None:  # noqa: C901 - one loop owning every rclpy object
@@ -401,7 +496,7 @@ class RosSide(threading.Thread):
             from rclpy.executors import SingleThreadedExecutor
             from sslfr_drivers.axis.lifecycle_ctl import bring_to
 
-            ctx = rclpy.Context()
+            ctx = self._ctx = rclpy.Context()
             rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
             node = rclpy.create_node(self.node_name, namespace=self.namespace or None, context=ctx)
             executor = SingleThreadedExecutor(context=ctx)
@@ -471,7 +566,7 @@ class RosSide(threading.Thread):
             node.create_timer(1.0 / self.clock_rate, publish_clock, clock=steady)
         self.ready.set()
         try:
-            while not self._halt.is_set():
+            while not self._halt.is_set() and ctx.ok():
                 try:
                     kind, arg = self._jobs.get_nowait()
                 except queue.Empty:
@@ -498,7 +593,8 @@ class RosSide(threading.Thread):
                         executor.spin_once(timeout_sec=0.02)
                     done.set()
         except BaseException as exc:  # noqa: BLE001
-            self.error = exc
+            if not self._halt.is_set():
+                self.error = exc
         finally:
             executor.shutdown()
             node.destroy_node()

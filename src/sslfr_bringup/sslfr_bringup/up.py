@@ -14,7 +14,6 @@ graph to a monitoring laptop.
 from __future__ import annotations
 
 import argparse
-import atexit
 import os
 import shlex
 import shutil
@@ -23,7 +22,8 @@ import tempfile
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
-from sslfr_bringup.supervisor import Program, RosSide, Supervisor
+from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
+from sslfr_planner._cliutil import CliError, OneLineParser, bounded_int
 
 
 def find_executable(package: str, exe: str) -> Path | None:
@@ -81,12 +81,12 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='sslfr up', description=__doc__.split('\n\n')[0],
+    p = OneLineParser(prog='sslfr up', description=__doc__.split('\n\n')[0],
                                 epilog='Stop with Ctrl-C or SIGTERM: axes first, then the rest (<= 5 s).')
     p.add_argument('--config', default=None,
                    help='site params file: a path or a name in sslfr_bringup/config (default: almeria_sslfr.yaml)')
     p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
-    p.add_argument('--domain-id', type=int, default=None,
+    p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else the node set\'s, 42)')
     p.add_argument('--namespace', default=None, help='namespace of the whole tracker, e.g. /sslfr1')
     p.add_argument('--only', default='', help='comma-separated node names to run (default: all)')
@@ -110,13 +110,28 @@ def select(ns: nodeset_mod.NodeSet, only: str, skip: str) -> nodeset_mod.NodeSet
 
 
 def main(argv: list[str]) -> int:
-    args = parser().parse_args(argv)
+    """``sslfr up``: exit 0 after a stop signal, 1 when the set cannot run (a node
+    refused its configuration, the ROS side failed), 2 for bad arguments or configs.
+    Every child started is ended whatever signal arrives and whenever (start-up
+    included), and the run directory is removed."""
+    with StopSignals() as stop:
+        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-up-'))
+        try:
+            return _run(parser().parse_args(argv), stop, run_dir)
+        except CliError as exc:
+            print(f'sslfr up: error: {exc}', file=sys.stderr)
+            return 2
+        except Interrupted:
+            return 0
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
+
+
+def _run(args, stop: StopSignals, run_dir: Path) -> int:
     try:
         ns = nodeset_mod.load(args.nodeset)
         ns = select(ns, args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
-        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-up-'))
-        atexit.register(shutil.rmtree, run_dir, True)
         programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
@@ -139,16 +154,21 @@ def main(argv: list[str]) -> int:
         return 1
     ros = RosSide(domain, namespace=args.namespace or ns.namespace)
     ros.start()
-    ros.ready.wait(30)
-    if ros.error is not None:
-        print(f'sslfr up: ROS side failed: {ros.error}', file=sys.stderr)
-        return 1
-    sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
-                     stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None, ros=ros)
     try:
-        sup.run()
+        while not ros.ready.is_set():
+            stop.wait(0.05)
+        if ros.error is not None:
+            print(f'sslfr up: ROS side failed: {ros.error}', file=sys.stderr)
+            return 1
+        sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
+                         stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None,
+                         ros=ros)
+        why = sup.run(stop)
     finally:
         ros.shutdown()
+    if why == 'fatal':
+        print(f'sslfr up: stopped: {sup.fatal}', file=sys.stderr)
+        return 1
     return 0
 
 
