@@ -12,13 +12,17 @@ from __future__ import annotations
 
 import argparse
 import getpass
+import ipaddress
 import os
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_planner._cliutil import (CliError, OneLineParser, bounded_int, output_dir, ros_namespace, run,
+                                    write_atomically)
 
 UNIT_NAME = 'sslfr-tracker.service'
 
@@ -31,17 +35,34 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parents[3]
 
 
+def systemd_word(value: str) -> str:
+    """``value`` as one word of a unit file line (systemd.syntax(7), systemd.service(5)
+    "Command lines"): control characters refused (ValueError: a newline would start a
+    new directive), ``%`` and ``$`` escaped, double-quoted with ``\\`` and ``"``
+    escaped when it holds a space or a quote."""
+    bad = [ch for ch in value if ord(ch) < 0x20 or ord(ch) == 0x7f]
+    if bad:
+        raise ValueError(f'{value!r} holds a control character ({bad[0]!r}): it cannot go into a unit file')
+    out = value.replace('%', '%%').replace('$', '$$')
+    if any(ch in out for ch in ' \t"\'\\;') or out == '':
+        out = '"' + out.replace('\\', '\\\\').replace('"', '\\"') + '"'
+    return out
+
+
 def render_unit(*, root: Path, config: str, user: str, domain_id: int, discovery_range: str,
                 namespace: str = '', peers: str = '') -> str:
-    """Text of the systemd unit (pure; tested)."""
-    up = f'{root}/sslfr up --config {config}'
+    """Text of the systemd unit (pure; tested). Every value that reaches the file is
+    checked and quoted (:func:`systemd_word`); ValueError when one cannot be written."""
+    up = ' '.join(systemd_word(w) for w in (f'{root}/sslfr', 'up', '--config', str(config)))
     if namespace:
-        up += f' --namespace {namespace}'
+        up += ' --namespace ' + systemd_word(namespace)
     env = [f'ROS_DOMAIN_ID={domain_id}', f'ROS_AUTOMATIC_DISCOVERY_RANGE={discovery_range}',
            'PYTHONUNBUFFERED=1', 'RCUTILS_COLORIZED_OUTPUT=0', 'RCUTILS_LOGGING_BUFFERED_STREAM=0']
     if peers:
         env.append(f'ROS_STATIC_PEERS={peers}')
-    env_lines = '\n'.join(f'Environment={e}' for e in env)
+    env_lines = '\n'.join(f'Environment={systemd_word(e)}' for e in env)
+    user = systemd_word(user)
+    root = systemd_word(str(root))
     return f"""# {UNIT_NAME}: the SSLFR tracker node set (written by `sslfr install-service`)
 # Logs: journalctl -u {UNIT_NAME.removesuffix('.service')} -f     Docs: {root}/docs/deploy.md
 [Unit]
@@ -78,34 +99,64 @@ WantedBy=multi-user.target
 """
 
 
+def unix_user(text: str) -> str:
+    """argparse type: a POSIX user name (useradd's default rule, <= 32 characters)."""
+    if not re.fullmatch(r'[a-z_][a-z0-9_-]{0,30}\$?', text):
+        raise argparse.ArgumentTypeError(f'{text!r} is not a user name (lower-case letters, digits, _ and -, '
+                                         'starting with a letter or _, at most 32 characters)')
+    return text
+
+
+def static_peers(text: str) -> str:
+    """argparse type: ROS_STATIC_PEERS, host names or IP addresses separated by ``;``
+    ('' = none)."""
+    if text == '':
+        return text
+    for peer in (t.strip() for t in text.split(';')):
+        try:
+            ipaddress.ip_address(peer)
+            continue
+        except ValueError:
+            pass
+        if not re.fullmatch(r'(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?'
+                            r'(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*', peer):
+            raise argparse.ArgumentTypeError(f'{peer!r} is not an IP address or host name '
+                                             '(separate several peers with ;)')
+    return text
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='sslfr install-service', description=__doc__.split('\n\n')[0])
+    p = OneLineParser(prog='sslfr install-service', description=__doc__.split('\n\n')[0])
     p.add_argument('--config', default=None,
                    help='site params file (path or name in sslfr_bringup/config; default almeria_sslfr.yaml)')
-    p.add_argument('--user', default=None, help='user the node set runs as (default: the invoking user)')
-    p.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID (default: the node set\'s, 42)')
+    p.add_argument('--user', type=unix_user, default=None,
+                   help='user the node set runs as (default: the invoking user)')
+    p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
+                   help='ROS_DOMAIN_ID, 1..232 (default: the node set\'s, 42)')
     p.add_argument('--discovery-range', default=None, choices=['LOCALHOST', 'SUBNET', 'SYSTEM_DEFAULT', 'OFF'],
                    help='ROS_AUTOMATIC_DISCOVERY_RANGE (default LOCALHOST; SUBNET opens it to the LAN)')
-    p.add_argument('--peers', default='', help='ROS_STATIC_PEERS, e.g. the monitoring laptop\'s IP')
-    p.add_argument('--namespace', default='', help='namespace of the tracker')
-    p.add_argument('--unit-dir', default='/etc/systemd/system', help='where to write the unit')
+    p.add_argument('--peers', type=static_peers, default='',
+                   help='ROS_STATIC_PEERS, e.g. the monitoring laptop\'s IP (several: a;b)')
+    p.add_argument('--namespace', type=ros_namespace, default='', help='namespace of the tracker, e.g. /sslfr1')
+    p.add_argument('--unit-dir', type=output_dir, default=Path('/etc/systemd/system'),
+                   help='where to write the unit (an existing or creatable directory)')
     p.add_argument('--dry-run', action='store_true', help='print the unit, write nothing')
     p.add_argument('--no-enable', action='store_true', help='write the unit but do not enable/start it')
     return p
 
 
 def main(argv: list[str]) -> int:
+    return run('install-service', _body, argv)
+
+
+def _body(argv: list[str]) -> int:
     args = parser().parse_args(argv)
     try:
         ns = nodeset_mod.load()
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
     except nodeset_mod.NodeSetError as exc:
-        print(f'sslfr install-service: {exc}', file=sys.stderr)
-        return 2
+        raise CliError(f'argument --config: {exc}') from None
     domain = args.domain_id if args.domain_id is not None else ns.domain_id
-    if not 0 < domain <= 232:
-        print('sslfr install-service: --domain-id must be 1..232', file=sys.stderr)
-        return 2
     user = args.user or os.environ.get('SUDO_USER') or getpass.getuser()
     text = render_unit(root=repo_root(), config=str(config), user=user, domain_id=domain,
                        discovery_range=args.discovery_range or ns.discovery_range,
@@ -115,7 +166,8 @@ def main(argv: list[str]) -> int:
         return 0
     path = Path(args.unit_dir) / UNIT_NAME
     try:
-        path.write_text(text)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomically(str(path), lambda tmp: Path(tmp).write_text(text))
     except PermissionError:
         print(f'sslfr install-service: cannot write {path}: run with sudo (or --dry-run to see the unit)',
               file=sys.stderr)

@@ -25,6 +25,25 @@ PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))
 
 #: (subcommand argv with {placeholders}, text the one-line refusal must contain)
 CASES = [
+    # -- sim / up / install-service arguments (values for generated files included) ------------
+    ('sim --anchor-margin nan', '--anchor-margin'),
+    ('sim --anchor-margin 1e9', '--anchor-margin'),
+    ('sim --speed 0', '--speed'),
+    ('sim --speed inf', '--speed'),
+    ('sim --date 1000-06-21', '--date'),
+    ('sim --date 2026-02-30', '--date'),
+    ('sim --domain-id -1', '--domain-id'),
+    ('sim --seed x', '--seed'),
+    ('up --domain-id 0', '--domain-id'),
+    ('up --domain-id 999', '--domain-id'),
+    ("install-service --dry-run --namespace '/a\nExecStartPre=/bin/false'", '--namespace'),
+    ("install-service --dry-run --user 'pi\nExecStartPre=/bin/false'", '--user'),
+    ("install-service --dry-run --peers '10.0.0.1\nExecStartPre=/bin/false'", '--peers'),
+    ('install-service --dry-run --namespace relative', '--namespace'),
+    ('install-service --dry-run --domain-id 0', '--domain-id'),
+    ('install-service --unit-dir {file} --no-enable', '--unit-dir'),
+    ('install-service --unit-dir /proc/x --no-enable', '--unit-dir'),
+    ('install-service --dry-run --config {png}', '--config'),
     # -- wrong-kind and missing bags ------------------------------------------------------
     ('bag info {png}', 'metadata.yaml'),
     ('bag info {binary}', 'metadata.yaml'),

@@ -328,6 +328,19 @@ def ros_node_name(text: str) -> str:
     return text
 
 
+def ros_namespace(text: str) -> str:
+    """argparse type: '' or an absolute ROS namespace (``/sslfr1``, ``/field/row2``),
+    checked with the topic-name rules rcl applies (a trailing / is dropped)."""
+    if text == '':
+        return text
+    why = topic_name_error(text.rstrip('/') or '/') if text.startswith('/') else 'must start with /'
+    if not why and '~' in text:
+        why = 'must not hold ~'
+    if why:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a valid ROS namespace: {why}')
+    return text.rstrip('/') or '/'
+
+
 def ros_remap(text: str) -> tuple[str, str]:
     """argparse type: a topic remap ``from:=to`` with both names valid (rcl's rules)."""
     if ':=' not in text:
