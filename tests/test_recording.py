@@ -367,3 +367,27 @@ def test_sslfr_record_exits_1_when_it_recorded_nothing(ros_env, tmp_path):
     assert proc.returncode == 1, (out, err)
     assert 'recorded 0 message(s)' in err and '/nobody/publishes/this' in err
     assert 'Traceback' not in err
+
+
+@pytest.mark.parametrize('gap', [0.05, 0.3])
+def test_two_sigints_during_the_stop_still_finish_the_bag(launch, ros, tmp_path, gap):
+    """A terminal's Ctrl-C and launch's own SIGINT (issue 21): the recorder exits 0 and
+    the day's bag is complete (metadata.yaml written atomically, no .tmp left), as
+    rosbag2's rules require."""
+    from sslfr_bringup.bag.conformance import check_bag
+    rec = launch('sslfr_bringup', 'recorder', params={
+        'output_dir': str(tmp_path / 'bags'), 'chunk_duration': 0.5, 'discovery_period': 0.2,
+        'exclude': ['/diagnostics']})
+    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    _wait_matched(ros, [pub])
+    _publish(ros, pub, 80.0, 40)
+    rec.signal(signal.SIGINT)
+    time.sleep(gap)
+    rec.signal(signal.SIGINT)
+    assert rec.proc.wait(15) == 0, rec.output()
+    out = rec.output()
+    assert 'Traceback' not in out and 'rosout' not in out, out
+    (bag,) = _bag_dirs(tmp_path / 'bags')
+    assert (bag / 'metadata.yaml').exists() and not list(bag.glob('*.tmp')), list(bag.iterdir())
+    report = check_bag(bag)
+    assert report.conforms, report.text()
