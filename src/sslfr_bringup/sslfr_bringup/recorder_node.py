@@ -15,96 +15,30 @@ stops recording; it never touches another node.
 """
 from __future__ import annotations
 
-import importlib
-import os
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
-    SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from sslfr_common.node import run_node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, \
-    ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from sslfr_common.node import ParameterGuard, declare_parameters, message_class, run_node
 
-from .bag.policy import DiskGuard, SplitPolicy
-from .bag.qos import duration_dict
+from .bag import recorder_config as rc
 from .bag.schema import DefinitionNotFoundError
-from .bag.session import RecordingSession, probe_output_dir
-from .bag.writer import WriterOptions
-
-_ALWAYS_EXCLUDED = ('/rosout', '/parameter_events')
-
-
-def qos_to_dict(qos) -> dict:
-    """rclpy QoSProfile -> rosbag2 v9 profile dict (durations as {sec, nsec})."""
-    def name(enum_value) -> str:
-        return getattr(enum_value, 'name', str(enum_value)).lower()
-
-    def dur(d) -> dict:
-        ns = getattr(d, 'nanoseconds', 0)
-        return duration_dict(None) if ns >= 0x7FFFFFFFFFFFFFFF else duration_dict(ns / 1e9) \
-            if ns >= 0 else duration_dict(0.0)
-
-    return {'history': name(qos.history), 'depth': int(qos.depth),
-            'reliability': name(qos.reliability), 'durability': name(qos.durability),
-            'deadline': dur(qos.deadline), 'lifespan': dur(qos.lifespan),
-            'liveliness': name(qos.liveliness),
-            'liveliness_lease_duration': dur(qos.liveliness_lease_duration),
-            'avoid_ros_namespace_conventions': bool(qos.avoid_ros_namespace_conventions)}
-
-
-def import_message(type_name: str):
-    """``pkg/msg/Type`` -> the generated Python message class."""
-    pkg, _, typ = type_name.split('/')
-    return getattr(importlib.import_module(f'{pkg}.msg'), typ)
 
 
 class Recorder(Node):
     """Record topics to per-day MCAP bags."""
 
-    PARAMS = {
-        'output_dir': ('~/sslfr_bags', 'directory where bag directories are created', None),
-        'prefix': ('sslfr', 'bag directory name prefix: <prefix>_YYYY-MM-DD', None),
-        'topics': ([''], 'topics to record (relative names are resolved in the node '
-                         'namespace); empty = every topic with a publisher', None),
-        'exclude': (['/clock'], 'topics never recorded (besides /rosout, /parameter_events)', None),
-        'discovery_period': (1.0, 'period of topic discovery [s]', (0.1, 60.0)),
-        'per_day': (True, 'one bag per UTC day of ROS time (else one bag per run)', None),
-        'max_file_size': (0, 'split the bag into a new .mcap at this size [bytes]; 0 = off',
-                          (0, 2**62)),
-        'max_file_duration': (0.0, 'split into a new .mcap after this much log time [s]; 0 = off',
-                              (0.0, 1e7)),
-        'chunk_duration': (2.0, 'max age of unwritten data [s]: bounds what a crash loses',
-                           (0.05, 60.0)),
-        'chunk_size': (1048576, 'MCAP chunk size [bytes]', (1024, 1 << 30)),
-        'compression': ('zstd', 'MCAP chunk compression: zstd | lz4 | none', None),
-        'fsync': (True, 'fsync every chunk (power-cut safety)', None),
-        'min_free_bytes': (500 * 1024 * 1024, 'stop recording below this free space [bytes]',
-                           (0, 2**62)),
-        'min_free_fraction': (0.02, 'stop recording below this free fraction of the disk [-]',
-                              (0.0, 0.99)),
-        'disk_check_period': (5.0, 'period of the free-disk check [s]', (0.1, 3600.0)),
-        'queue_depth': (100, 'subscription history depth [messages]', (1, 100000)),
-    }
-
     def __init__(self):
         super().__init__('recorder')
-        for pname, (default, text, rng) in self.PARAMS.items():
-            desc = ParameterDescriptor(description=text)
-            if rng is not None and isinstance(default, float):
-                desc.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
-            elif rng is not None and isinstance(default, int) and not isinstance(default, bool):
-                desc.integer_range = [IntegerRange(from_value=rng[0], to_value=min(rng[1], 2**62))]
-            self.declare_parameter(pname, default, desc)
-        cfg = {p: self.get_parameter(p).value for p in self.PARAMS}
-        error = self._validate(cfg) or self._output_error(cfg)
+        cfg = declare_parameters(self, rc.TABLE)
+        error = rc.output_error(cfg)
         if error:
-            raise ValueError(f'recorder: invalid parameters: {error}')
+            raise ValueError(error)
         self.cfg = cfg
-        self.session = self._make_session(cfg)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.session = rc.make_session(cfg)
+        self.params = ParameterGuard(self, rc.TABLE, cfg, self._apply)
         self._subs: dict[str, object] = {}
         self._bad_types: set[str] = set()
         self.received = 0
@@ -123,64 +57,24 @@ class Recorder(Node):
             f'chunks <= {cfg["chunk_duration"]} s)')
 
     # -- parameters ------------------------------------------------------------------
-    @staticmethod
-    def _validate(cfg: dict) -> str:
-        if cfg['compression'] not in ('zstd', 'lz4', 'none'):
-            return f"compression must be zstd, lz4 or none (got {cfg['compression']!r})"
-        if not str(cfg['output_dir']).strip():
-            return 'output_dir is empty'
-        if not cfg['prefix'] or '/' in cfg['prefix'] or '\0' in cfg['prefix'] \
-                or cfg['prefix'] in ('.', '..'):
-            return 'prefix must be a non-empty name without /'
-        for key in ('discovery_period', 'chunk_duration', 'disk_check_period'):
-            if not cfg[key] > 0:
-                return f'{key} must be > 0'
-        for key in ('max_file_size', 'max_file_duration', 'min_free_bytes', 'min_free_fraction'):
-            if not cfg[key] >= 0:
-                return f'{key} must be >= 0'
-        return ''
-
-    @staticmethod
-    def _output_error(cfg: dict) -> str:
-        why = probe_output_dir(os.path.expanduser(str(cfg['output_dir'])))
-        return f'output_dir {cfg["output_dir"]!r}: {why}' if why else ''
-
-    def _make_session(self, cfg: dict) -> RecordingSession:
-        opts = WriterOptions(chunk_size=int(cfg['chunk_size']),
-                             chunk_duration_s=float(cfg['chunk_duration']),
-                             compression=cfg['compression'], fsync=bool(cfg['fsync']),
-                             split=SplitPolicy(int(cfg['max_file_size']),
-                                               float(cfg['max_file_duration'])))
-        guard = DiskGuard(min_free_bytes=int(cfg['min_free_bytes']),
-                          min_free_fraction=float(cfg['min_free_fraction']))
-        return RecordingSession(os.path.expanduser(cfg['output_dir']), cfg['prefix'],
-                                bool(cfg['per_day']), opts, guard,
-                                float(cfg['disk_check_period']))
-
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        new = dict(self.cfg)
-        for p in params:
-            if p.name in new:
-                new[p.name] = p.value
-        changed = {k for k in new if new[k] != self.cfg[k]}
-        error = self._validate(new) or (self._output_error(new) if 'output_dir' in changed else '')
-        if error:
-            self.get_logger().error(f'parameter change refused: {error}')
-            return SetParametersResult(successful=False, reason=error)
-        self.cfg = new
-        if changed & {'output_dir', 'prefix', 'per_day', 'max_file_size', 'max_file_duration',
-                      'chunk_duration', 'chunk_size', 'compression', 'fsync', 'min_free_bytes',
-                      'min_free_fraction', 'disk_check_period'}:
-            # New writer settings apply from the next bag: close the current one now.
+    def _apply(self, new: dict) -> None:
+        """A validated run-time change: an unwritable output_dir is refused (ValueError);
+        writer settings apply from a new bag (the current one is closed cleanly)."""
+        if new['output_dir'] != self.cfg['output_dir']:
+            error = rc.output_error(new)
+            if error:
+                self.get_logger().error(f'parameter change refused: {error}')
+                raise ValueError(error)
+        old_cfg, self.cfg = self.cfg, new
+        if rc.needs_new_bag(old_cfg, new):
             old = self.session
-            self.session = self._make_session(new)
+            self.session = rc.make_session(new)
             for name in old.topics:
                 d = old._decls[name]  # noqa: SLF001 - same package
                 self.session.add_topic(name, d.type_name, d.qos, d.type_hash)
             old.close()
-        if 'discovery_period' in changed:
+        if new['discovery_period'] != old_cfg['discovery_period']:
             self._restart_discovery()
-        return SetParametersResult(successful=True)
 
     # -- discovery and recording --------------------------------------------------------
     def _restart_discovery(self) -> None:
@@ -192,13 +86,8 @@ class Recorder(Node):
         self._discover()
 
     def _wanted(self, topic: str) -> bool:
-        if topic in _ALWAYS_EXCLUDED:
-            return False
-        excl = {self._resolve(t) for t in self.cfg['exclude'] if t}
-        if topic in excl:
-            return False
-        listed = [self._resolve(t) for t in self.cfg['topics'] if t]
-        return not listed or topic in listed
+        return rc.wanted(topic, [self._resolve(t) for t in self.cfg['topics'] if t],
+                         [self._resolve(t) for t in self.cfg['exclude'] if t])
 
     def _resolve(self, name: str) -> str:
         try:
@@ -217,8 +106,8 @@ class Recorder(Node):
             if not pubs:
                 continue
             try:
-                msg_cls = import_message(type_name)
-                offered = [qos_to_dict(p.qos_profile) for p in pubs]
+                msg_cls = message_class(type_name)
+                offered = [rc.qos_to_dict(p.qos_profile) for p in pubs]
                 type_hash = ''
                 try:
                     type_hash = str(pubs[0].topic_type_hash)
@@ -230,8 +119,9 @@ class Recorder(Node):
                 self._bad_types.add(type_name)
                 self.get_logger().error(f'cannot record {topic} ({type_name}): {exc}')
                 continue
-            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in pubs)
-            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in pubs)
+            reliable, latched = rc.subscription_qos(
+                [(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE,
+                  p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL) for p in pubs])
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(self.cfg['queue_depth']),
                              reliability=ReliabilityPolicy.RELIABLE if reliable
                              else ReliabilityPolicy.BEST_EFFORT,

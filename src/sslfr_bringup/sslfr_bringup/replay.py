@@ -21,11 +21,11 @@ tracker/trajectory) and compares them with the recorded ones
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import threading
 import time
 
+from sslfr_common.node import message_class
 from sslfr_planner._cliutil import (CliError, OneLineParser, bounded_int, output_dir, ranged_float,
                                     read_text_file, ros_remap, ros_topic, run)
 
@@ -42,11 +42,6 @@ WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
                  'axes/mobile_structure/status', 'axes/secondary_reflector/status']
 #: Decisions compared in what-if mode.
 WHATIF_DECISIONS = ['tracker/phase', 'safety/state', 'tracker/trajectory']
-
-
-def _import_message(type_name: str):
-    pkg, _, typ = type_name.split('/')
-    return getattr(importlib.import_module(f'{pkg}.msg'), typ)
 
 
 def _qos_for(info, QoSProfile, ReliabilityPolicy, DurabilityPolicy):  # noqa: N803
@@ -110,7 +105,7 @@ class Player:
             if wanted is not None and name not in wanted:
                 continue
             try:
-                cls = _import_message(info.type)
+                cls = message_class(info.type)
             except (ImportError, AttributeError, ValueError) as exc:
                 self.skipped[name] = f'type {info.type} not available ({exc})'
                 continue

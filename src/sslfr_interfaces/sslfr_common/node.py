@@ -360,3 +360,16 @@ def duration(seconds: float):
 def steady_now(clock) -> float:
     """``clock.now()`` in seconds [s] (a steady or ROS clock)."""
     return clock.now().nanoseconds * 1e-9
+
+
+def message_class(type_name: str):
+    """The generated Python class of ``pkg/msg/Type`` (or ``pkg/Type``); ImportError,
+    AttributeError or ValueError when there is none."""
+    import importlib
+    parts = type_name.split('/')
+    if len(parts) == 2:
+        parts = [parts[0], 'msg', parts[1]]
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f'not a message type name: {type_name!r}')
+    pkg, kind, typ = parts
+    return getattr(importlib.import_module(f'{pkg}.{kind}'), typ)

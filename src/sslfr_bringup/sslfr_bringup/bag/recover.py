@@ -28,6 +28,7 @@ from pathlib import Path
 
 import yaml
 
+from .mcapfile import McapFile, TopicEntry
 from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError,
                        TopicInfo, decode_text, parse_metadata, parse_serialized, write_metadata)
 from .qos import load_profiles
@@ -144,7 +145,6 @@ def _lost(scan: FileScan) -> list[str]:
 def _rebuild(path: Path, scan: FileScan, topics: dict[int, TopicInfo], schema_texts: dict[str, str],
              meta: BagMetadata) -> tuple[Path, int]:
     """Write the rescued content of ``path`` into ``<path>.recovering``; return it and its count."""
-    from .writer import McapFile, _Topic  # local: the writer imports this module for resume
     tmp = path.with_name(path.name + '.recovering')
     if tmp.exists():
         tmp.unlink()
@@ -153,7 +153,7 @@ def _rebuild(path: Path, scan: FileScan, topics: dict[int, TopicInfo], schema_te
     written = 0
     try:
         for info in topics.values():
-            out.add_topic(_Topic(info, schema_texts.get(info.type, '')))
+            out.add_topic(TopicEntry(info, schema_texts.get(info.type, '')))
         by_id = {cid: info.name for cid, info in topics.items()}
         loose = []
         scan_loose = scan.loose_messages

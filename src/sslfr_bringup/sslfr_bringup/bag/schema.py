@@ -19,10 +19,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-#: The delimiter line rosbag2 puts before each dependency (80 '=').
-SEPARATOR = '=' * 80 + '\n'
+from .typehash import type_hash
+from .typenames import SEPARATOR, normalize_type, split_type  # noqa: F401 - SEPARATOR for users of schema
 
-_TYPENAME_RE = re.compile(r'^([a-zA-Z][a-zA-Z0-9_]*)/((?:msg|srv)/)?([a-zA-Z][a-zA-Z0-9_]*)$')
 # Same pattern as rosbag2_storage_mcap's MSG_FIELD_TYPE_REGEX (first token of a line).
 _FIELD_TYPE_RE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
 PRIMITIVE_TYPES = frozenset({
@@ -32,26 +31,6 @@ PRIMITIVE_TYPES = frozenset({
 
 class DefinitionNotFoundError(LookupError):
     """No ``.msg`` file for a type in any ament prefix."""
-
-
-def split_type(name: str) -> tuple[str, str, str]:
-    """Split ``pkg/msg/Type`` or ``pkg/Type`` into ``(pkg, 'msg', Type)``.
-
-    Raises
-    ------
-    ValueError
-        When the name is not a ROS message type name.
-    """
-    match = _TYPENAME_RE.match(name)
-    if not match:
-        raise ValueError(f'not a ROS message type name: {name!r}')
-    return match.group(1), (match.group(2) or 'msg/').rstrip('/'), match.group(3)
-
-
-def normalize_type(name: str) -> str:
-    """Return the ROS 2 bag form ``pkg/msg/Type`` of a type name."""
-    pkg, ns, typ = split_type(name)
-    return f'{pkg}/{ns}/{typ}'
 
 
 def parse_dependencies(text: str, package: str) -> set[str]:
@@ -148,7 +127,6 @@ class DefinitionCache:
         DefinitionNotFoundError
             When neither the ``.json`` nor the ``.msg`` definitions can be found.
         """
-        from .typehash import type_hash
         full = normalize_type(name)
         pkg, ns, typ = split_type(name)
         try:

@@ -29,7 +29,7 @@ import hashlib
 import json
 from typing import Callable
 
-from .schema import SEPARATOR, normalize_type, split_type
+from .typenames import SEPARATOR, normalize_type, split_type
 
 #: .msg primitive -> FieldType id of the IDL type it maps to (rosidl_adapter MSG_TYPE_TO_IDL,
 #: then type_description_interfaces/msg/FieldType.msg).

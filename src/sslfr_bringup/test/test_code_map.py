@@ -1,0 +1,132 @@
+"""The code map of docs/architecture.md, checked: no import cycle anywhere, the product
+never imports the simulators, the layers import downward only, node files stay thin."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[2]      # src/
+
+#: package -> the packages it may import (downward only; docs/architecture.md "Code map")
+LAYERS = {
+    'sslfr_common': set(),
+    'sslfr_planner': {'sslfr_common'},
+    'sslfr_drivers': {'sslfr_common', 'sslfr_planner'},
+    'sslfr_bringup': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers'},
+}
+#: modules allowed to import the simulators (sslfr_drivers.sim): the simulators
+#: themselves and the `sslfr sim` command with its fault and scenario helpers
+SIM_USERS = ('sslfr_drivers.sim', 'sslfr_bringup.sim', 'sslfr_bringup.scenario', 'sslfr_bringup.faults')
+NODE_FILE_MAX_LINES = 300
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in sorted(SRC.glob('*/*/**/*.py')):
+        rel = path.relative_to(SRC)
+        parts = rel.parts[1:]                 # drop the ROS package directory
+        if parts[0] in ('test', 'launch') or parts[0].endswith('.py'):
+            continue
+        name = '.'.join(parts)[:-3]
+        out[name.removesuffix('.__init__')] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: Path) -> set[str]:
+    """Project modules ``name`` imports (module-level and inside functions)."""
+    is_pkg = path.name == '__init__.py'
+    base = name.split('.') if is_pkg else name.split('.')[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                pkg = base[:len(base) - (node.level - 1)]
+                mod = '.'.join(pkg + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ''
+            targets = [mod] + [f'{mod}.{a.name}' for a in node.names]
+        for t in targets:
+            while t and t not in MODULES:
+                t = t.rpartition('.')[0]
+            if t and t != name and not name.startswith(t + '.'):   # parent packages are not edges
+                found.add(t)
+    return found
+
+
+GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+
+
+def _cycles() -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in GRAPH[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+    for v in GRAPH:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_map_sees_every_package():
+    assert {n.split('.')[0] for n in MODULES} == set(LAYERS)
+    assert len(MODULES) > 80
+
+
+def test_no_import_cycle():
+    assert _cycles() == []
+
+
+def test_the_detector_finds_a_cycle():
+    saved = dict(GRAPH)
+    try:
+        GRAPH['sslfr_common.contract'] = GRAPH['sslfr_common.contract'] | {'sslfr_common.node'}
+        GRAPH['sslfr_common.node'] = GRAPH['sslfr_common.node'] | {'sslfr_common.contract'}
+        assert ['sslfr_common.contract', 'sslfr_common.node'] in _cycles()
+    finally:
+        GRAPH.clear()
+        GRAPH.update(saved)
+
+
+def test_layers_import_downward_only():
+    wrong = [f'{m} imports {t}' for m, deps in GRAPH.items() for t in deps
+             if t.split('.')[0] != m.split('.')[0] and t.split('.')[0] not in LAYERS[m.split('.')[0]]]
+    assert wrong == []
+
+
+def test_product_code_never_imports_the_simulators():
+    wrong = [f'{m} imports {t}' for m, deps in GRAPH.items() for t in deps
+             if t.startswith('sslfr_drivers.sim') and not m.startswith(SIM_USERS)]
+    assert wrong == []
+
+
+def test_node_files_are_thin():
+    fat = {str(p.relative_to(SRC)): n for p in SRC.glob('*/*/**/*_node.py')
+           if (n := len(p.read_text().splitlines())) > NODE_FILE_MAX_LINES}
+    assert fat == {}
