@@ -207,28 +207,49 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
     The node may define ``on_exit()``: called once after spinning ends, with the
     context still valid (stop motors, close links and files).
     """
+    return run_nodes([(name, make_node)], args=args, executor=executor, config_errors=config_errors,
+                     log_bridge=log_bridge)
+
+
+def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] | None = None,
+              executor: Callable[[object], object] | None = None,
+              config_errors: tuple[type[BaseException], ...] = CONFIG_ERRORS,
+              log_bridge: tuple[str, ...] = ()) -> int:
+    """Several nodes in one process, one executor, one DDS participant (ROS 2
+    composition in Python): the same life as :func:`run_node` for each. ``nodes`` is
+    ``[(name, make_node), ...]`` in start order; on a stop each node's ``on_exit()`` is
+    called in that order (put the axis drivers first: they stop their motors first).
+    A node that refuses its configuration stops the whole process (exit 2, one line
+    naming it), after the nodes already built have run their ``on_exit()``."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _StopRequest()
-    node = ex = bridge = None
+    built: list = []
+    ex = bridge = None
     code = 0
     try:
-        try:
-            node = make_node()
-        except config_errors as exc:
-            print(f'{name}: invalid parameters, not starting: {exc}', file=sys.stderr, flush=True)
-            code = 2
-            return code
+        for name, make_node in nodes:
+            try:
+                built.append(make_node())
+            except config_errors as exc:
+                print(f'{name}: invalid parameters, not starting: {exc}', file=sys.stderr, flush=True)
+                code = 2
+                return code
+            if stop.requested.is_set():
+                return code
         if log_bridge:
-            bridge = LogBridge(node, log_bridge)
-        ex = executor(node.context) if executor is not None else SingleThreadedExecutor(context=node.context)
+            bridge = LogBridge(built[0], log_bridge)
+        ex = executor(built[0].context) if executor is not None else SingleThreadedExecutor(context=built[0].context)
         stop.executor = ex
-        ex.add_node(node)
-        node.spin_stats = spin_until_stopped(node, ex, stop)
+        for node in built:
+            ex.add_node(node)
+        stats = spin_until_stopped(built[0], ex, stop)
+        for node in built:
+            node.spin_stats = stats
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         stop.ignore_further()
-        if node is not None:
+        for node in built:
             on_exit = getattr(node, 'on_exit', None)
             if on_exit is not None:
                 try:
@@ -243,7 +264,7 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
         if ex is not None:
             stop.executor = None
             ex.shutdown(timeout_sec=2.0)
-        if node is not None:
+        for node in built:
             try:
                 node.destroy_node()
             except Exception:  # noqa: BLE001 - context already gone

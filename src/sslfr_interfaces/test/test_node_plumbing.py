@@ -160,3 +160,44 @@ def test_runtime_errors_are_counted_not_fatal(ros_domain):
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         ex.shutdown()
+
+
+COMPOSED = textwrap.dedent('''
+    import os, sys
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+    from sslfr_common.node import run_nodes
+
+    class Part(Node):
+        def __init__(self, name):
+            super().__init__(name)
+            if os.environ.get('BAD') == name:
+                raise ValueError(f'{name}: bad value')
+            self.create_timer(0.05, lambda: None)
+            print(f'{name} ready', flush=True)
+
+        def on_exit(self):
+            print(f'{self.get_name()} on_exit', flush=True)
+
+    sys.exit(run_nodes([(n, lambda n=n: Part(n)) for n in ('first', 'second', 'third')],
+                       executor=lambda ctx: EventsExecutor(context=ctx)))
+''')
+
+
+def test_composed_nodes_stop_in_order_in_one_process(ros_env):
+    proc = subprocess.Popen([sys.executable, '-c', COMPOSED], env=ros_env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    _wait_line(proc, 'third ready')
+    proc.send_signal(signal.SIGTERM)
+    code, out = _finish(proc)
+    assert code == 0, out
+    assert [ln for ln in out.splitlines() if 'on_exit' in ln] == ['first on_exit', 'second on_exit', 'third on_exit']
+
+
+def test_a_composed_node_refusing_its_config_stops_the_process(ros_env):
+    proc = subprocess.Popen([sys.executable, '-c', COMPOSED], env={**ros_env, 'BAD': 'second'},
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    code, out = _finish(proc)
+    assert code == 2, out
+    assert 'second: invalid parameters, not starting: second: bad value' in out
+    assert 'first on_exit' in out and 'third' not in out

@@ -1,0 +1,204 @@
+"""Benchmark: CPU and memory of the whole node set at real time (issue 16's budget).
+
+Runs ``./sslfr sim --speed 1`` (12:00 UTC at Almeria: the mirrors tracking, every
+sensor reporting), waits until the set is up, then measures over ``--window`` wall
+seconds the CPU time (user + system, psutil) of every node process and its threads
+(the simulated boards excluded: they are not on the Pi), and their PSS at the end.
+Prints CPU per node and in total as % of one core of this machine, the PSS sum, and
+the ratio to the 119 % measured before the CPU work (issue 16: 9 processes, the same
+command, 140 s). Goal: total <= 15 % of one core, PSS <= 200 MB.
+
+``--confine F`` runs the node processes in a cgroup limited to F of one core (cgroup
+v1 ``cpu.cfs_quota_us`` or v2 ``cpu.max``, root needed) - the Raspberry Pi 3 budget is
+about 0.4 of one core of this machine - and ``--fault SPEC`` passes faults to the sim
+(e.g. ``overtemp@12:01:30+30``). With ``--json FILE`` the figures are also written as
+JSON (used by the confined-CPU tests).
+
+    python benchmarks/bench_nodeset_cpu.py [--window 140] [--confine 0.4] [--layout NAME]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import psutil
+
+ROOT = Path(__file__).resolve().parents[1]
+BEFORE_TOTAL = 119.0      # [% of one core] issue 16, the node set before the CPU work
+
+
+def node_processes(root_pid: int) -> dict[str, psutil.Process]:
+    """Node processes under ``root_pid`` by their ROS node name(s) (``__node:=``);
+    a process running several nodes is named after all of them."""
+    out = {}
+    try:
+        procs = psutil.Process(root_pid).children(recursive=True)
+    except psutil.Error:
+        return out
+    for p in procs:
+        try:
+            cmd = p.cmdline()
+        except psutil.Error:
+            continue
+        if any('sim_board' in c or 'fwsim' in c or 'fw_board' in c for c in cmd[:3]) or 'setpriv' in cmd[0]:
+            continue
+        names = [m.group(1) for c in cmd for m in [re.match(r'__node:=(\S+)', c)] if m]
+        if names:
+            out['+'.join(names)] = p
+        elif any(c.endswith(('/composed', '/nodeset_process')) for c in cmd[:2]):
+            out[next((c for c in cmd if c.startswith('--group=')), 'composed')] = p
+    return out
+
+
+def cpu_seconds(p: psutil.Process) -> float:
+    t = p.cpu_times()
+    return t.user + t.system
+
+
+class Cgroup:
+    """A CPU-limited cgroup (v2 cpu.max or v1 cpu.cfs_quota_us) for node processes."""
+
+    def __init__(self, fraction: float):
+        self.path = None
+        name = f'sslfr-bench-{os.getpid()}'
+        v2, v1 = Path('/sys/fs/cgroup'), Path('/sys/fs/cgroup/cpu')
+        period = 100_000
+        quota = int(fraction * period)
+        if (v2 / 'cgroup.controllers').exists():
+            self.path = v2 / name
+            self.path.mkdir()
+            (self.path / 'cpu.max').write_text(f'{quota} {period}')
+        elif (v1 / 'cpu.cfs_quota_us').exists():
+            self.path = v1 / name
+            self.path.mkdir()
+            (self.path / 'cpu.cfs_period_us').write_text(str(period))
+            (self.path / 'cpu.cfs_quota_us').write_text(str(quota))
+        else:
+            raise OSError('no cgroup cpu controller')
+        self.how = f'cgroup {"v2 cpu.max" if (v2 / "cgroup.controllers").exists() else "v1 cfs quota"} ' \
+                   f'{quota}/{period} us'
+
+    def add(self, pid: int) -> None:
+        (self.path / 'cgroup.procs').write_text(str(pid))
+
+    def throttled(self) -> str:
+        try:
+            stat = dict(line.split() for line in (self.path / 'cpu.stat').read_text().splitlines())
+            return f'throttled {stat.get("nr_throttled", "?")} of {stat.get("nr_periods", "?")} periods'
+        except OSError:
+            return ''
+
+    def remove(self) -> None:
+        if self.path is None:
+            return
+        parent = self.path.parent
+        for line in (self.path / 'cgroup.procs').read_text().split():
+            try:
+                (parent / 'cgroup.procs').write_text(line)
+            except OSError:
+                pass
+        try:
+            self.path.rmdir()
+        except OSError:
+            pass
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--window', type=float, default=140.0, help='measurement window [s wall]')
+    ap.add_argument('--start', default='12:00', help='simulated start HH:MM UTC')
+    ap.add_argument('--confine', type=float, default=None, help='CPU share of one core for the nodes')
+    ap.add_argument('--fault', action='append', default=[], help='fault spec for the sim')
+    ap.add_argument('--set', action='append', default=[], help='NODE:KEY=VALUE for the sim')
+    ap.add_argument('--json', default=None, help='write the figures to this file')
+    ap.add_argument('--keep', action='store_true', help='keep the sim output directory')
+    args = ap.parse_args(argv)
+    minutes = int(args.window // 60) + 3
+    h, m = (int(x) for x in args.start.split(':'))
+    end = f'{(h + (m + minutes) // 60) % 24:02d}:{(m + minutes) % 60:02d}'
+    out = Path(tempfile.mkdtemp(prefix='bench-cpu-'))
+    cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
+           '--no-report', '--anchor-margin', '3', '--out', str(out)]
+    for f in args.fault:
+        cmd += ['--fault', f]
+    for s in args.set:
+        cmd += ['--set', s]
+    group = Cgroup(args.confine) if args.confine else None
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    lines: list[str] = []
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if group is not None and 'nodes started at' in line:
+                for p in node_processes(proc.pid).values():
+                    group.add(p.pid)
+            if 'sensors flowing at' in line or 'start-up failed' in line:
+                break
+        if proc.poll() is not None or 'start-up failed' in lines[-1]:
+            print(''.join(lines[-40:]), file=sys.stderr)
+            return 1
+        if group is not None:              # nodes restarted since: confine them too
+            for p in node_processes(proc.pid).values():
+                group.add(p.pid)
+        import threading
+        threading.Thread(target=lambda: [lines.append(ln) for ln in proc.stdout], daemon=True).start()
+        time.sleep(5.0)                   # settle: the first trajectory, first homing done
+        procs = node_processes(proc.pid)
+        t0 = time.monotonic()
+        c0 = {n: cpu_seconds(p) for n, p in procs.items()}
+        time.sleep(args.window)
+        wall = time.monotonic() - t0
+        cpu, pss, rss = {}, {}, {}
+        for n, p in procs.items():
+            try:
+                cpu[n] = 100.0 * (cpu_seconds(p) - c0[n]) / wall
+                info = p.memory_full_info()
+                pss[n], rss[n] = info.pss / 2**20, info.rss / 2**20
+            except psutil.Error:
+                cpu[n] = float('nan')
+        throttled = group.throttled() if group is not None else ''
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        if group is not None:
+            group.remove()
+    total = sum(v for v in cpu.values() if v == v)
+    print(f'node set at real time (sslfr sim --speed 1, {args.start} UTC Almeria), {len(cpu)} processes, '
+          f'{wall:.0f} s window, load average {os.getloadavg()[0]:.1f}'
+          + (f', confined to {args.confine:.2f} core ({group.how}; {throttled})' if group else ''))
+    for n in sorted(cpu, key=lambda k: -cpu[k]):
+        print(f'  {n:<44} CPU {cpu[n]:6.2f} %   PSS {pss.get(n, 0):6.1f} MB   RSS {rss.get(n, 0):6.1f} MB')
+    print(f'total CPU {total:.1f} % of one core (goal <= 15 %); before: {BEFORE_TOTAL:.0f} % '
+          f'-> ratio {BEFORE_TOTAL / total:.1f}x' if total else 'no CPU measured')
+    print(f'PSS sum {sum(pss.values()):.0f} MB (goal <= 200 MB), RSS sum {sum(rss.values()):.0f} MB')
+    sim = {}
+    try:
+        sim = json.loads((out / 'sim.json').read_text())
+    except (OSError, ValueError):
+        pass
+    if args.json:
+        Path(args.json).write_text(json.dumps({'cpu_percent': cpu, 'total_cpu_percent': total,
+                                               'pss_mb': pss, 'rss_mb': rss, 'window_s': wall,
+                                               'confine': args.confine, 'throttled': throttled,
+                                               'out': str(out), 'sim': sim}, indent=2))
+    if not args.keep and not args.json:
+        import shutil
+        shutil.rmtree(out, ignore_errors=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
