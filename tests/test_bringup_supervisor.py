@@ -138,10 +138,16 @@ def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path, ros_env):
         out, _ = proc.communicate(timeout=60)
         assert proc.returncode == 1 and 'MISSING executable' in out and 'nothing to run' in out
         return
-    time.sleep(6.0)
-    assert proc.poll() is None
     import psutil
-    kids = psutil.Process(proc.pid).children(recursive=True)
+    deadline = time.monotonic() + 60      # every node process started (slow when loaded)
+    kids = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        kids = psutil.Process(proc.pid).children(recursive=True)
+        logs = [tmp_path / 'logs' / f'{name}.log' for name in installed[:3]]
+        if len(kids) >= len(installed[:3]) and all(p.exists() and p.stat().st_size for p in logs):
+            break
+        time.sleep(0.1)
+    assert proc.poll() is None
     assert len(kids) >= len(installed[:3]), [k.cmdline() for k in kids]
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)

@@ -23,6 +23,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, TrackerPhase
 
@@ -143,7 +144,7 @@ def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
     assert all(t.type_description_hash.startswith('RIHS01_') for t in report.metadata.topics.values())
 
 
-def test_record_replay_round_trip_lossless(launch, ros_env, tmp_path):
+def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
     # bag 1, written directly: 3 topics, 4 s, known bytes and times (bytes padded as a
     # recorder receives them from DDS)
     t0 = 1_782_043_200 * 10**9  # 2026-06-21 12:00 UTC
@@ -167,12 +168,19 @@ def test_record_replay_round_trip_lossless(launch, ros_env, tmp_path):
         'output_dir': str(tmp_path / 'two'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'use_sim_time': True,
         'topics': ['/absorber/inlet_temperature', '/axes/mirrors/status', '/tracker/phase']})
-    time.sleep(1.0)
+    diags = ros.collect(DiagnosticArray, 'diagnostics')
     out = _sslfr(['replay', str(tmp_path / 'one'), '--rate', '1', '--no-progress',
                   '--wait-subscribers', '15'], ros_env)
     assert out.returncode == 0, out.stderr
     assert 'replayed 164 messages' in out.stdout
-    time.sleep(1.0)
+
+    def written():   # the recorder's own count (diagnostics, 1 Hz)
+        for arr in reversed(diags):
+            for st in arr.status:
+                if st.name.endswith(': recording'):
+                    return int({kv.key: kv.value for kv in st.values}.get('written', 0))
+        return 0
+    assert ros.spin_until(lambda: written() >= 164, 15), written()
     assert rec.stop() == 0
     (bag2,) = _bag_dirs(tmp_path / 'two')
     assert bag2.name == 'sslfr_2026-06-21'          # sim time: the recorded day
@@ -183,9 +191,11 @@ def test_record_replay_round_trip_lossless(launch, ros_env, tmp_path):
         ma = [m for m in a if m.topic == topic]
         mb = [m for m in b if m.topic == topic]
         assert [m.data for m in mb] == [m.data for m in ma], topic   # same bytes, same order
-        # log times: the second recorder stamps with /clock (sim time) at reception
+        # log times: the second recorder stamps with /clock (sim time) at reception; the
+        # replay publishes /clock before each message, so the difference is delivery
+        # latency, bounded generously for a loaded 2-core machine (a stall of ~0.3 s)
         err = max(abs(x.log_time - y.log_time) for x, y in zip(ma, mb)) / 1e9
-        assert err < 0.15, (topic, err)
+        assert err < 0.5, (topic, err)
     assert _read_rosbags(bag2)[0][2] == b[0].data
 
 
@@ -342,9 +352,13 @@ def test_replay_ctrl_c_stops_cleanly(ros_env, tmp_path):
     w.close()
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'replay', str(tmp_path / 'b'), '--rate', '1'],
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(5.0)
+    seen = ''
+    while '%' not in seen and proc.poll() is None:   # replaying: the progress bar is drawn
+        seen += proc.stderr.read(1)
+    time.sleep(1.0)                                  # a second into the replay
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=20)
+    err = seen + err
     assert proc.returncode == 130, err
     assert 'interrupted' in out and 'Traceback' not in err
     assert '%' in err                               # the progress bar was drawn
