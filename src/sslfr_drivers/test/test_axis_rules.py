@@ -196,7 +196,7 @@ def test_configure_retried_with_doubling_back_off_then_activation():
     a.record(t, 'activate', True)
     assert a.next_transition('active', t + 100) is None and a.pending('active', t) == ''
     hist = a.values(t)['attempts'].split(' | ')
-    assert len(hist) == 8 and 'failed: no INFO (6)' in hist[-3] and hist[-1].endswith('activate at %.1f s: ok' % t)
+    assert len(hist) == 8 and 'failed: no INFO (6)' in hist[-3] and hist[-1].endswith('activate at +%.1f s: ok' % t)
 
 
 def test_external_requests_set_the_goal_and_are_not_undone():
@@ -319,6 +319,6 @@ def test_a_latched_fault_is_counted_once_and_snapshot():
     kinds = [sup.tick(0.0, 0.1 * k, b, True).kind for k in range(5)]
     assert kinds[0] == 'stop' and sup.counts()['faults'] == 1
     assert sup.take_new_fault().startswith('board reports fault bits') and sup.take_new_fault() is None
-    snap = sup.snapshot(b)
-    assert snap.state == 'fault' and snap.measured == 0.0 and snap.board is b
-    assert math.isnan(sup.snapshot(None).measured)
+    snap = sup.snapshot(12.5, b)
+    assert snap.stamp == 12.5 and snap.state == 'fault' and snap.measured == 0.0 and snap.board is b
+    assert math.isnan(sup.snapshot(13.0, None).measured)

@@ -76,11 +76,14 @@ class SelfActivation:
         First and longest wait after a failed attempt [s] (doubling).
     keep : int
         Attempts kept in :attr:`history` (shown in diagnostics).
+    origin : float
+        Steady time the history's times count from [s] (the node's start).
     """
 
     def __init__(self, enabled: bool, retry_min: float = 2.0, retry_max: float = 10.0,
-                 keep: int = 8) -> None:
+                 keep: int = 8, origin: float = 0.0) -> None:
         self.enabled = enabled
+        self.origin = origin
         self.goal = 'active'
         self.retry_min = retry_min
         self.retry_max = max(retry_min, retry_max)
@@ -124,7 +127,7 @@ class SelfActivation:
             self.failures += 1
             self.next_attempt = now + self.wait
             self.wait = min(2.0 * self.wait, self.retry_max)
-        self.history.append(f'#{self.attempts} {source} {label} at {now:.1f} s: '
+        self.history.append(f'#{self.attempts} {source} {label} at +{now - self.origin:.1f} s: '
                             f'{"ok" if ok else "failed: " + (reason or "no reason given")}')
 
     def refuse(self, reason: str) -> None:

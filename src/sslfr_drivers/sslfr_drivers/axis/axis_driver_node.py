@@ -26,7 +26,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from sslfr_common.contract import LinkState
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
+from sslfr_common.node import ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
@@ -229,12 +229,12 @@ class AxisDriver(ManagedNode):
                 warning = self.sup.record_write(act, *session.write(act))
                 if warning:
                     self.get_logger().warning(warning)
-            self._snap = self.sup.snapshot(board)
+            self._snap = self.sup.snapshot(now_ros, board)
             self._tick_n += 1
             if board is not None and self._tick_n % max(1, round(self.p['control_rate'] / self.p['joint_state_rate'])) == 0:
                 js = JointState(name=[self.axis], position=[float(self._snap.measured)],
                                 velocity=[float(session.velocity(self.sup.cfg.calibration))])
-                js.header.stamp = self.get_clock().now().to_msg()
+                js.header.stamp = stamp(now_ros)
                 self.pub_joint.publish(js)
 
     # ------------------------------------------------------------ outputs
@@ -244,7 +244,8 @@ class AxisDriver(ManagedNode):
         m = AxisStatus(axis=self.axis, state=snap.state if life == 'active' else life,
                        commanded=snap.commanded, setpoint=snap.setpoint, measured=snap.measured,
                        error=snap.measured - snap.setpoint)
-        m.header.stamp = self.get_clock().now().to_msg()
+        # the time the board was read: measured, setpoint and error belong to it
+        m.header.stamp = stamp(snap.stamp) if snap.stamp > 0 else self.get_clock().now().to_msg()
         if snap.board is not None:
             b = snap.board
             m.steps, m.moving, m.homed = int(b.steps), bool(b.moving), bool(b.homed)

@@ -276,9 +276,11 @@ class AxisTuning:
 
 class Snapshot(NamedTuple):
     """What one control tick decided and saw (immutable: read by the status heartbeat
-    without waiting for the tick): supervisor state, commanded / setpoint / measured
-    joint angles [rad] (NaN when unknown) and the board state."""
+    without waiting for the tick): ROS time of the tick [s] (0 before the first),
+    supervisor state, commanded / setpoint / measured joint angles [rad] (NaN when
+    unknown) and the board state."""
 
+    stamp: float = 0.0
     state: str = 'unconfigured'
     commanded: float = math.nan
     setpoint: float = math.nan
@@ -333,10 +335,10 @@ class AxisSupervisor:
             return board.sensor
         return self.cfg.calibration.angle(board.steps)
 
-    def snapshot(self, board: BoardState | None) -> Snapshot:
-        """The :class:`Snapshot` after a tick that saw ``board``."""
+    def snapshot(self, now_ros: float, board: BoardState | None) -> Snapshot:
+        """The :class:`Snapshot` after the tick at ROS time ``now_ros`` [s] that saw ``board``."""
         measured = self.measured(board) if board is not None else math.nan
-        return Snapshot(self.state, float(self.commanded), float(self.setpoint), float(measured), board)
+        return Snapshot(now_ros, self.state, float(self.commanded), float(self.setpoint), float(measured), board)
 
     def counts(self) -> dict[str, int]:
         """Every counter of :data:`COUNTERS` (trajectories from the store) [-]."""

@@ -36,7 +36,7 @@ class ManagedNode(LifecycleNodeMixin, Node):
         # the one documented hook rclpy leaves: the service's callback attribute
         self._service_change_state.callback = self._on_change_state
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.activation = SelfActivation(False)
+        self.activation = SelfActivation(False, origin=steady_now(self.steady))
         self.last_error = ''
 
     def lifecycle_state(self) -> str:
@@ -47,7 +47,7 @@ class ManagedNode(LifecycleNodeMixin, Node):
     def start_self_activation(self, retry_min: float, retry_max: float) -> None:
         """Walk to the goal (``active``) by itself, retrying after ``retry_min`` [s],
         doubling up to ``retry_max`` [s]."""
-        self.activation = SelfActivation(True, retry_min, retry_max)
+        self.activation = SelfActivation(True, retry_min, retry_max, origin=self.activation.origin)
         self.create_timer(0.1, self._self_activate, self.lifecycle_group, self.steady)
 
     def _on_change_state(self, req, resp):
