@@ -215,9 +215,10 @@ class AxisDriver(ManagedNode):
     # ------------------------------------------------------------ read -> update -> write
     def _control_tick(self) -> None:
         with self._lock:
-            now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())
             session = self.session
-            reading = session.read(now_steady, 1.0 / self.p['control_rate']) if session else BoardReading(None)
+            reading = session.read(steady_now(self.steady), 1.0 / self.p['control_rate']) if session \
+                else BoardReading(None)
+            now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())   # as read
             for line in self.sup.note_link_events(reading.reset, reading.reconnected):
                 self.get_logger().warning(line)
             self.board = board = reading.board
