@@ -7,8 +7,9 @@ built the same way) with the policy of :mod:`.activation` wired in:
   the current state (an unknown id, configure while active) gets ``success = False``
   with the reason logged and counted (rclpy would raise inside the service callback
   and leave the caller waiting). An accepted request sets the goal state;
-- :meth:`start_self_activation` adds a 10 Hz steady timer that walks the node to its
-  goal (configure retried with back-off, then activate);
+- :meth:`start_self_activation` adds a steady timer that walks the node to its goal
+  (configure retried with back-off, then activate): 10 Hz while below the goal,
+  1 Hz once there (to climb back if the node ever falls);
 - the lifecycle services and that timer share one mutually exclusive callback group:
   transitions never overlap, and they never block the node's other callbacks.
 
@@ -48,7 +49,7 @@ class ManagedNode(LifecycleNodeMixin, Node):
         """Walk to the goal (``active``) by itself, retrying after ``retry_min`` [s],
         doubling up to ``retry_max`` [s]."""
         self.activation = SelfActivation(True, retry_min, retry_max, origin=self.activation.origin)
-        self.create_timer(0.1, self._self_activate, self.lifecycle_group, self.steady)
+        self._activation_timer = self.create_timer(0.1, self._self_activate, self.lifecycle_group, self.steady)
 
     def _on_change_state(self, req, resp):
         state = self.lifecycle_state()
@@ -64,9 +65,13 @@ class ManagedNode(LifecycleNodeMixin, Node):
         return resp
 
     def _self_activate(self) -> None:
-        label = self.activation.next_transition(self.lifecycle_state(), steady_now(self.steady))
+        now = steady_now(self.steady)
+        label = self.activation.next_transition(self.lifecycle_state(), now)
         if label is not None:
             self._transition(label, 'self')
+        period = int((0.1 if self.activation.pending(self.lifecycle_state(), now) else 1.0) * 1e9)
+        if self._activation_timer.timer_period_ns != period:
+            self._activation_timer.timer_period_ns = period
 
     def _transition(self, label: str, source: str) -> bool:
         trigger = {'configure': self.trigger_configure, 'activate': self.trigger_activate,
