@@ -6,8 +6,8 @@ against the simulated axis board on a real pty (``sim.runner.SimThread``):
 
 1. ``AxisSupervisor.tick`` alone (trajectory interpolation, safety, stall, limits,
    speed): pure Python cost per call;
-2. one full control tick as the node runs it: STATUS poll (request -> answer over
-   the pty) + decision + MOVE_TO (request -> ACK);
+2. one full control tick as the node runs it (read -> update -> write): STATUS
+   (request -> answer over the pty) + decision + MOVE_TO (request -> ACK);
 3. setpoint-to-frame: from the start of the decision (setpoint interpolated) to the
    MOVE_TO frame having been read and CRC-checked by the board side of the pty.
 
@@ -21,9 +21,11 @@ import random
 import statistics
 import time
 
-from sslfr_drivers.axis.core import (AXIS_LIMITS, STOW_POSITIONS, AxisConfig, AxisSupervisor,
-                                     BoardState, Calibration, SoftLimits)
+from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
 from sslfr_drivers.axis.board_session import AxisBoardSession
+from sslfr_drivers.axis.core import AxisSupervisor, AxisTuning, BoardState
+from sslfr_drivers.axis.joint import Calibration, SoftLimits
+from sslfr_drivers.axis.trajectory import TrajectoryMsg
 from sslfr_drivers.sim.axis import AxisConfig as SimConfig
 from sslfr_drivers.sim.axis import AxisSim
 from sslfr_drivers.sim.runner import SimThread
@@ -41,12 +43,13 @@ def report(name, values_s):
 
 
 def make_supervisor(rate: float) -> AxisSupervisor:
-    cfg = AxisConfig('mirrors', Calibration(), SoftLimits(*AXIS_LIMITS['mirrors']), 0.3, 1e-4,
-                     1.0 / rate, STOW_POSITIONS['mirrors'], 'sleep', math.pi / 2, 0.3)
+    cfg = AxisTuning('mirrors', Calibration(), SoftLimits(*JOINT_RANGE['mirrors']), 0.3, 1e-4,
+                     1.0 / rate, STOW_POSITION['mirrors'], 'sleep', math.pi / 2, 0.3)
     sup = AxisSupervisor(cfg)
     now = time.time()
     ts = [now + k for k in range(0, 3600, 1)]              # one hour, one point per second
-    sup.store.offer(ts, [0.2 + 0.1 * math.sin(k / 600) for k in range(len(ts))], None, now, cfg.limits)
+    msg = TrajectoryMsg.for_joint('mirrors', ts, [0.2 + 0.1 * math.sin(k / 600) for k in range(len(ts))])
+    assert sup.store.offer(msg, 'mirrors', now, cfg.limits) is None
     return sup
 
 
@@ -88,31 +91,31 @@ def main() -> int:
         t_tick, t_frame = [], []
         # re-reference once from the sensor (SET_ZERO), as the node does
         while True:
-            b = session.poll(time.monotonic(), 2 * period, 3 * period)
+            b = session.read(time.monotonic(), period).board
             act = sup.tick(time.time(), time.monotonic(), b, True)
             if act.kind != 'none':
-                session.command(act)
+                session.write(act)
             if b is not None and b.homed:
                 break
             time.sleep(period / 4)
         k = 0
         while len(t_tick) < args.n:
             t0 = time.perf_counter()
-            b = session.poll(time.monotonic(), 2 * period, 3 * period)
+            b = session.read(time.monotonic(), period).board          # read
             t_dec = time.perf_counter()
             # a fresh setpoint every tick (the trajectory moves ~0.5 step per tick here)
             sup._cmd_steps = None
-            act = sup.tick(time.time() + k * 0.5 / args.rate, time.monotonic(), b, True)
+            act = sup.tick(time.time() + k * 0.5 / args.rate, time.monotonic(), b, True)   # update
             n_seen = len(seen)
             if act.kind != 'none':
-                session.command(act)
+                sup.record_write(act, *session.write(act))                     # write
             t1 = time.perf_counter()
             t_tick.append(t1 - t0)
             if act.kind == 'move' and len(seen) > n_seen:
                 t_frame.append(seen[n_seen] - t_dec)
             k += 1
         session.close()
-    report('control tick: STATUS poll + decision + MOVE_TO ACK', t_tick)
+    report('control tick: read STATUS + update + write MOVE_TO', t_tick)
     report('setpoint decided -> MOVE_TO decoded by the board', t_frame)
     print(f'(control period at {args.rate:.0f} Hz = {1e3 / args.rate:.0f} ms; goal p99 < 10 ms)')
     return 0

@@ -478,3 +478,136 @@ def test_lifecycle_transitions_stall_fault_and_old_protocol(rig, ros):
     assert old.driver.running() and old.status
     assert old.status[-1].state == 'unconfigured' and old.status[-1].link_state == 3   # LINK_FAULT
     assert old.board()['homed'] is False and old.board()['counter'] == 0    # never driven
+
+
+# ----------------------------------------------------------------- issue 21: self-activation
+def _active(ros, name: str) -> bool:
+    from sslfr_drivers.axis.lifecycle_ctl import get_state
+    return get_state(ros.node, name, timeout=1.0, executor=ros.executor) == 'active'
+
+
+def _gaps(status) -> float:
+    stamps = [_stamp(s) for s in status]
+    return max((b - a for a, b in zip(stamps, stamps[1:])), default=0.0)
+
+
+def test_driver_started_before_its_board_activates_by_itself_and_after_sigkill(launch, ros, ros_env, tmp_path):
+    """The port appears 5 s after the driver started: configure is retried with
+    back-off (each failed attempt's reason in diagnostics), then the driver activates
+    by itself; SIGKILLed and started again, it becomes active by itself again. The
+    status heartbeat runs at 5 Hz throughout, also while no board answers."""
+    import signal
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sslfr_interfaces.msg import AxisStatus
+
+    d = tempfile.mkdtemp(prefix='axd')
+    port = os.path.join(d, 'board')
+    params = {'axis': 'mirrors', 'port': port, 'retry_period': 0.5, 'retry_period_max': 2.0}
+    status = ros.collect(AxisStatus, 'axes/mirrors/status')
+    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    driver = launch('sslfr_drivers', 'axis_driver', params=params, name='mirrors_driver')   # autostart: default
+    sim = None
+    try:
+        assert ros.spin_until(lambda: len(status) >= 3, 30), driver.output()
+        t_first = time.monotonic()
+        ros.spin_until(lambda: time.monotonic() > t_first + 5.0 or not driver.running(), 6.0)
+        early = list(status)
+        assert all(s.state == 'unconfigured' and s.link_state == 0 for s in early), [s.state for s in early]
+        # 5 Hz while configure attempts come and go (an attempt never holds the heartbeat)
+        assert len(early) >= 0.7 * 5 * (_stamp(early[-1]) - _stamp(early[0])) and _gaps(early) < 1.0, _gaps(early)
+        sim = NodeProcess([sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', 'mirrors',
+                           '--link', port, '--seed', '7', '--opt', 'initial_angle_deg=10'],
+                          ros_env, tmp_path / 'sim.log')
+        t_board = time.monotonic()
+        assert ros.spin_until(lambda: _active(ros, 'mirrors_driver'), 30), driver.output()
+        print(f'\nboard appeared late: driver active {time.monotonic() - t_board:.1f} s after the port appeared')
+        # every failed attempt is in diagnostics with its reason
+        failed = {}
+        for arr in diags:
+            for st in arr.status:
+                kv = {k.key: k.value for k in st.values}
+                for entry in kv.get('attempts', '').split(' | '):
+                    if 'failed:' in entry:
+                        failed[entry.split()[0]] = entry
+        assert ros.spin_until(lambda: any(k.key == 'lifecycle' and k.value == 'active'
+                                          for a in diags[-1:] for s in a.status for k in s.values), 5)
+        last = {k.key: k.value for k in diags[-1].status[0].values}
+        n_failed = int(last['failed_attempts'])
+        assert n_failed >= 3 and len(failed) == n_failed, (n_failed, sorted(failed))
+        assert all(f'cannot reach the board on {port}' in e for e in failed.values()), failed
+        assert 'ok' in last['attempts'].split(' | ')[-1] and last['lifecycle_goal'] == 'active'
+        reasons = {e.split('failed: ', 1)[1] for e in failed.values()}
+        assert driver.output().count('configure failed') == len(reasons)   # each reason logged once
+
+        # SIGKILL and start again (what launch's respawn and sslfr up do): active by itself
+        driver.signal(signal.SIGKILL)
+        driver.proc.wait(5)
+        n = len(status)
+        again = launch('sslfr_drivers', 'axis_driver', params=params, name='mirrors_driver')
+        assert ros.spin_until(lambda: len(status) > n and _active(ros, 'mirrors_driver'), 30), again.output()
+        assert 'configured: board' in again.output()
+    finally:
+        if sim is not None:
+            sim.stop()
+        shutil.rmtree(d, ignore_errors=True)
+
+
+# ----------------------------------------------------------------- issue 22: answered refusals
+def test_every_lifecycle_request_is_answered_and_bad_inputs_are_refused(rig, ros):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from sslfr_drivers.axis.lifecycle_ctl import get_state
+
+    r = rig(sim_args=['--opt', 'initial_angle_deg=0'])
+    name = 'mirrors_driver'
+    assert r.wait_state('holding', 20), r.driver.output()
+
+    def change(tid):
+        req = ChangeState.Request()
+        req.transition.id = tid
+        return ros.call(ChangeState, f'{name}/change_state', req, timeout=10.0).success   # fails on no answer
+
+    for tid in (99, 255, Transition.TRANSITION_CONFIGURE):
+        assert change(tid) is False
+    out = r.driver.output()
+    assert 'lifecycle request refused: transition 99 is not possible from state active' in out
+    assert 'transition 255 is not possible' in out and 'transition 1 is not possible from state active' in out
+    assert ros.spin_until(lambda: r.diag().get('lifecycle_requests_refused') == '3', 3), r.diag()
+    assert get_state(ros.node, name, executor=ros.executor) == 'active'
+
+    # an outside deactivate is respected: the driver does not activate itself again
+    assert change(Transition.TRANSITION_DEACTIVATE) is True
+    ros.spin_for(2.0)                                     # 4 x retry_period: time to undo it, if it did
+    assert get_state(ros.node, name, executor=ros.executor) == 'inactive'
+    assert r.status[-1].state == 'inactive' and r.diag().get('lifecycle_goal') == 'inactive'
+    assert change(Transition.TRANSITION_ACTIVATE) is True
+    assert r.wait_state('holding', 5)
+
+    # a port that cannot be a board is refused at run time with the reason, counted
+    req = SetParameters.Request(parameters=[Parameter(name='port', value=ParameterValue(
+        type=ParameterType.PARAMETER_STRING, string_value='/dev/null'))])
+    res = ros.call(SetParameters, f'{name}/set_parameters', req).results[0]
+    assert not res.successful and 'memory device' in res.reason, res.reason
+    assert ros.spin_until(lambda: r.diag().get('parameter_changes_refused') == '1', 3), r.diag()
+    assert r.diag()['port'] == r.port and 'parameter change refused' in r.driver.output()
+
+    # malformed trajectories: duplicate joint names, a velocities list of the wrong length
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    from builtin_interfaces.msg import Duration
+    bad = []
+    for names, vel in ((['mirrors', 'mirrors'], [0.0, 0.0]), (['mobile_structure', 'mirrors'], [0.0])):
+        msg = JointTrajectory(joint_names=names)
+        msg.header.stamp = ros.node.get_clock().now().to_msg()
+        msg.points = [JointTrajectoryPoint(positions=[0.0, 0.01], velocities=vel,
+                                           time_from_start=Duration(sec=k)) for k in (1, 2)]
+        bad.append(msg)
+    for k, msg in enumerate(bad):
+        r.pub_traj.publish(msg)
+        assert ros.spin_until(lambda k=k: r.diag().get('trajectories_rejected') == str(k + 1), 5), r.diag()
+    out = r.driver.output()
+    assert 'trajectory refused (duplicate joint names: mirrors)' in out
+    assert 'trajectory refused (point 0 has 1 velocities for 2 joints)' in out
+    assert r.diag()['trajectories_accepted'] == '0' and r.status[-1].state == 'holding'

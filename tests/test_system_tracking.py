@@ -81,7 +81,7 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(ros, ros_en
     assert np.all(day.phase.between(t0, t1)['phase'] == 2), ('TRACKING all through the window', _why(tmp_path))
     lag = speed * WALL_LATENCY
     report = {}
-    for axis in scenario.AXES:
+    for axis in scenario.JOINTS:
         s = day.axes[axis].between(t0, t1)
         assert len(s) > 50, (axis, len(s), day.topics)
         err = scenario.tracking_error(s.t, s['measured'], lambda t, a=axis: getattr(ref(t), a), lag=lag)

@@ -12,7 +12,9 @@ the same description and applies it the same way:
   (rcl matches a bare ``planner:`` section only in the root namespace), so several
   collectors, each with its own config, share one domain;
 - ``use_sim_time:=true`` reaches every node (replaying a day with ``ros2 bag play --clock``);
-- lifecycle nodes (the axis drivers) are configured, then activated, as soon as they start.
+- the axis drivers (lifecycle nodes) activate themselves, also after a respawn and when
+  their board appears late; launch only starts them (an outside lifecycle command is
+  still obeyed and not undone).
 
 The supervisor of `./sslfr up` adds what launch does not do: restart with backoff and
 an ordered stop (axes first); the systemd unit uses `sslfr up` for that reason
@@ -50,14 +52,9 @@ def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
 
 def generate_launch_description():
     from launch import LaunchDescription
-    from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler, \
-        SetEnvironmentVariable
-    from launch.events import matches_action
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import LifecycleNode, Node
-    from launch_ros.event_handlers import OnStateTransition
-    from launch_ros.events.lifecycle import ChangeState
-    from lifecycle_msgs.msg import Transition
 
     def _setup(context):
         import tempfile
@@ -74,19 +71,7 @@ def generate_launch_description():
                           namespace=e['namespace'], parameters=e['parameters'],
                           remappings=e['remappings'], output='screen',
                           respawn=True, respawn_delay=2.0)
-            if not e['lifecycle']:
-                actions.append(Node(**common))
-                continue
-            node = LifecycleNode(**common)
-            actions.append(RegisterEventHandler(OnStateTransition(
-                target_lifecycle_node=node, goal_state='inactive',
-                entities=[EmitEvent(event=ChangeState(
-                    lifecycle_node_matcher=matches_action(node),
-                    transition_id=Transition.TRANSITION_ACTIVATE))])))
-            actions.append(node)
-            actions.append(EmitEvent(event=ChangeState(
-                lifecycle_node_matcher=matches_action(node),
-                transition_id=Transition.TRANSITION_CONFIGURE)))
+            actions.append(LifecycleNode(**common) if e['lifecycle'] else Node(**common))
         return actions
 
     return LaunchDescription([

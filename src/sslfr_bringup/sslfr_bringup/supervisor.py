@@ -9,8 +9,11 @@ only the supervisor, which then stops the set in order). The supervisor
   ``stable_after`` seconds); the restart of a *critical* program (the safety
   supervisor) is reported loudly: a banner on stderr at journal priority ``err`` and
   an ERROR status on ``diagnostics``;
-- drives lifecycle programs (the axis drivers) to ``active`` after every (re)start,
-  retrying with backoff when a transition fails (e.g. a board not reachable);
+- watches lifecycle programs (the axis drivers) after every (re)start until they
+  report ``active``: the drivers activate themselves (``autostart``, configure
+  retried with back-off while a board is not reachable), the supervisor never
+  requests a transition on the way up, so it cannot fight them; a driver not active
+  after 20 s is reported (and watched again 3 s later);
 - on :meth:`Supervisor.stop` stops the set in stop groups within ``stop_timeout``
   seconds: the axes first (lifecycle ``deactivate``, then SIGINT), then the rest,
   the recorder last; whatever is still alive at the end is killed.
@@ -224,7 +227,7 @@ class Supervisor:
                     p.lifecycle_state = 'failed'
                     p.lifecycle_retry = now + 3.0
                     self._event(p, 'activate-failed', msg)
-                    self.say(f'{p.name}: could not be activated ({msg}); retrying in 3 s', 4)
+                    self.say(f'{p.name}: {msg}; checking again in 3 s', 4)
         for p in self.programs.values():
             if self.stopping:
                 return
@@ -313,7 +316,7 @@ class Supervisor:
         order = sorted(groups)
         for i, g in enumerate(order):
             progs = [p for p in groups[g] if p.alive()]
-            lifecycle = [p.name for p in progs if p.lifecycle and p.lifecycle_state == 'active']
+            lifecycle = [p.name for p in progs if p.lifecycle]     # active or about to be
             if lifecycle and self.ros is not None:
                 # stop the motors through the drivers' own deactivate (bounded wait)
                 self.ros.deactivate(lifecycle, timeout=min(1.0, max(0.1, deadline - time.monotonic() - 1.5)))
@@ -424,8 +427,8 @@ class Supervisor:
 class RosSide(threading.Thread):
     """The supervisor's rclpy side, in one thread owning its own context.
 
-    - lifecycle: walks requested nodes to ``active`` (results via :meth:`results`),
-      deactivates the axes at stop;
+    - lifecycle: watches requested nodes until ``active`` (results via
+      :meth:`results`; ``lifecycle_ctl.ActiveWatch``), deactivates the axes at stop;
     - ``diagnostics``: one DiagnosticStatus per supervised process at 1 Hz, ERROR after
       a critical program's restart (so the monitoring laptop sees it too);
     - optional ``/clock`` (simulation): ``clock_fn()`` -> sim time [s since epoch],
@@ -494,7 +497,7 @@ class RosSide(threading.Thread):
             from lifecycle_msgs.srv import ChangeState
             from rclpy.clock import Clock, ClockType
             from rclpy.executors import SingleThreadedExecutor
-            from sslfr_drivers.axis.lifecycle_ctl import bring_to
+            from sslfr_drivers.axis.lifecycle_ctl import ActiveWatch
 
             ctx = self._ctx = rclpy.Context()
             rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
@@ -564,9 +567,12 @@ class RosSide(threading.Thread):
                 self.clock_published += 1
 
             node.create_timer(1.0 / self.clock_rate, publish_clock, clock=steady)
+        watch = ActiveWatch(node, timeout=20.0)
         self.ready.set()
         try:
             while not self._halt.is_set() and ctx.ok():
+                for result in watch.poll():
+                    self._results.put(result)
                 try:
                     kind, arg = self._jobs.get_nowait()
                 except queue.Empty:
@@ -575,8 +581,7 @@ class RosSide(threading.Thread):
                 if kind == 'active':
                     if arg not in clients:  # kept for a quick deactivate at stop
                         clients[arg] = node.create_client(ChangeState, f'{arg}/change_state')
-                    ok, msg = bring_to(node, arg, 'active', timeout=20.0, executor=executor)
-                    self._results.put((arg, ok, msg))
+                    watch.add(arg)
                 elif kind == 'deactivate':
                     names, timeout, done = arg
                     deadline = time.monotonic() + timeout

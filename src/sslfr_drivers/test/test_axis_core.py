@@ -9,10 +9,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sslfr_common.contract import JOINT_RANGE, STEP_ANGLE
-from sslfr_drivers.axis.core import (
-    Calibration, SafetyVerdict, SafetyWatch, SoftLimits,
-    StallDetector, TrajectoryStore, move_speed, validate_trajectory, TrajectoryRejected,
-)
+from sslfr_drivers.axis.core import SafetyVerdict, SafetyWatch, StallDetector
+from sslfr_drivers.axis.joint import Calibration, SoftLimits, move_speed
+from sslfr_drivers.axis.trajectory import TrajectoryMsg, TrajectoryRejected, TrajectoryStore
+from sslfr_drivers.axis.trajectory import validate_trajectory as _validate
+
+
+def validate_trajectory(times, positions, velocities, now, limits):
+    """One joint's points through the one validation."""
+    return _validate(TrajectoryMsg.for_joint('mirrors', times, positions, velocities), 'mirrors', now, limits)
+
+
+def offer(store, times, positions, velocities, now, limits):
+    """Offer one joint's points to a store (the mirrors driver's)."""
+    return store.offer(TrajectoryMsg.for_joint('mirrors', times, positions, velocities), 'mirrors', now, limits)
+
 
 MIRRORS = SoftLimits(*JOINT_RANGE['mirrors'])
 
@@ -61,7 +72,7 @@ def test_move_speed_is_bounded():
 def test_trajectory_refusals_keep_last_good():
     store = TrajectoryStore()
     now = 1_700_000_000.0
-    assert store.offer([now, now + 10], [0.0, 0.1], None, now, MIRRORS) is None
+    assert offer(store, [now, now + 10], [0.0, 0.1], None, now, MIRRORS) is None
     good = store.current
     for times, pos, vel, word in [
         ([now, now + 1], [0.0, float('nan')], None, 'non-finite'),
@@ -71,7 +82,7 @@ def test_trajectory_refusals_keep_last_good():
         ([], [], None, 'no points'),
         ([now, now + 1], [0.0, 0.1], [0.0, float('inf')], 'velocity'),
     ]:
-        reason = store.offer(times, pos, vel, now, MIRRORS)
+        reason = offer(store, times, pos, vel, now, MIRRORS)
         assert reason is not None and word in reason
         assert store.current is good
     assert store.rejected == 6 and store.accepted == 1
@@ -80,7 +91,7 @@ def test_trajectory_refusals_keep_last_good():
 def test_setpoint_interpolates_and_holds_on_starvation():
     store = TrajectoryStore()
     now = 100.0
-    store.offer([110.0, 120.0], [0.0, 0.2], None, now, MIRRORS)
+    offer(store, [110.0, 120.0], [0.0, 0.2], None, now, MIRRORS)
     assert store.setpoint(105.0) == (0.0, 0.0, 'waiting')
     pos, vel, st_ = store.setpoint(115.0)
     assert st_ == 'following' and pos == pytest.approx(0.1) and vel == pytest.approx(0.02)
@@ -179,7 +190,8 @@ def test_stall_without_sensor_pending_move_not_moving():
 
 
 # ----------------------------------------------------------------- supervisor
-from sslfr_drivers.axis.core import Action, AxisConfig, AxisSupervisor, BoardState  # noqa: E402
+from sslfr_drivers.axis.core import Action, AxisSupervisor, BoardState  # noqa: E402
+from sslfr_drivers.axis.core import AxisTuning as AxisConfig  # noqa: E402
 
 
 def _sup(use_sensor=True, auto_home=True):
@@ -198,7 +210,7 @@ def _board(steps=0, moving=False, homed=True, sensor=0.0, target=None):
 
 def test_supervisor_follows_setpoint_ahead_by_lead():
     sup = _sup()
-    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     act = sup.tick(150.0, 0.5, _board(), True)
     cal = Calibration()
     assert act.kind == 'move' and act.steps == cal.steps(0.05 + 0.001 * 0.05)
@@ -208,24 +220,24 @@ def test_supervisor_follows_setpoint_ahead_by_lead():
 
 def test_supervisor_never_moves_when_position_lost():
     sup = _sup(use_sensor=False)
-    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     act = sup.tick(150.0, 0.5, _board(homed=False, sensor=None), True)
     assert act.kind == 'home' and act.speed > 0 and act.steps == Calibration().steps(math.pi / 2)
     sup2 = _sup(use_sensor=True)
-    sup2.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup2.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     acts = [sup2.tick(150.0, 0.5 + 0.05 * k, _board(steps=5, homed=False, sensor=0.0123 + d), True)
             for k, d in enumerate([1e-5, -1e-5, 2e-5, -2e-5, 0.0])]
     assert [a.kind for a in acts] == ['none'] * 4 + ['set_zero']          # 5 samples averaged
     assert acts[-1] == Action('set_zero', Calibration().steps(0.0123))
     sup3 = _sup(use_sensor=False, auto_home=False)
-    sup3.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup3.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     assert sup3.tick(150.0, 0.5, _board(homed=False, sensor=None), True).kind == 'none'
     assert sup3.state == 'fault'
 
 
 def test_supervisor_stops_on_safety_silence_and_stows():
     sup = _sup()
-    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     assert sup.tick(150.0, 0.9, _board(), True).kind == 'move'
     assert sup.tick(150.1, 1.05, _board(moving=True, steps=3, sensor=3 * Calibration().joint_per_step), True).kind == 'stop'
     assert sup.state == 'stopped'
@@ -237,7 +249,7 @@ def test_supervisor_stops_on_safety_silence_and_stows():
 def test_supervisor_inactive_stops_and_stall_latches():
     sup = _sup()
     assert sup.tick(0.0, 0.1, _board(moving=True), False).kind == 'stop'
-    sup.store.offer([0.0, 100.0], [0.0, 0.5], None, 0.0, MIRRORS)
+    offer(sup.store, [0.0, 100.0], [0.0, 0.5], None, 0.0, MIRRORS)
     sup.safety.timeout = 1e9
     kinds = []
     for k in range(15):   # motor steps, sensor stuck at 0
@@ -250,7 +262,7 @@ def test_supervisor_inactive_stops_and_stall_latches():
 
 def test_supervisor_starvation_holds_last_point():
     sup = _sup()
-    sup.store.offer([100.0, 110.0], [0.0, 0.01], None, 100.0, MIRRORS)
+    offer(sup.store, [100.0, 110.0], [0.0, 0.01], None, 100.0, MIRRORS)
     cal = Calibration()
     act = sup.tick(500.0, 0.5, _board(steps=cal.steps(0.01), sensor=0.01), True)
     assert act.kind == 'none' and sup.state == 'holding'
@@ -272,7 +284,7 @@ def test_home_direction_toward_sleep_switch_inside_the_range():
 
 def test_setpoint_lead_scales_with_the_ros_time_rate():
     sup = _sup()
-    sup.store.offer([0.0, 1000.0], [0.0, 0.5], None, 0.0, MIRRORS)
+    offer(sup.store, [0.0, 1000.0], [0.0, 0.5], None, 0.0, MIRRORS)
     cal = Calibration()
     a1 = sup.tick(100.0, 0.5, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=1.0)
     a40 = sup.tick(100.0, 0.6, _board(steps=cal.steps(0.05), sensor=0.05), True, time_rate=40.0)
@@ -290,7 +302,7 @@ def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
     from sslfr_drivers.axis.core import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
     assert BOARD_FAULT_STALL == m.FaultBits.STALL and BOARD_FAULT_DRIVER == m.FaultBits.DRIVER
     sup = _sup()
-    sup.store.offer([100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
     b = BoardState(0, 10, True, True, False, 0.0, 0, int(m.FaultBits.DRIVER))
     assert sup.tick(150.0, 0.5, b, True).kind == 'stop'
     assert sup.state == 'fault' and 'driver' in sup.fault
@@ -298,7 +310,7 @@ def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
 
 def test_sensor_fault_bit_drops_the_sensor():
     from sslfr_drivers.link import messages as m
-    from sslfr_drivers.axis.board_session import board_state
+    from sslfr_drivers.axis.board_session import board_from_status as board_state
     st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR | m.StatusFlags.HOMED), 0, 0, 0.5, 1)
     assert board_state(st).sensor == pytest.approx(0.5)
     st = m.Status(100, 100, 0.0, int(m.StatusFlags.HAS_SENSOR), 0, int(m.FaultBits.SENSOR), 0.5, 1)

@@ -1,16 +1,17 @@
-"""The axis driver's view of one axis board (no rclpy): a thin adapter over
-:class:`sslfr_drivers.link.board_link.BoardLink` that speaks in :mod:`axis_core` terms.
+"""The axis driver's hardware interface (no rclpy): one axis board, a thin adapter over
+:class:`sslfr_drivers.link.board_link.BoardLink` that speaks in :mod:`.core` terms.
+It owns the board I/O of the driver's read -> update -> write cycle.
 
 - :meth:`AxisBoardSession.open` starts the link, waits for INFO and refuses a board
   speaking another protocol version or that is not an axis board
   (:class:`BoardRefused`, message says why);
-- :meth:`poll` reads STATUS (one try, short time-out) into a
-  :class:`~sslfr_drivers.axis.core.BoardState`, or None while the link is not UP
-  (down, reconnecting, re-reading INFO/STATUS after a board reset);
-- :meth:`command` executes an :class:`~sslfr_drivers.axis.core.Action`
-  (MOVE_TO / STOP / HOME / SET_ZERO) and returns ``(ok, detail)``;
-- :meth:`take_reset` / :meth:`take_reconnect` report (once) that the board reset or
-  the port was reopened since the last call, so the driver forgets its commands.
+- :meth:`read` (once per control tick) reads STATUS (one try, short time-out) into
+  a :class:`BoardReading`: the :class:`~sslfr_drivers.axis.core.BoardState`, or
+  None while the link is not UP (down, reconnecting, re-reading INFO/STATUS after a
+  board reset), and whether the board reset or the port was reopened since the
+  last read (the driver then forgets its commands);
+- :meth:`write` executes an :class:`~sslfr_drivers.axis.core.Action`
+  (MOVE_TO / STOP / HOME / SET_ZERO) and returns a :class:`WriteResult`.
 
 The link's own heartbeat (PING when idle for ``heartbeat`` s) keeps the board's 1 s
 watchdog quiet even when the driver is inactive; STATUS polls count as traffic too.
@@ -19,6 +20,9 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
+
+from sslfr_common.contract import LinkState as Link
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.axis.core import Action, BoardState, Calibration
@@ -26,15 +30,29 @@ from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackE
 from sslfr_drivers.link.protocol import ProtocolError
 from sslfr_drivers.link.transport import make_transport
 
-# AxisStatus.LINK_* values (sslfr_interfaces/msg/AxisStatus.msg)
-LINK_DOWN, LINK_CONNECTING, LINK_UP, LINK_FAULT = 0, 1, 2, 3
+class BoardReading(NamedTuple):
+    """One :meth:`AxisBoardSession.read`: the board state (None: no usable STATUS)
+    and whether the board reset / the port was reopened since the previous read."""
+
+    board: BoardState | None
+    reset: bool = False
+    reconnected: bool = False
+
+
+class WriteResult(NamedTuple):
+    """One :meth:`AxisBoardSession.write`: ACKed, else the reason (``nack``: the
+    board refused, ``detail`` = the ErrorCode name; otherwise no valid answer)."""
+
+    ok: bool
+    detail: str = ''
+    nack: bool = False
 
 
 class BoardRefused(RuntimeError):
     """The board answers but must not be driven (protocol version, board kind)."""
 
 
-def board_state(status: m.Status) -> BoardState:
+def board_from_status(status: m.Status) -> BoardState:
     """Convert a STATUS message into the core's :class:`BoardState`.
 
     ``sensor`` is the sensor angle [rad] when the board flags HAS_SENSOR, the value
@@ -126,6 +144,13 @@ class AxisBoardSession:
         self.link.stop()
 
     # ------------------------------------------------------------------ state
+    def read(self, now: float, period: float) -> BoardReading:
+        """The read of one control tick at steady ``now`` [s] with control ``period``
+        [s]: STATUS with a ``2 * period`` time-out (a lost answer reuses a STATUS up
+        to ``3 * period`` old, see :meth:`poll`) and the reset / reconnect events."""
+        board = self.poll(now, 2 * period, 3 * period)
+        return BoardReading(board, self.take_reset(), self.take_reconnect())
+
     def poll(self, now: float, timeout: float, max_age: float) -> BoardState | None:
         """STATUS now (one try of ``timeout`` [s]).
 
@@ -148,7 +173,7 @@ class AxisBoardSession:
                 return last[1]
             return None
         self.last_status = status
-        state = board_state(status)
+        state = board_from_status(status)
         self._last_ok = (now, state)
         return state
 
@@ -166,16 +191,16 @@ class AxisBoardSession:
             return True
         return False
 
-    def link_state(self) -> int:
+    def link_state(self) -> Link:
         """AxisStatus.LINK_* for the current link state."""
         st = self.link.state
         if st == LinkState.UP:
-            return LINK_UP
+            return Link.LINK_UP
         if st == LinkState.REFUSED:
-            return LINK_FAULT
+            return Link.LINK_FAULT
         if st in (LinkState.CONNECTING, LinkState.SILENT):
-            return LINK_CONNECTING
-        return LINK_DOWN
+            return Link.LINK_CONNECTING
+        return Link.LINK_DOWN
 
     def frames_lost(self) -> int:
         """Board frames lost so far (sequence-number gaps)."""
@@ -209,10 +234,10 @@ class AxisBoardSession:
         except (LinkError, ProtocolError, OSError):
             pass
 
-    def command(self, act: Action) -> tuple[bool, str]:
-        """Execute one action; ``(True, '')`` when ACKed, else ``(False, reason)``.
+    def write(self, act: Action) -> WriteResult:
+        """Execute one action and wait for its ACK (the link's time-out and retries).
 
-        A NACK's reason is the :class:`messages.ErrorCode` name (e.g. ``NOT_HOMED``).
+        A NACK's detail is the :class:`messages.ErrorCode` name (e.g. ``NOT_HOMED``).
         """
         try:
             if act.kind == 'move':
@@ -223,13 +248,11 @@ class AxisBoardSession:
                 self.link.home(m.Switch(act.switch), act.speed, act.steps)
             elif act.kind == 'set_zero':
                 self.link.set_zero(act.steps)
-            else:
-                return True, ''
         except NackError as exc:
             try:
-                return False, m.ErrorCode(exc.code).name
+                return WriteResult(False, m.ErrorCode(exc.code).name, True)
             except ValueError:
-                return False, str(exc)
+                return WriteResult(False, str(exc), True)
         except (LinkError, ProtocolError) as exc:
-            return False, str(exc) or type(exc).__name__
-        return True, ''
+            return WriteResult(False, str(exc) or type(exc).__name__)
+        return WriteResult(True)

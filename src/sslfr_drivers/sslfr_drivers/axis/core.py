@@ -1,5 +1,6 @@
-"""Pure decision core of the axis driver (no rclpy): calibration, trajectory store,
-soft and speed limits, stall / lost-step detection and the safety watchdog.
+"""Pure decision core of the axis driver (no rclpy): safety watchdog, stall / lost-step
+detection, the per-tick supervisor and the node's small decisions (operator mode,
+home and jog requests, the ROS/steady time rate, the diagnostics verdict).
 
 Everything here works on plain numbers so it can be unit-tested on values:
 
@@ -11,259 +12,23 @@ Everything here works on plain numbers so it can be unit-tested on values:
 - trajectory times are float seconds since the Unix epoch (ROS time, UTC);
 - watchdog times are float seconds of a steady (monotonic) clock.
 
-The node (``axis_driver_node``) only converts messages to these numbers, calls the
-functions below and turns their verdicts into board commands.
+The node (``axis_driver_node``) runs read -> update -> write at the control rate:
+the board session reads a :class:`BoardState`, :meth:`AxisSupervisor.tick` decides
+one :class:`Action`, the session writes it and :meth:`AxisSupervisor.record_write`
+books the result. Joint geometry lives in :mod:`.joint`, the trajectory and its one
+validation in :mod:`.trajectory`, the parameters in :mod:`.params`.
 """
 from __future__ import annotations
 
 import enum
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
-import numpy as np
+from sslfr_common.contract import Level, Phase
 
-from sslfr_common.contract import STEP_ANGLE
-
-
-
-# --------------------------------------------------------------------------- calibration
-@dataclass(frozen=True)
-class Calibration:
-    """Joint angle <-> motor step conversion.
-
-    ``theta = offset + sign * steps * step_angle / gear_ratio``
-
-    Parameters
-    ----------
-    step_angle : float
-        Motor shaft rotation per step [rad/step], > 0. Seed 000 section 3.4: 0.006 deg
-        (with ``gear_ratio`` 1 the seed's 0.006 deg is the joint resolution).
-    gear_ratio : float
-        Motor shaft angle per joint angle [-], > 0 (a 10:1 reducer is 10).
-    offset : float
-        Joint angle at step count 0 [rad] (where SET_ZERO / homing puts the counter).
-    invert : bool
-        True when positive steps turn the joint in the negative direction.
-    """
-
-    step_angle: float = STEP_ANGLE
-    gear_ratio: float = 1.0
-    offset: float = 0.0
-    invert: bool = False
-
-    def __post_init__(self):
-        for name in ('step_angle', 'gear_ratio'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f'{name} must be finite and > 0, got {value!r}')
-        if not math.isfinite(self.offset):
-            raise ValueError(f'offset must be finite, got {self.offset!r}')
-
-    @property
-    def joint_per_step(self) -> float:
-        """Joint rotation per motor step [rad/step] (signed by ``invert``)."""
-        return (-1.0 if self.invert else 1.0) * self.step_angle / self.gear_ratio
-
-    def steps(self, theta: float) -> int:
-        """Nearest step count for joint angle ``theta`` [rad] -> [steps]."""
-        return int(round((theta - self.offset) / self.joint_per_step))
-
-    def angle(self, steps: float) -> float:
-        """Joint angle [rad] for a step count [steps]."""
-        return self.offset + steps * self.joint_per_step
-
-    def step_rate(self, speed: float) -> float:
-        """Motor step rate [steps/s] (>= 0) for a joint speed [rad/s]."""
-        return abs(speed / self.joint_per_step)
-
-
-# --------------------------------------------------------------------------- limits
-@dataclass(frozen=True)
-class SoftLimits:
-    """Software joint limits ``lower <= theta <= upper`` [rad]."""
-
-    lower: float
-    upper: float
-
-    def __post_init__(self):
-        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
-            raise ValueError(f'soft limits need finite lower < upper, got {self.lower!r}..{self.upper!r}')
-
-    def contains(self, theta: float, tol: float = 1e-9) -> bool:
-        """True when ``theta`` [rad] is inside the limits (``tol`` [rad] of slack)."""
-        return self.lower - tol <= theta <= self.upper + tol
-
-    def clamp(self, theta: float) -> float:
-        """``theta`` [rad] clamped into the limits."""
-        return min(self.upper, max(self.lower, theta))
-
-
-def move_speed(current: float, target: float, horizon: float, max_speed: float,
-               min_speed: float) -> float:
-    """Speed [rad/s] to send with a MOVE_TO so the axis reaches ``target`` in ``horizon``.
-
-    ``v = clamp(|target - current| / horizon, min_speed, max_speed)``: commanding the
-    setpoint one control period ahead at this speed keeps the motor moving
-    continuously instead of stop-and-go, and never faster than ``max_speed``.
-
-    Parameters
-    ----------
-    current, target : float
-        Measured and target joint angles [rad].
-    horizon : float
-        Time to reach the target [s], > 0 (the control period).
-    max_speed, min_speed : float
-        Speed bounds [rad/s], 0 < min_speed <= max_speed.
-    """
-    if horizon <= 0:
-        return max_speed
-    return min(max_speed, max(min_speed, abs(target - current) / horizon))
-
-
-# --------------------------------------------------------------------------- trajectory
-class TrajectoryRejected(ValueError):
-    """A trajectory was refused; ``str(exc)`` is the reason to log."""
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """One joint's trajectory: absolute times [s, Unix epoch] and positions [rad].
-
-    ``velocities`` [rad/s] is optional; when given, :meth:`sample` uses cubic
-    Hermite interpolation between points, otherwise linear.
-    """
-
-    times: np.ndarray
-    positions: np.ndarray
-    velocities: np.ndarray | None = None
-
-    @property
-    def start(self) -> float:
-        """Time of the first point [s since the Unix epoch]."""
-        return float(self.times[0])
-
-    @property
-    def end(self) -> float:
-        """Time of the last point [s since the Unix epoch]."""
-        return float(self.times[-1])
-
-    def sample(self, t: float) -> tuple[float, float]:
-        """Setpoint ``(position [rad], velocity [rad/s])`` at time ``t`` [s].
-
-        Before the first point the first position is held, after the last point the
-        last position is held (velocity 0): trajectory starvation holds position.
-        """
-        ts, ps = self.times, self.positions
-        if t <= ts[0]:
-            return float(ps[0]), 0.0
-        if t >= ts[-1]:
-            return float(ps[-1]), 0.0
-        i = int(np.searchsorted(ts, t, side='right')) - 1
-        t0, t1 = ts[i], ts[i + 1]
-        h = t1 - t0
-        s = (t - t0) / h
-        p0, p1 = ps[i], ps[i + 1]
-        if self.velocities is None:
-            return float(p0 + s * (p1 - p0)), float((p1 - p0) / h)
-        m0, m1 = self.velocities[i] * h, self.velocities[i + 1] * h
-        s2, s3 = s * s, s * s * s
-        pos = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0
-               + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * m1)
-        dpos = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * m0
-                + (-6 * s2 + 6 * s) * p1 + (3 * s2 - 2 * s) * m1) / h
-        return float(pos), float(dpos)
-
-
-def validate_trajectory(times, positions, velocities, now: float, limits: SoftLimits) -> Trajectory:
-    """Check one joint's points and return a :class:`Trajectory`.
-
-    Refused (``TrajectoryRejected`` with the reason) when: no points; any time or
-    position (or velocity) is NaN/inf; times not strictly increasing; a position
-    outside the soft limits; every point is in the past (``times[-1] < now``).
-
-    Parameters
-    ----------
-    times : array_like
-        Absolute point times [s since the Unix epoch].
-    positions : array_like
-        Joint positions [rad].
-    velocities : array_like or None
-        Joint velocities [rad/s], same length as positions, or None / empty.
-    now : float
-        Current ROS time [s since the Unix epoch].
-    limits : SoftLimits
-        The axis soft limits [rad].
-    """
-    t = np.asarray(times, dtype=np.float64)
-    p = np.asarray(positions, dtype=np.float64)
-    if t.size == 0:
-        raise TrajectoryRejected('no points')
-    if p.shape != t.shape:
-        raise TrajectoryRejected(f'{p.size} positions for {t.size} points')
-    if not np.all(np.isfinite(t)):
-        raise TrajectoryRejected('non-finite point time')
-    bad = np.flatnonzero(~np.isfinite(p))
-    if bad.size:
-        raise TrajectoryRejected(f'non-finite position at point {int(bad[0])}')
-    if t.size > 1 and not np.all(np.diff(t) > 0):
-        raise TrajectoryRejected('point times not strictly increasing')
-    out = np.flatnonzero((p < limits.lower - 1e-9) | (p > limits.upper + 1e-9))
-    if out.size:
-        k = int(out[0])
-        raise TrajectoryRejected(
-            f'point {k} position {p[k]:.6f} rad outside soft limits '
-            f'[{limits.lower:.6f}, {limits.upper:.6f}] rad')
-    if t[-1] < now:
-        raise TrajectoryRejected(f'past-only trajectory: last point {now - t[-1]:.3f} s before now')
-    v = None
-    if velocities is not None and len(velocities) > 0:
-        v = np.asarray(velocities, dtype=np.float64)
-        if v.shape != t.shape:
-            raise TrajectoryRejected(f'{v.size} velocities for {t.size} points')
-        if not np.all(np.isfinite(v)):
-            raise TrajectoryRejected('non-finite velocity')
-    return Trajectory(t, p, v)
-
-
-class TrajectoryStore:
-    """Holds the last good trajectory; refused ones leave it untouched."""
-
-    def __init__(self) -> None:
-        self.current: Trajectory | None = None
-        self.accepted = 0
-        self.rejected = 0
-        self.last_reason = ''
-
-    def offer(self, times, positions, velocities, now: float, limits: SoftLimits) -> str | None:
-        """Validate and keep a trajectory; return None when accepted, else the reason."""
-        try:
-            traj = validate_trajectory(times, positions, velocities, now, limits)
-        except TrajectoryRejected as exc:
-            self.rejected += 1
-            self.last_reason = str(exc)
-            return self.last_reason
-        self.current = traj
-        self.accepted += 1
-        return None
-
-    def clear(self) -> None:
-        """Forget the current trajectory (no setpoint until the next one)."""
-        self.current = None
-
-    def setpoint(self, t: float) -> tuple[float, float, str] | None:
-        """``(position [rad], velocity [rad/s], status)`` at ``t`` [s], or None.
-
-        status: ``'waiting'`` (before the first point: first position held),
-        ``'following'``, ``'starved'`` (past the last point: last position held).
-        """
-        if self.current is None:
-            return None
-        pos, vel = self.current.sample(t)
-        if t < self.current.start:
-            return pos, 0.0, 'waiting'
-        if t > self.current.end:
-            return pos, 0.0, 'starved'
-        return pos, vel, 'following'
+from sslfr_drivers.axis.joint import Calibration, SoftLimits, move_speed
+from sslfr_drivers.axis.trajectory import TrajectoryStore
 
 
 # --------------------------------------------------------------------------- safety
@@ -271,10 +36,6 @@ class SafetyVerdict(enum.Enum):
     FOLLOW = 'follow'
     STOW = 'stow'
     STOP = 'stop'
-
-
-# SafetyState levels (sslfr_interfaces/msg/SafetyState.msg)
-LEVEL_OK, LEVEL_WARN, LEVEL_STOW, LEVEL_ESTOP = 0, 1, 2, 3
 
 
 @dataclass
@@ -303,7 +64,7 @@ class SafetyWatch:
     silent_stow_after: float = 1.0
     last_rx: float | None = None
     last_sequence: int | None = None
-    level: int = LEVEL_OK
+    level: int = Level.OK
     stow_required: bool = False
     stopped_axes: tuple = ()
     reasons: tuple = ()
@@ -334,11 +95,11 @@ class SafetyWatch:
             return SafetyVerdict.STOW, f'safety/state silent for {age:.2f} s: fail-safe stow (defocus)'
         if age > self.timeout:
             return SafetyVerdict.STOP, f'safety/state silent for {age:.2f} s > {self.timeout:.2f} s'
-        if self.level == LEVEL_ESTOP and not self.stopped_axes:
+        if self.level == Level.ESTOP and not self.stopped_axes:
             return SafetyVerdict.STOP, 'safety ESTOP: ' + '; '.join(self.reasons)
         if self.axis in self.stopped_axes:
             return SafetyVerdict.STOP, f'safety stops axis {self.axis}: ' + '; '.join(self.reasons)
-        if self.stow_required or self.level == LEVEL_STOW:
+        if self.stow_required or self.level == Level.STOW:
             return SafetyVerdict.STOW, 'safety requires stow: ' + '; '.join(self.reasons)
         return SafetyVerdict.FOLLOW, ''
 
@@ -420,6 +181,11 @@ class StallDetector:
 
 # --------------------------------------------------------------------------- supervisor
 HOME_SWITCHES = {'low': 0, 'high': 1, 'sleep': 2}   # messages.Switch indices
+#: The driver's counters (diagnostics keys) [-].
+COUNTERS = ('trajectories_accepted', 'trajectories_rejected', 'moves_sent', 'nacks', 'nacks_not_homed',
+            'stops_sent', 'homes_sent', 'set_zero_sent', 'request_timeouts', 'reconnects',
+            'board_resets', 'faults')
+_SENT = {'move': 'moves_sent', 'stop': 'stops_sent', 'home': 'homes_sent', 'set_zero': 'set_zero_sent'}
 #: STATUS.fault_bits that make the driver latch a fault (docs/protocol.md FaultBits)
 BOARD_FAULT_STALL = 1 << 2
 BOARD_FAULT_DRIVER = 1 << 4
@@ -461,8 +227,9 @@ class Action:
 
 
 @dataclass
-class AxisConfig:
-    """Validated tuning of one axis (the node's parameters, in SI units).
+class AxisTuning:
+    """Validated tuning of one axis (the node's parameters, in SI units; built by
+    :func:`sslfr_drivers.axis.params.tuning_from`).
 
     Attributes
     ----------
@@ -507,12 +274,30 @@ class AxisConfig:
     ref_samples: int = 5
 
 
+class Snapshot(NamedTuple):
+    """What one control tick decided and saw (immutable: read by the status heartbeat
+    without waiting for the tick): ROS time of the tick [s] (0 before the first),
+    supervisor state, commanded / setpoint / measured joint angles [rad] (NaN when
+    unknown) and the board state."""
+
+    stamp: float = 0.0
+    state: str = 'unconfigured'
+    commanded: float = math.nan
+    setpoint: float = math.nan
+    measured: float = math.nan
+    board: BoardState | None = None
+
+
 class AxisSupervisor:
     """Per-tick decision of the axis driver: board state + inputs -> one board command.
 
     Inputs kept here: the trajectory store, the safety watchdog, the operator mode
     (from tracker/phase), a jog target, a latched driver fault. :meth:`tick` is
     called at the control rate with ROS time (trajectory) and steady time (watchdogs).
+
+    Besides :meth:`tick` it books the board's answers (:meth:`record_write`,
+    :meth:`note_link_events`) and decides the operator requests (:meth:`set_mode`,
+    :meth:`request_home`, :meth:`request_jog`).
 
     Priority (first match wins): inactive -> stop if moving; latched fault -> stop;
     safety STOP (missing heartbeat, ESTOP, axis listed) -> stop; homing in progress ->
@@ -521,13 +306,13 @@ class AxisSupervisor:
     hold; manual -> hold; trajectory -> setpoint(now + lead); none -> hold.
     """
 
-    def __init__(self, cfg: AxisConfig, safety_timeout: float = 1.0,
+    def __init__(self, cfg: AxisTuning, safety_timeout: float = 1.0,
                  stall: StallDetector | None = None):
         self.cfg = cfg
         self.store = TrajectoryStore()
         self.safety = SafetyWatch(cfg.axis, safety_timeout)
         self.stall = stall or StallDetector(tolerance=0.005, window=1.0, min_motion=0.01)
-        self.mode = 'auto'          # auto | manual | maintenance | stow (from tracker/phase)
+        self.mode = 'auto'          # auto | manual | maintenance (operator_mode of tracker/phase)
         self.jog_target: float | None = None
         self.fault: str | None = None
         self.home_requested = False
@@ -539,6 +324,9 @@ class AxisSupervisor:
         self._cmd_steps: int | None = None       # last MOVE_TO target [steps]
         self._ref: list[float] = []               # sensor samples for SET_ZERO [rad]
         self._cmd_speed: float = 0.0
+        self.counters: dict[str, int] = dict.fromkeys(COUNTERS, 0)
+        self.last_error = ''                      # last command the board refused / did not answer
+        self._new_fault: str | None = None
 
     # -- helpers ------------------------------------------------------------
     def measured(self, board: BoardState) -> float:
@@ -546,6 +334,26 @@ class AxisSupervisor:
         if self.cfg.use_sensor and board.sensor is not None:
             return board.sensor
         return self.cfg.calibration.angle(board.steps)
+
+    def snapshot(self, now_ros: float, board: BoardState | None) -> Snapshot:
+        """The :class:`Snapshot` after the tick at ROS time ``now_ros`` [s] that saw ``board``."""
+        measured = self.measured(board) if board is not None else math.nan
+        return Snapshot(now_ros, self.state, float(self.commanded), float(self.setpoint), float(measured), board)
+
+    def counts(self) -> dict[str, int]:
+        """Every counter of :data:`COUNTERS` (trajectories from the store) [-]."""
+        return {**self.counters, 'trajectories_accepted': self.store.accepted,
+                'trajectories_rejected': self.store.rejected}
+
+    def _latch(self, problem: str) -> None:
+        self.fault = problem
+        self.counters['faults'] += 1
+        self._new_fault = problem
+
+    def take_new_fault(self) -> str | None:
+        """The fault latched since the last call (to log once), or None."""
+        fault, self._new_fault = self._new_fault, None
+        return fault
 
     def clear_fault(self) -> None:
         """Clear the latched fault and the stall history."""
@@ -681,9 +489,9 @@ class AxisSupervisor:
         self._ref.clear()
         hard = board.fault_bits & (BOARD_FAULT_STALL | BOARD_FAULT_DRIVER)
         if hard:
-            self.fault = (f'board reports fault bits {board.fault_bits:#06x} '
-                          f'({"stall" if hard & BOARD_FAULT_STALL else ""}'
-                          f'{" driver" if hard & BOARD_FAULT_DRIVER else ""})').replace('( ', '(')
+            self._latch((f'board reports fault bits {board.fault_bits:#06x} '
+                         f'({"stall" if hard & BOARD_FAULT_STALL else ""}'
+                         f'{" driver" if hard & BOARD_FAULT_DRIVER else ""})').replace('( ', '('))
             return self._stop(board, 'fault', self.fault)
         pending = self._cmd_steps is not None and abs(self._cmd_steps - board.steps) > 1
         cal = self.cfg.calibration
@@ -691,10 +499,10 @@ class AxisSupervisor:
                                     board.sensor if self.cfg.use_sensor else None,
                                     board.moving, pending)
         if problem:
-            self.fault = problem
+            self._latch(problem)
             return self._stop(board, 'fault', problem)
-        if verdict is SafetyVerdict.STOW or self.mode == 'stow':
-            return self._move(board, self.cfg.stow_position, 'stowing', why or 'stow mode')
+        if verdict is SafetyVerdict.STOW:
+            return self._move(board, self.cfg.stow_position, 'stowing', why)
         if self.mode == 'maintenance':
             if self.jog_target is not None:
                 return self._move(board, self.jog_target, 'jogging', 'maintenance jog')
@@ -713,3 +521,147 @@ class AxisSupervisor:
         self.state, self.reason = 'holding', reason
         self._cmd_steps = None
         return Action('stop') if board.moving else Action()
+
+    # -- the board's answers ----------------------------------------------------
+    def note_link_events(self, reset: bool, reconnected: bool) -> list[str]:
+        """Book a board reset / a reopened port (the position must be re-established);
+        return the warnings to log."""
+        out = []
+        if reset:
+            self.counters['board_resets'] += 1
+            self.position_lost()
+            out.append('board reset or reconnected: position must be re-established')
+        if reconnected:
+            self.counters['reconnects'] += 1
+            self.position_lost()
+            out.append('link re-established')
+        return out
+
+    def record_write(self, act: Action, ok: bool, detail: str = '', nack: bool = False) -> str | None:
+        """Book the result of sending ``act``: counted per kind; a refusal (``nack``,
+        ``detail`` = the ErrorCode name) or an unanswered command forgets the commands
+        (position lost). Returns the warning to log: every failure of a non-move, one
+        in 20 of failed moves (a board refusing moves refuses each tick)."""
+        self.counters[_SENT[act.kind]] += 1
+        if ok:
+            return None
+        if nack:
+            self.counters['nacks'] += 1
+            self.counters['nacks_not_homed'] += detail == 'NOT_HOMED'
+            self.last_error = f'{act.kind} refused by the board: {detail}'
+        else:
+            self.counters['request_timeouts'] += 1
+            self.last_error = f'{act.kind} not answered by the board: {detail}'
+        self.position_lost()
+        failures = self.counters['nacks'] + self.counters['request_timeouts']
+        return self.last_error if act.kind != 'move' or failures % 20 == 1 else None
+
+    # -- operator requests --------------------------------------------------------
+    def set_mode(self, mode: str) -> bool:
+        """Operator mode from :func:`operator_mode`; leaving maintenance drops the jog
+        target. True when it changed."""
+        if mode == self.mode:
+            return False
+        if mode != 'maintenance':
+            self.jog_target = None
+        self.mode = mode
+        return True
+
+    def request_home(self, ready: bool) -> tuple[bool, str]:
+        """The home service: ``(accepted, message)``; ``ready`` = lifecycle active with
+        a board session. Clears a latched fault."""
+        if not ready:
+            return False, 'driver not active'
+        self.clear_fault()
+        self.home_requested = True
+        return True, (f'homing toward the {self.cfg.home_switch} switch '
+                      f'(or re-referencing from the sensor); watch axes/{self.cfg.axis}/status')
+
+    def request_jog(self, delta: float, speed: float, board: BoardState | None, active: bool,
+                    max_jog: float) -> tuple[bool, str, float]:
+        """The jog service: ``(accepted, message, target [rad])``.
+
+        Refused, in this order: not in maintenance mode; not active or no board
+        answer; a latched fault; axis not homed; ``delta`` [rad] not finite or
+        ``|delta| > max_jog``; ``speed`` [rad/s] not finite or negative; the target
+        (the pending jog target, else the measured angle, + ``delta``) outside the
+        soft limits. Jogs add up: a second jog starts from the first one's target.
+        """
+        if self.mode != 'maintenance':
+            return False, 'jog refused: not in maintenance mode (tracker/phase)', math.nan
+        if not active or board is None:
+            return False, 'jog refused: driver not active or board not answering', math.nan
+        if self.fault:
+            return False, f'jog refused: fault: {self.fault}', math.nan
+        if not board.homed:
+            return False, 'jog refused: axis not homed', math.nan
+        if not math.isfinite(delta) or abs(delta) > max_jog:
+            return False, f'jog refused: |delta| must be finite and <= max_jog {max_jog:.4f} rad', math.nan
+        if not math.isfinite(speed) or speed < 0:
+            return False, 'jog refused: speed must be finite and >= 0', math.nan
+        base = self.jog_target if self.jog_target is not None else self.measured(board)
+        target = base + delta
+        if not self.cfg.limits.contains(target):
+            return False, f'jog refused: target {target:.4f} rad outside soft limits', math.nan
+        self.jog_target = target
+        return True, 'jogging', target
+
+
+# --------------------------------------------------------------------------- node decisions
+def operator_mode(phase: int, mode: str) -> str:
+    """Operator mode of the driver from ``tracker/phase``: ``'maintenance'`` (phase
+    MAINTENANCE or mode maintenance: automatic motion off, jog allowed), ``'manual'``
+    (phase MANUAL or mode manual: hold), else ``'auto'`` (follow the trajectory; the
+    planner plans the stows)."""
+    if phase == Phase.MAINTENANCE or mode == 'maintenance':
+        return 'maintenance'
+    if phase == Phase.MANUAL or mode == 'manual':
+        return 'manual'
+    return 'auto'
+
+
+class TimeRate:
+    """ROS seconds per steady second, smoothed: 1 in real time, e.g. 400 in a
+    simulated day; the supervisor takes its setpoint ``lead * rate`` ROS seconds ahead.
+
+    Each :meth:`update` with a pair of clock readings moves the estimate by ``gain``
+    toward the rate since the previous pair; a clock jump (ROS time going back, or
+    faster than ``max_rate``: a replay restarting, the time being set) is ignored.
+    """
+
+    def __init__(self, gain: float = 0.3, max_rate: float = 1e5) -> None:
+        self.rate = 1.0
+        self.gain = gain
+        self.max_rate = max_rate
+        self._last: tuple[float, float] | None = None
+
+    def update(self, now_ros: float, now_steady: float) -> float:
+        """Feed ROS time [s] and steady time [s]; return the rate [-]."""
+        last, self._last = self._last, (now_ros, now_steady)
+        if last is None or now_steady - last[1] <= 0.0:
+            return self.rate
+        inst = (now_ros - last[0]) / (now_steady - last[1])
+        if 0.0 <= inst <= self.max_rate:
+            self.rate += self.gain * (inst - self.rate)
+        return self.rate
+
+
+#: diagnostic_msgs/DiagnosticStatus levels (tested equal to the message's).
+DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
+
+
+def diagnostic_verdict(lifecycle: str, sup: AxisSupervisor, connected: bool,
+                       last_error: str) -> tuple[int, str]:
+    """Level and message of the driver's diagnostics status.
+
+    ERROR: a latched fault, or no board session after a failed attempt
+    (``last_error``); WARN: lifecycle not active, or active but stopped by safety,
+    link down or holding; OK otherwise (following, waiting, stowing, jogging, homing).
+    """
+    if sup.fault or (not connected and last_error):
+        return DIAG_ERROR, sup.fault or last_error
+    if lifecycle != 'active':
+        return DIAG_WARN, f'{lifecycle}: {last_error or "not active"}'
+    if sup.state in ('stopped', 'link_down', 'holding'):
+        return DIAG_WARN, f'{sup.state}: {sup.reason}'
+    return DIAG_OK, f'{sup.state} {sup.reason}'.strip()

@@ -17,7 +17,13 @@ Command line (the ``lifecycle_ctl`` console script)::
 
 ``set`` walks the standard state machine: unconfigured -configure-> inactive
 -activate-> active, and back with deactivate / cleanup. Exit code 0 when every node
-reached the state.
+reached the state. The axis drivers activate themselves (``autostart``): ``set
+active`` then only confirms it, and a transition the node made meanwhile is not an
+error (the walk goes on from the state the node is in).
+
+:class:`ActiveWatch` is the non-blocking form for a supervisor that lets the drivers
+activate themselves (``sslfr up`` / ``sslfr sim``): it polls ``get_state`` until each
+watched node reports ``active`` and never requests a transition.
 """
 from __future__ import annotations
 
@@ -101,7 +107,7 @@ def bring_to(node, target: str, goal: str, timeout: float = 15.0, executor=None)
     if goal not in _RANK:
         return False, f'unknown goal state {goal!r} (unconfigured | inactive | active)'
     deadline = time.monotonic() + timeout
-    for _ in range(4):
+    for _ in range(6):
         left = deadline - time.monotonic()
         state = get_state(node, target, max(0.1, left), executor)
         if state is None:
@@ -113,8 +119,63 @@ def bring_to(node, target: str, goal: str, timeout: float = 15.0, executor=None)
         rank = _RANK[state]
         tid = _UP[rank] if _RANK[goal] > rank else _DOWN[rank]
         if not change_state(node, target, tid, max(0.1, deadline - time.monotonic()), executor):
-            return False, f'{target}: transition {tid} from {state} failed (see the node log)'
+            # refused because the node moved by itself meanwhile (self-activation)? go on from there
+            if get_state(node, target, max(0.1, deadline - time.monotonic()), executor) == state:
+                return False, f'{target}: transition {tid} from {state} failed (see the node log)'
     return False, f'{target}: did not reach {goal}'
+
+
+class ActiveWatch:
+    """Watch lifecycle nodes until they report ``active`` without blocking (polls
+    ``<node>/get_state`` asynchronously; the caller spins ``node``).
+
+    Parameters
+    ----------
+    node : rclpy node
+        The client node (spun by the caller's executor).
+    timeout : float
+        A node not active this long after :meth:`add` is reported as not active [s].
+    period : float
+        Poll period per node [s].
+    """
+
+    def __init__(self, node, timeout: float = 20.0, period: float = 0.5) -> None:
+        self.node, self.timeout, self.period = node, timeout, period
+        self._clients: dict = {}
+        self._watched: dict[str, dict] = {}
+
+    def add(self, target: str) -> None:
+        """Watch ``target`` (again) from now on."""
+        if target not in self._clients:
+            self._clients[target] = self.node.create_client(GetState, f'{_prefix(target)}/get_state')
+        self._watched[target] = {'since': time.monotonic(), 'next': 0.0, 'future': None, 'last': 'no answer'}
+
+    def poll(self) -> list[tuple[str, bool, str]]:
+        """Results since the last call: ``(target, True, 'active')`` once a node is
+        active, ``(target, False, reason)`` once it was not within ``timeout``; either
+        ends the watch of that node."""
+        now = time.monotonic()
+        out = []
+        for target, w in list(self._watched.items()):
+            fut = w['future']
+            if fut is not None and fut.done():
+                w['future'] = None
+                res = fut.result()
+                if res is not None:
+                    w['last'] = STATE_NAMES.get(res.current_state.id, res.current_state.label)
+            if w['last'] == 'active':
+                out.append((target, True, 'active'))
+                del self._watched[target]
+            elif now - w['since'] > self.timeout:
+                out.append((target, False, f'not active after {self.timeout:.0f} s (state {w["last"]}); '
+                            'the driver retries by itself, see its diagnostics'))
+                del self._watched[target]
+            elif w['future'] is None and now >= w['next']:
+                w['next'] = now + self.period
+                client = self._clients[target]
+                if client.service_is_ready():
+                    w['future'] = client.call_async(GetState.Request())
+        return out
 
 
 def main(argv: list[str] | None = None) -> int:

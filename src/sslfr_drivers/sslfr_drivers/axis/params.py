@@ -1,0 +1,169 @@
+"""The axis driver's parameters: one table (pure, no rclpy), per-axis defaults, the
+rules between parameters, and the check of a board port.
+
+:data:`PARAMS` is declared by the node (``sslfr_common.node.declare_parameters``),
+checked on every run-time change (``ParameterGuard``) and usable by the CLI to check
+a site config's driver sections without ROS. :func:`params_for` gives the table of
+one axis (its soft limits, stow and home positions as defaults).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import stat as stat_mod
+
+from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
+from sslfr_common.params import ParamSpec, ParamTable
+
+from sslfr_drivers.axis.core import HOME_SWITCHES, AxisTuning, StallDetector
+from sslfr_drivers.axis.joint import Calibration, SoftLimits
+
+_P = ParamSpec
+_ANGLE = (-math.pi, math.pi)
+_SPEED = (1e-5, 2.0)
+
+
+_M = JOINTS[0]          # the base table carries the mirrors' defaults
+_SPECS = [
+    _P('axis', _M, 'axis driven: mirrors | mobile_structure | secondary_reflector (read-only)',
+       choices=JOINTS, read_only=True),
+    _P('port', '', "board port: pyserial URL/device (/dev/ttyUSB0, a pty, loop://) or "
+       "'xbee:<uart>?addr=<64-bit hex>'; '' = /dev/sslfr/<axis>"),
+    _P('baudrate', 115200, 'serial line speed [bit/s]', 'bit/s', 1200, 4_000_000),
+    _P('autostart', True, 'reach and keep the active state by itself: configure (retried with '
+       'back-off from retry_period to retry_period_max while no board answers), then activate; '
+       'an external deactivate / cleanup / shutdown is respected', read_only=True),
+    _P('retry_period', 2.0, 'autostart: first wait between configure attempts [s]', 's', 0.1, 3600.0),
+    _P('retry_period_max', 10.0, 'autostart: longest wait between configure attempts [s] (the '
+       'wait doubles from retry_period up to the larger of the two)', 's', 0.1, 3600.0),
+    _P('control_rate', 20.0, 'control loop and STATUS poll rate [Hz] (steady clock)', 'Hz', 1.0, 200.0,
+       read_only=True),
+    _P('status_rate', 5.0, 'axes/<axis>/status rate [Hz]', 'Hz', 0.1, 50.0),
+    _P('joint_state_rate', 10.0, 'joint_states rate [Hz]', 'Hz', 0.1, 100.0),
+    _P('request_timeout', 0.25, 'board answer time-out per try [s] (STATUS polls use '
+       'min(this, 2 / control_rate))', 's', 0.01, 5.0),
+    _P('link_timeout', 1.0, 'no answer for this long -> link down, reconnect [s]', 's', 0.1, 30.0),
+    _P('heartbeat_period', 0.25, 'PING when nothing was sent for this long [s] (board watchdog is 1 s)',
+       's', 0.02, 0.9),
+    _P('step_angle', STEP_ANGLE, 'motor rotation per step [rad/step] (seed 000: 0.006 deg)',
+       'rad/step', 1e-7, 0.5),
+    _P('gear_ratio', 1.0, 'motor angle per joint angle [-]', '-', 1e-3, 1e4),
+    _P('offset', 0.0, 'joint angle at step count 0 [rad]', 'rad', -2 * math.pi, 2 * math.pi),
+    _P('invert', False, 'positive steps turn the joint negative'),
+    _P('lower_limit', JOINT_RANGE[_M][0], 'soft lower limit [rad] (mirrors -pi/4, others -pi/2)', 'rad', *_ANGLE),
+    _P('upper_limit', JOINT_RANGE[_M][1], 'soft upper limit [rad] (pi/2)', 'rad', *_ANGLE),
+    _P('max_speed', 0.05, 'maximum joint speed of a move [rad/s]', 'rad/s', *_SPEED),
+    _P('min_speed', 1e-4, 'minimum joint speed of a move [rad/s]', 'rad/s', 1e-6, 2.0),
+    _P('stow_position', STOW_POSITION[_M], 'stow (defocus) position [rad] (mirrors pi/2 sleeping, others 0)',
+       'rad', *_ANGLE),
+    _P('home_switch', 'sleep', 'limit switch HOME drives to: low | high | sleep (default sleep: '
+       'mirrors +pi/2, others 0)', choices=tuple(HOME_SWITCHES)),
+    _P('home_position', STOW_POSITION[_M], 'joint angle where the home switch closes [rad]', 'rad', *_ANGLE),
+    _P('home_speed', 0.05, 'homing speed [rad/s]', 'rad/s', *_SPEED),
+    _P('use_sensor', True, "use the board's position sensor (measured angle, re-referencing after a reset)"),
+    _P('auto_home', True, 'home by itself when the board lost its position'),
+    _P('reference_samples', 5, 'sensor readings at rest averaged to re-reference (SET_ZERO) [-]',
+       '-', 1, 100),
+    _P('safety_timeout', 1.0, 'safety/state silence that stops the axis [s] (steady clock)', 's', 0.05, 10.0),
+    _P('safety_silent_stow_after', 1.0, 'further safety/state silence after the stop before the '
+       'fail-safe stow (defocus) [s] (steady clock)', 's', 0.0, 60.0),
+    _P('lost_step_tolerance', 0.005, 'step count vs sensor disagreement that faults [rad]', 'rad', 1e-5, 1.0),
+    _P('stall_window', 1.0, 'stall observation window [s]', 's', 0.1, 60.0),
+    _P('stall_min_motion', 0.01, 'commanded motion that must show on the sensor within '
+       'stall_window [rad]', 'rad', 1e-5, 1.0),
+    _P('max_jog', 0.2, 'largest |delta| of a jog [rad]', 'rad', 0.0, math.pi),
+    _P('jog_speed', 0.02, 'default jog speed [rad/s]', 'rad/s', *_SPEED),
+]
+
+
+def cross_check(p: dict) -> list[str]:
+    """Rules between parameters (each value alone is valid): soft limits ordered and
+    inside the axis' mechanical range, the stow position inside them, min_speed <=
+    max_speed."""
+    axis = p['axis']
+    if not p['lower_limit'] < p['upper_limit']:
+        return [f"soft limits need lower < upper, got {p['lower_limit']!r}..{p['upper_limit']!r}"]
+    mech = JOINT_RANGE[axis]
+    errors = []
+    if p['lower_limit'] < mech[0] - 1e-9 or p['upper_limit'] > mech[1] + 1e-9:
+        errors.append(f"soft limits [{p['lower_limit']:.4f}, {p['upper_limit']:.4f}] rad exceed the "
+                      f'mechanical range [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
+    elif not SoftLimits(p['lower_limit'], p['upper_limit']).contains(p['stow_position']):
+        errors.append(f"stow_position {p['stow_position']:.4f} rad outside the soft limits")
+    if p['min_speed'] > p['max_speed']:
+        errors.append('min_speed > max_speed')
+    return errors
+
+
+#: The driver's parameters with the mirrors' defaults (:func:`params_for` per axis).
+PARAMS = ParamTable(_SPECS, cross_check)
+
+
+def params_for(axis: str) -> ParamTable:
+    """The table of ``axis`` (defaults: its mechanical range as soft limits, its stow
+    position as stow and home position); KeyError for an unknown axis."""
+    lo, hi = JOINT_RANGE[axis]
+    return PARAMS.with_defaults(axis=axis, lower_limit=lo, upper_limit=hi,
+                                stow_position=STOW_POSITION[axis], home_position=STOW_POSITION[axis])
+
+
+def tuning_from(p: dict) -> tuple[AxisTuning, StallDetector]:
+    """The core's tuning from a complete, valid set of values (``PARAMS.validate``)."""
+    cal = Calibration(p['step_angle'], p['gear_ratio'], p['offset'], p['invert'])
+    tuning = AxisTuning(p['axis'], cal, SoftLimits(p['lower_limit'], p['upper_limit']), p['max_speed'],
+                        p['min_speed'], 1.0 / p['control_rate'], p['stow_position'], p['home_switch'],
+                        p['home_position'], p['home_speed'], p['use_sensor'], p['auto_home'],
+                        p['reference_samples'])
+    return tuning, StallDetector(p['lost_step_tolerance'], p['stall_window'], p['stall_min_motion'])
+
+
+def board_port(p: dict) -> str:
+    """The board's port: parameter ``port``, default ``/dev/sslfr/<axis>`` (udev name)."""
+    return p['port'] or f'/dev/sslfr/{p["axis"]}'
+
+
+#: pyserial URL schemes (serial_for_url) a board can be reached through.
+URL_SCHEMES = ('loop', 'socket', 'rfc2217', 'spy', 'alt', 'hwgrep', 'cp2110')
+#: Character-device majors that are never a board (Linux devices.txt): 1 = memory
+#: devices (/dev/null, zero, full, random, urandom, mem, kmsg), 5 = /dev/tty,
+#: console, ptmx; 4 with minor < 64 = virtual consoles /dev/tty0..63.
+_NOT_A_BOARD = {1: 'a memory device', 5: 'the terminal / console / pty multiplexer'}
+
+
+def port_problem(port: str, stat=os.stat) -> str | None:
+    """None when ``port`` can be a board's port, else the reason (one line).
+
+    Accepted: '' (the udev name), a pyserial URL of :data:`URL_SCHEMES`,
+    ``xbee:<device>?addr=<16 hex digits>[&baud=N]``, and a device path that does not
+    exist yet (a board plugged in later) or is a character device other than the
+    memory devices, /dev/tty, the console, /dev/ptmx and the virtual consoles.
+    ``stat`` is ``os.stat`` (injectable for tests).
+    """
+    if port == '':
+        return None
+    if any(ord(c) < 32 or c == '\x7f' for c in port):
+        return f'port {port!r}: control characters'
+    if port.startswith('xbee:'):
+        m = re.fullmatch(r'xbee:([^?]+)\?addr=([0-9A-Fa-f]{16})(&baud=\d+)?', port)
+        if m is None:
+            return f"port {port!r}: expected 'xbee:<uart>?addr=<16 hex digits>[&baud=<bit/s>]'"
+        return port_problem(m.group(1), stat)
+    if '://' in port:
+        scheme = port.split('://', 1)[0]
+        if scheme not in URL_SCHEMES:
+            return f'port {port!r}: unknown URL scheme {scheme!r} (pyserial: {", ".join(URL_SCHEMES)})'
+        return None
+    try:
+        st = stat(port)
+    except FileNotFoundError:
+        return None                  # not plugged in yet: configure retries
+    except OSError as exc:
+        return f'port {port!r}: {exc.strerror or exc}'
+    if not stat_mod.S_ISCHR(st.st_mode):
+        return f'port {port!r} is not a character device (a serial port, pty or USB adapter)'
+    major, minor = os.major(st.st_rdev), os.minor(st.st_rdev)
+    what = _NOT_A_BOARD.get(major) or ('a virtual console' if major == 4 and minor < 64 else None)
+    if what:
+        return f'port {port!r} is {what} ({major}:{minor}), not a board'
+    return None
