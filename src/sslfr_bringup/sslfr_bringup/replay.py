@@ -26,8 +26,8 @@ import sys
 import threading
 import time
 
-from sslfr_planner._cliutil import (CliError, OneLineParser, bounded_int, output_dir, ranged_float,
-                                    read_text_file, ros_remap, ros_topic, run)
+from sslfr_planner.cli_input import (CliError, OneLineParser, bounded_int, output_dir, ranged_float,
+                                     read_text_file, ros_remap, ros_topic, run)
 
 from .bag.metadata import BagError
 from .bag.playback import Timeline, absolute, parse_time_spec, progress_line

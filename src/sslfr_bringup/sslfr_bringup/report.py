@@ -8,7 +8,7 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 - per-axis tracking error, RMS / max / 95th percentile [mrad], only while the axis is
   tracking: phase TRACKING and not inside one of the axis' deliberate moves (see
   :func:`axis_moves`): measured vs the commanded setpoint (``axes/<axis>/status``)
-  and measured vs the ideal command of :func:`sslfr_planner.daytable.evaluate` at the
+  and measured vs the ideal command of :func:`sslfr_planner.tracking_table.evaluate` at the
   same instants (when that module is installed; otherwise "ideal unavailable");
 - per-axis moves, reported separately: count, total duration and the largest
   (PRE_DAWN's slew from the sleeping position, stows, a law's repositioning);
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
-from sslfr_planner._cliutil import CliError, OneLineParser, output_dir
+from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader
@@ -239,8 +239,8 @@ def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None)
 def planner_config(path: str | None) -> dict:
     """The planner's parameter values: its defaults, overlaid with the ``/**`` and
     ``planner`` sections of a ROS params file (the site config) when given."""
-    from sslfr_planner.planner_params import defaults
-    cfg = dict(defaults())
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    cfg = PLANNER_PARAMS.defaults()
     if path:
         import yaml
         with open(path, encoding='utf-8') as fh:
@@ -251,13 +251,13 @@ def planner_config(path: str | None) -> dict:
 
 
 def _ideal(site: dict, t: np.ndarray, config: str | None = None):
-    """Ideal axis commands at ``t`` from sslfr_planner.daytable, or (None, reason)."""
+    """Ideal axis commands at ``t`` from sslfr_planner.tracking_table, or (None, reason)."""
     try:
-        from sslfr_planner.day_planner import make_collector
-        from sslfr_planner.daytable import evaluate
+        from sslfr_planner.day_cycle import make_collector
+        from sslfr_planner.tracking_table import evaluate
         from sslfr_planner.site import Site
     except ImportError:
-        return None, 'ideal unavailable (sslfr_planner.daytable not installed)'
+        return None, 'ideal unavailable (sslfr_planner.tracking_table not installed)'
     if not site or not np.isfinite(site.get('latitude', np.nan)):
         return None, 'ideal unavailable (no site in the bag)'
     try:
@@ -265,7 +265,7 @@ def _ideal(site: dict, t: np.ndarray, config: str | None = None):
         s = Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0))
         table = evaluate(t, s, collector)
         return {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}, \
-            ('ideal = sslfr_planner.daytable.evaluate at the same instants, collector from '
+            ('ideal = sslfr_planner.tracking_table.evaluate at the same instants, collector from '
              + (config or 'the planner defaults') + ', site from the bag')
     except Exception as exc:  # noqa: BLE001 - any failure of the optional reference is reported
         return None, f'ideal unavailable ({type(exc).__name__}: {exc})'
@@ -426,13 +426,13 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
 
     ``beam`` [W/m^2] at ``t`` [s]; ``measured``: axis -> (t, {'measured': rad, ...}) from
     ``axes/<axis>/status``. The ideal angles and the sun come from
-    :func:`sslfr_planner.daytable.evaluate`; an axis without status counts as ideal.
+    :func:`sslfr_planner.tracking_table.evaluate`; an axis without status counts as ideal.
     """
     try:
         from sslfr_planner.analysis.optics import OpticalParameters
         from sslfr_planner.analysis.performance import day_energy
-        from sslfr_planner.day_planner import make_collector
-        from sslfr_planner.daytable import evaluate
+        from sslfr_planner.day_cycle import make_collector
+        from sslfr_planner.tracking_table import evaluate
         from sslfr_planner.site import Site
     except ImportError:
         return {'note': 'energy estimate unavailable (sslfr_planner not installed)'}
