@@ -9,6 +9,8 @@ durations; nanoseconds are Python integers (exact).
 """
 from __future__ import annotations
 
+import math
+
 NS_PER_S = 1_000_000_000
 
 
@@ -31,18 +33,32 @@ def stamp_from_ns(ns: int):
     return Time(sec=sec, nanosec=nanosec)
 
 
+def split_seconds(seconds: float) -> tuple[int, int]:
+    """``(sec, nanosec)`` of ``seconds`` [s], nanosec in [0, 1e9), rounded to the
+    nanosecond of the float's own value (exact: the fraction is taken before scaling,
+    so an epoch instant keeps its sub-microsecond digits). ValueError for NaN or
+    infinity."""
+    if not math.isfinite(seconds):
+        raise ValueError(f'{seconds} s is not a finite time')
+    sec = math.floor(seconds)
+    nanosec = round((seconds - sec) * 1e9)
+    if nanosec >= NS_PER_S:
+        sec, nanosec = sec + 1, nanosec - NS_PER_S
+    return int(sec), int(nanosec)
+
+
 def stamp(seconds: float):
-    """``builtin_interfaces/Time`` for ``seconds`` [s since the epoch], rounded to the
-    nanosecond. ValueError for NaN or infinity."""
-    return stamp_from_ns(round(seconds * 1e9))
+    """``builtin_interfaces/Time`` for ``seconds`` [s since the epoch] (:func:`split_seconds`)."""
+    from builtin_interfaces.msg import Time
+    sec, nanosec = split_seconds(seconds)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def duration(seconds: float):
-    """``builtin_interfaces/Duration`` for ``seconds`` [s], rounded to the nanosecond
-    (nanosec is always in [0, 1e9), as the message requires). ValueError for NaN or
-    infinity."""
+    """``builtin_interfaces/Duration`` for ``seconds`` [s] (:func:`split_seconds`; a
+    negative duration has sec < 0 and nanosec >= 0, as the message requires)."""
     from builtin_interfaces.msg import Duration
-    sec, nanosec = divmod(round(seconds * 1e9), NS_PER_S)
+    sec, nanosec = split_seconds(seconds)
     return Duration(sec=sec, nanosec=nanosec)
 
 

@@ -33,7 +33,7 @@ def _cfg_from(name: str) -> dict:
     return PLANNER_PARAMS.coerce(cfg)
 
 
-def _planner(cfg: dict) -> DayCycle:
+def _cycle(cfg: dict) -> DayCycle:
     return DayCycle(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
                                    cfg['site.elevation'], 'parameters'))
 
@@ -107,10 +107,10 @@ def test_seed_numbers_in_configs():
     assert f['collector.receiver_height'] == 3.75 and f['collector.mirror_width'] == 0.45
 
 
-# ----------------------------------------------------------------------- day plans
+# ------------------------------------------------------------------- day schedules
 def test_day_table_is_the_core_table_and_covers_the_local_day():
     cfg = _cfg_from('almeria_sslfr.yaml')
-    p = _planner(cfg)
+    p = _cycle(cfg)
     now = _utc(2026, 6, 21, 10, 0, 0) + 0.5
     plan = p.plan(now)
     assert plan.start <= now < plan.start + 86400 and plan.table.t.size == 86401
@@ -127,7 +127,7 @@ def test_day_table_is_the_core_table_and_covers_the_local_day():
 
 
 def test_horizon_positions_and_rates():
-    p = _planner(_cfg_from('almeria_sslfr.yaml'))
+    p = _cycle(_cfg_from('almeria_sslfr.yaml'))
     now = _utc(2026, 6, 21, 10, 0, 0) + 0.3
     p.plan(now)
     t = horizon_times(now, 120.0, 1.0)
@@ -146,7 +146,7 @@ def test_horizon_positions_and_rates():
 
 
 def test_horizon_across_local_midnight_and_pre_dawn_step():
-    p = _planner(_cfg_from('almeria_sslfr.yaml'))
+    p = _cycle(_cfg_from('almeria_sslfr.yaml'))
     plan = p.plan(_utc(2026, 6, 21, 12))
     t = horizon_times(plan.start + 86400 - 60.5, 120.0, 1.0)
     h = p.auto_horizon(t)
@@ -165,7 +165,7 @@ def test_horizon_across_local_midnight_and_pre_dawn_step():
 
 def test_bucaramanga_window_and_15_minute_steps():
     cfg = _cfg_from('bucaramanga_single_axis.yaml')
-    p = _planner(cfg)
+    p = _cycle(cfg)
     plan = p.plan(_utc(2026, 3, 20, 17))
     tab = plan.table
     ws, we = _utc(2026, 3, 20, 12), _utc(2026, 3, 20, 22)      # 7:00 and 17:00 UTC-5
@@ -193,7 +193,7 @@ def test_bucaramanga_window_and_15_minute_steps():
 def test_polar_days(date, day_type, phase):
     cfg = PLANNER_PARAMS.defaults()
     cfg.update({'site.latitude_deg': 78.22, 'site.longitude_deg': 15.65})
-    p = _planner(cfg)
+    p = _cycle(cfg)
     plan = p.plan(_utc(*date, 11))
     assert plan.events.day_type == day_type and plan.events.sunrise is None
     assert np.all(plan.table.phase == phase)
@@ -202,7 +202,7 @@ def test_polar_days(date, day_type, phase):
 
 
 def test_sleep_pose_and_day_index():
-    p = _planner(PLANNER_PARAMS.defaults())
+    p = _cycle(PLANNER_PARAMS.defaults())
     pose = p.sleep_pose(_utc(2026, 1, 1))
     assert pose.tolist() == [math.pi / 2, 0.0, 0.0]
     for t in np.linspace(_utc(2026, 1, 1), _utc(2026, 1, 3), 37):
