@@ -34,10 +34,11 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
+from sslfr_common.timeconv import to_sec
 from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
-from .bag.reader import BagReader
+from .bag.reader import BagReader, message_time
 from .nodeset import node_params
 
 MAX_GAP_S = 120.0
@@ -49,15 +50,6 @@ MOVE_RATE = math.radians(0.05)
 SETTLE = 1e-3
 #: a move not settled after this long ends anyway: what follows counts as tracking error [s]
 MOVE_CAP = 300.0
-
-
-def _t(header, log_ns: int) -> float:
-    s, n = int(header.stamp.sec), int(header.stamp.nanosec)
-    return log_ns / 1e9 if s == 0 and n == 0 else s + n * 1e-9
-
-
-def _time_msg(t) -> float:
-    return int(t.sec) + int(t.nanosec) * 1e-9
 
 
 def utc(t: float, fmt: str = '%H:%M:%S') -> str:
@@ -298,26 +290,26 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         except Exception as exc:  # noqa: BLE001 - decoder errors vary
             raise BagError(f'cannot decode a {raw.type} message on {raw.topic}: {exc}') from exc
         if key == 'tracker/phase':
-            phase.add(_t(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
+            phase.add(message_time(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
             last_phase = m
         elif key == 'safety/state':
-            safety.add(_t(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
+            safety.add(message_time(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
         elif key.startswith('absorber/'):
-            temps.setdefault(key.split('/')[1], Series()).add(_t(m.header, raw.log_time),
+            temps.setdefault(key.split('/')[1], Series()).add(message_time(m.header, raw.log_time),
                                                               v=float(m.temperature))
         elif key == 'irradiance/beam':
-            beam.add(_t(m.header, raw.log_time), g=float(m.beam), sat=bool(m.saturated))
+            beam.add(message_time(m.header, raw.log_time), g=float(m.beam), sat=bool(m.saturated))
         elif key == 'gps/fix':
             if len(fix.t) < 10 and int(m.status.status) >= 0:
-                fix.add(_t(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
+                fix.add(message_time(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
         elif key == 'joint_states':
-            t = _t(m.header, raw.log_time)
+            t = message_time(m.header, raw.log_time)
             for name, pos in zip(m.name, m.position):
                 if name in joints:
                     joints[name].add(t, measured=float(pos))
         else:
             axis = key.split('/')[1]
-            status[axis].add(_t(m.header, raw.log_time), measured=float(m.measured),
+            status[axis].add(message_time(m.header, raw.log_time), measured=float(m.measured),
                              setpoint=float(m.setpoint), commanded=float(m.commanded),
                              link=int(m.link_state), lost=int(m.frames_lost), bad=int(m.frames_bad),
                              faults=int(m.fault_bits))
@@ -327,10 +319,10 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         rep.site = {'latitude': float(last_phase.latitude), 'longitude': float(last_phase.longitude),
                     'altitude': float(last_phase.altitude), 'source': str(last_phase.site_source)}
         if int(last_phase.day_type) == 0:
-            rep.events = {k: _time_msg(getattr(last_phase, k)) for k in ('sunrise', 'solar_noon', 'sunset')}
+            rep.events = {k: to_sec(getattr(last_phase, k)) for k in ('sunrise', 'solar_noon', 'sunset')}
         else:
             rep.events = {'day_type': {1: 'polar day', 2: 'polar night'}.get(int(last_phase.day_type), '?'),
-                          'solar_noon': _time_msg(last_phase.solar_noon)}
+                          'solar_noon': to_sec(last_phase.solar_noon)}
     elif fix.t:
         rep.site = {'latitude': float(fix.v['lat'][0]), 'longitude': float(fix.v['lon'][0]),
                     'altitude': float(fix.v['alt'][0]), 'source': 'gps/fix'}

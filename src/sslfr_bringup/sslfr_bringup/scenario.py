@@ -24,15 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from sslfr_common.contract import JOINTS
+from sslfr_common.timeconv import to_sec
 
-
-
-def _stamp(h) -> float:
-    return h.stamp.sec + h.stamp.nanosec * 1e-9
-
-
-def _time(t) -> float:
-    return t.sec + t.nanosec * 1e-9
 
 
 @dataclass
@@ -98,7 +91,7 @@ def _collect(reader, topic: str, fields: dict, log_time: bool = False) -> Series
     rows = []
     for raw, msg in reader.decoded([topic]):
         header = getattr(msg, 'header', None)
-        t = _stamp(header) if header is not None and not log_time else raw.log_time * 1e-9
+        t = to_sec(header.stamp) if header is not None and not log_time else raw.log_time * 1e-9
         rows.append((t, [f(msg) for f in fields.values()]))
     rows.sort(key=lambda r: r[0])
     cols = {}
@@ -129,7 +122,7 @@ def read_day(bag: str | Path) -> Day:
         'phase': lambda m: int(m.phase), 'name': lambda m: m.phase_name, 'reason': lambda m: m.reason,
         'mode': lambda m: m.mode, 'site_source': lambda m: m.site_source,
         'latitude': lambda m: float(m.latitude), 'longitude': lambda m: float(m.longitude),
-        'sunrise': lambda m: _time(m.sunrise), 'sunset': lambda m: _time(m.sunset)})
+        'sunrise': lambda m: to_sec(m.sunrise), 'sunset': lambda m: to_sec(m.sunset)})
     safety = _collect(reader, '/safety/state', {
         'level': lambda m: int(m.level), 'reasons': lambda m: list(m.reasons),
         'stow_required': lambda m: bool(m.stow_required), 'stopped_axes': lambda m: list(m.stopped_axes)})
@@ -142,7 +135,7 @@ def read_day(bag: str | Path) -> Day:
     rows = []
     for raw, msg in reader.decoded(['/diagnostics']):
         for st in msg.status:
-            rows.append((_stamp(msg.header), st.name, int(st.level) if not isinstance(st.level, bytes)
+            rows.append((to_sec(msg.header.stamp), st.name, int(st.level) if not isinstance(st.level, bytes)
                          else st.level[0], st.message, {kv.key: kv.value for kv in st.values}))
     rows.sort(key=lambda r: r[0])
     diag = Series(np.asarray([r[0] for r in rows], dtype=float),

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import os
 import shlex
 import shutil
 import sys
@@ -23,24 +22,8 @@ import tempfile
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_bringup.host import find_executable
 from sslfr_bringup.supervisor import Program, RosSide, Supervisor
-
-
-def find_executable(package: str, exe: str) -> Path | None:
-    """Where ``ros2 run package exe`` looks: ``<prefix>/lib/<package>/<exe>``."""
-    candidates = []
-    root = os.environ.get('SSLFR_ROOT')
-    if root:
-        candidates.append(Path(root) / 'ros_ws' / 'install' / package / 'lib' / package / exe)
-    try:
-        from ament_index_python.packages import get_package_prefix
-        candidates.append(Path(get_package_prefix(package)) / 'lib' / package / exe)
-    except Exception:  # noqa: BLE001 - package not installed: no candidate
-        pass
-    for c in candidates:
-        if c.is_file() and os.access(c, os.X_OK):
-            return c
-    return None
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
