@@ -54,7 +54,7 @@ def main() -> int:
     ap.add_argument('--runs', type=int, default=15)
     args = ap.parse_args()
     now = dt.datetime(2026, 6, 21, 10, 0, 0, tzinfo=dt.timezone.utc).timestamp() + 0.37
-    polar = defaults()
+    polar = PLANNER_PARAMS.defaults()
     polar.update({'site.latitude_deg': 78.22, 'site.longitude_deg': 15.65})
     sites = [('almeria_sslfr.yaml', cfg_from('almeria_sslfr.yaml')),
              ('bucaramanga_single_axis.yaml', cfg_from('bucaramanga_single_axis.yaml')),
