@@ -17,9 +17,7 @@ ros          a :class:`RosHarness`: an rclpy context + node in the test's domain
 """
 from __future__ import annotations
 
-import fcntl
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -30,36 +28,27 @@ from pathlib import Path
 
 import pytest
 
+from sslfr_bringup.host import TEST_DOMAINS, acquire_domain, executable_path
+
 ROOT = Path(__file__).resolve().parent
 INSTALL = ROOT / 'ros_ws' / 'install'
-_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
 
 
 def executable(package: str, exe: str) -> Path:
-    """Path ``ros2 run package exe`` would run."""
-    return INSTALL / package / 'lib' / package / exe
+    """Path ``ros2 run package exe`` would run in this checkout's overlay."""
+    return executable_path(package, exe, INSTALL)
 
 
 def _acquire_domain() -> tuple[int, object]:
-    _LOCK_DIR.mkdir(exist_ok=True)
-    ids = list(range(1, 102))
-    random.shuffle(ids)
-    for i in ids:
-        fh = open(_LOCK_DIR / f'{i}.lock', 'w')  # noqa: SIM115 - held for the test
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return i, fh
-        except OSError:
-            fh.close()
-    raise RuntimeError('no free ROS_DOMAIN_ID in 1..101 (too many concurrent test runs)')
+    """A test domain id held for the caller: ``(id, lock file)`` (sslfr_bringup.host)."""
+    return acquire_domain(TEST_DOMAINS, shuffle=True)
 
 
 @pytest.fixture
 def ros_domain():
     dom, fh = _acquire_domain()
     yield dom
-    fcntl.flock(fh, fcntl.LOCK_UN)
-    fh.close()
+    fh.close()                  # releases the lock
 
 
 @pytest.fixture

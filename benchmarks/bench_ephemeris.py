@@ -1,7 +1,7 @@
 """Benchmark: one whole day at 1 s (86,400 instants), all columns of ``sslfr plan``.
 
 Issue 3 goals: <= 20 ms median in-process for the whole table (sun position, incidence
-angles, phases, axis commands; ``plan_day``) and >= 20x faster than pvlib's
+angles, phases, axis commands; ``tabulate_day``) and >= 20x faster than pvlib's
 ``spa_python`` on the same instants (sun position only, numpy back end). Also prints
 the agreement with pvlib (max |difference| in zenith and azimuth), the distance of the
 fast path from the exact SPA path, and how far the seeds' own low-accuracy formulas
@@ -21,7 +21,7 @@ import numpy as np
 
 from sslfr_planner import solar_simple, spa
 from sslfr_planner.collector import Collector
-from sslfr_planner.daytable import day_grid, plan_day
+from sslfr_planner.tracking_table import day_grid, tabulate_day
 from sslfr_planner.site import Site
 
 
@@ -36,7 +36,7 @@ def timings(fn, repeat, clock=time.perf_counter):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--repeat', type=int, default=21, help='runs of plan_day (median reported)')
+    ap.add_argument('--repeat', type=int, default=21, help='runs of tabulate_day (median reported)')
     ap.add_argument('--pvlib-repeat', type=int, default=3, help='runs of pvlib spa_python')
     a = ap.parse_args(argv)
 
@@ -50,16 +50,16 @@ def main(argv=None):
     t = day_grid(day, 1.0)
     idx = pd.to_datetime(t, unit='s', utc=True)
 
-    plan_day(day, site, collector, 1.0)  # warm-up
-    ours = timings(lambda: plan_day(day, site, collector, 1.0), a.repeat)
-    ours_cpu = timings(lambda: plan_day(day, site, collector, 1.0), a.repeat, time.process_time)
+    tabulate_day(day, site, collector, 1.0)  # warm-up
+    ours = timings(lambda: tabulate_day(day, site, collector, 1.0), a.repeat)
+    ours_cpu = timings(lambda: tabulate_day(day, site, collector, 1.0), a.repeat, time.process_time)
     sun_only = timings(lambda: spa.sun_position(t, site), a.repeat)
     theirs = timings(lambda: pvsp.spa_python(idx, lat, lon, elev, delta_t=69.2, how='numpy'), a.pvlib_repeat)
     theirs_cpu = timings(lambda: pvsp.spa_python(idx, lat, lon, elev, delta_t=69.2, how='numpy'), a.pvlib_repeat,
                          time.process_time)
     med_ours, med_sun, med_pv = statistics.median(ours), statistics.median(sun_only), statistics.median(theirs)
 
-    table = plan_day(day, site, collector, 1.0)
+    table = tabulate_day(day, site, collector, 1.0)
     ref = pvsp.spa_python(idx, lat, lon, elev, delta_t=69.2, how='numpy')
     dz = np.abs(np.degrees(table.zenith) - ref['apparent_zenith'].to_numpy())
     da = np.abs((np.degrees(table.azimuth) - ref['azimuth'].to_numpy() + 180.0) % 360.0 - 180.0)
@@ -70,18 +70,18 @@ def main(argv=None):
     import os
     print(f'day table {day} at 1 s, {t.size} instants, Almeria (36.84 N, 2.40 W), all `sslfr plan` columns')
     print(f'  machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} (1 min) at the end of the runs')
-    print(f'  plan_day (ours, in-process)     median {med_ours * 1e3:8.2f} ms  '
+    print(f'  tabulate_day (ours, in-process)     median {med_ours * 1e3:8.2f} ms  '
           f'(min {min(ours) * 1e3:.2f}, max {max(ours) * 1e3:.2f}, n={len(ours)})   goal <= 20 ms: '
           f'{"OK" if med_ours <= 0.020 else "MISSED"}')
-    print(f'  plan_day CPU time (process)     median {statistics.median(ours_cpu) * 1e3:8.2f} ms  '
+    print(f'  tabulate_day CPU time (process)     median {statistics.median(ours_cpu) * 1e3:8.2f} ms  '
           '(wall time above includes waiting for the shared CPUs)')
     print(f'  sun_position only (ours)        median {med_sun * 1e3:8.2f} ms')
     print(f'  pvlib spa_python (numpy)        median {med_pv * 1e3:8.2f} ms  (n={len(theirs)})')
-    print(f'  ratio pvlib / plan_day          {med_pv / med_ours:8.1f} x   goal >= 20x: '
+    print(f'  ratio pvlib / tabulate_day          {med_pv / med_ours:8.1f} x   goal >= 20x: '
           f'{"OK" if med_pv / med_ours >= 20 else "MISSED"}')
     print(f'  ratio pvlib / sun_position      {med_pv / med_sun:8.1f} x')
     cpu_ratio = statistics.median(theirs_cpu) / statistics.median(ours_cpu)
-    print(f'  ratio of CPU-time medians, pvlib / plan_day {cpu_ratio:8.1f} x '
+    print(f'  ratio of CPU-time medians, pvlib / tabulate_day {cpu_ratio:8.1f} x '
           f'(pvlib CPU {statistics.median(theirs_cpu) * 1e3:.1f} ms)')
     print(f'  max |ours - pvlib|: zenith {dz.max():.2e} deg, azimuth {da.max():.2e} deg')
     print(f'  max |fast - exact SPA path|: zenith {fz.max():.2e} deg, azimuth {fa.max():.2e} deg')

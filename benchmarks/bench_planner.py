@@ -22,8 +22,8 @@ from pathlib import Path
 
 import yaml
 
-from sslfr_planner.day_planner import DayPlanner
-from sslfr_planner.planner_params import SPEC_BY_NAME, defaults
+from sslfr_planner.day_cycle import DayCycle
+from sslfr_planner.planner_params import PLANNER_PARAMS
 from sslfr_planner.site_source import SiteFix
 from sslfr_planner.trajectory import horizon_times
 
@@ -33,11 +33,10 @@ GOAL_MS = 50.0
 
 def cfg_from(name: str) -> dict:
     data = yaml.safe_load((CONFIG / name).read_text())
-    cfg = defaults()
+    cfg = PLANNER_PARAMS.defaults()
     for section in ('/**', 'planner'):
         cfg.update(data[section]['ros__parameters'])
-    return {k: (float(v) if isinstance(SPEC_BY_NAME[k].default, float) and isinstance(v, int) else v)
-            for k, v in cfg.items()}
+    return PLANNER_PARAMS.coerce(cfg)
 
 
 def cpu_ms(fn, runs: int) -> tuple[float, float]:
@@ -55,7 +54,7 @@ def main() -> int:
     ap.add_argument('--runs', type=int, default=15)
     args = ap.parse_args()
     now = dt.datetime(2026, 6, 21, 10, 0, 0, tzinfo=dt.timezone.utc).timestamp() + 0.37
-    polar = defaults()
+    polar = PLANNER_PARAMS.defaults()
     polar.update({'site.latitude_deg': 78.22, 'site.longitude_deg': 15.65})
     sites = [('almeria_sslfr.yaml', cfg_from('almeria_sslfr.yaml')),
              ('bucaramanga_single_axis.yaml', cfg_from('bucaramanga_single_axis.yaml')),
@@ -64,7 +63,7 @@ def main() -> int:
     ok = True
     print(f'planning a day (86,401 per-second rows), CPU ms over {args.runs} runs; goal < {GOAL_MS:.0f} ms')
     for name, cfg in sites:
-        p = DayPlanner(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
+        p = DayCycle(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
                                     cfg['site.elevation'], 'parameters'))
         p.plan(now)                                   # warm-up (imports, caches)
         med, worst = cpu_ms(lambda: p.plan(now), args.runs)
@@ -72,7 +71,7 @@ def main() -> int:
         print(f'  {name:32s} median {med:6.1f}  worst {worst:6.1f}  '
               f'{"ok" if med < GOAL_MS else "OVER GOAL"}')
     cfg = cfg_from('almeria_sslfr.yaml')
-    p = DayPlanner(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
+    p = DayCycle(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
                                 cfg['site.elevation'], 'parameters'))
     p.plan(now)
     t = horizon_times(now, 120.0, 1.0)

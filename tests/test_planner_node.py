@@ -1,6 +1,6 @@
 """Topic-level acceptance of the planner node (issue 4): the real ``planner``
 executable runs as a process; this test process drives /clock (use_sim_time) and
-subscribes to its topics. References: the ephemeris core (sslfr_planner.daytable),
+subscribes to its topics. References: the ephemeris core (sslfr_planner.tracking_table),
 evaluated in this process for the same instants."""
 from __future__ import annotations
 
@@ -41,17 +41,14 @@ def _points(msg) -> np.ndarray:
 
 def _planner_cfg(config: Path | None, overrides: dict) -> dict:
     """The parameters the node will use (defaults <- file <- overrides)."""
-    from sslfr_planner.planner_params import SPEC_BY_NAME, defaults
-    cfg = defaults()
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    cfg = PLANNER_PARAMS.defaults()
     if config is not None:
         data = yaml.safe_load(config.read_text())
         for section in ('/**', 'planner'):
             cfg.update((data.get(section) or {}).get('ros__parameters') or {})
     cfg.update(overrides)
-    for k, v in list(cfg.items()):
-        if k in SPEC_BY_NAME and isinstance(SPEC_BY_NAME[k].default, float) and isinstance(v, int):
-            cfg[k] = float(v)
-    return cfg
+    return PLANNER_PARAMS.coerce(cfg)
 
 
 class SimClock:
@@ -133,7 +130,7 @@ CASES = {
 @pytest.mark.parametrize('case', list(CASES))
 def test_phase_sequence_over_a_simulated_day(case, launch, ros, tmp_path):
     from sslfr_interfaces.msg import TrackerPhase
-    from sslfr_planner.day_planner import DayPlanner
+    from sslfr_planner.day_cycle import DayCycle
     from sslfr_planner.site_source import SiteFix
 
     name, date, overrides, expected, day_type = CASES[case]
@@ -142,11 +139,11 @@ def test_phase_sequence_over_a_simulated_day(case, launch, ros, tmp_path):
     cfg = _planner_cfg(config, overrides)
     site = SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'], cfg['site.elevation'],
                    'parameters')
-    ref = DayPlanner(cfg, site)
+    ref = DayCycle(cfg, site)
     # the local solar day containing noon of `date` at the site
     day = ref.day_index(_utc(*date, 12) - cfg['site.longitude_deg'] * 240)
     t0, t1 = ref.day_start(day) + 30.0, ref.day_start(day) + 86400.0 - 30.0
-    plan = ref.day_plan(day)
+    plan = ref.schedule(day)
     ph = plan.table.phase
     changes = np.nonzero(np.diff(ph))[0] + 1
     transitions = [float(plan.table.t[i]) for i in changes]
@@ -180,8 +177,8 @@ def test_phase_sequence_over_a_simulated_day(case, launch, ros, tmp_path):
 # ------------------------------------------------------- trajectory vs the core table
 @pytest.mark.timeout(60)
 def test_trajectory_equals_core_and_is_never_in_the_past(launch, ros, tmp_path):
-    from sslfr_planner.daytable import evaluate
-    from sslfr_planner.day_planner import make_collector, make_site
+    from sslfr_planner.tracking_table import evaluate
+    from sslfr_planner.day_cycle import make_collector, make_site
     from sslfr_planner.site_source import SiteFix
     from trajectory_msgs.msg import JointTrajectory
 

@@ -2,7 +2,7 @@
 boards through `./sslfr sim`, observed live on topics and in the recorded bag.
 
 - a tracking window at high speed: every axis within one motor step + the position
-  sensor noise of the ideal angle of the ephemeris core (sslfr_planner.daytable),
+  sensor noise of the ideal angle of the ephemeris core (sslfr_planner.tracking_table),
   allowing for the sim-time quantisation (see sslfr_bringup.scenario);
 - sunrise and sunset windows: the phase changes NIGHT -> PRE_DAWN -> TRACKING and
   TRACKING -> STOWING -> NIGHT at the times of the reference table, the mirrors

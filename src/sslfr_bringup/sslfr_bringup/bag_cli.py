@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from sslfr_planner._cliutil import CliError, OneLineParser, run
+from sslfr_planner.cli_input import CliError, OneLineParser, run
 
 from .bag.metadata import BagError
 

@@ -5,7 +5,8 @@ import argparse
 import os
 import shutil
 import sys
-from pathlib import Path
+
+from .host import executable_path, find_executable, install_prefix
 
 #: package -> {executable: kind} that ``ros2 run <package> <exe>`` must find after a
 #: build. kind 'cli' answers ``--help``; kind 'node' starts with defaults and stops
@@ -17,20 +18,6 @@ EXECUTABLES: dict[str, dict[str, str]] = {
                       'irradiance': 'node'},
     'sslfr_planner': {'planner': 'node'},
 }
-
-
-def install_prefix() -> Path | None:
-    """Return ros_ws/install (the colcon overlay), or None when not built."""
-    root = os.environ.get('SSLFR_ROOT')
-    if root and (Path(root) / 'ros_ws' / 'install').is_dir():
-        return Path(root) / 'ros_ws' / 'install'
-    return None
-
-
-def executable_path(package: str, exe: str) -> Path | None:
-    """Where ``ros2 run package exe`` looks: <install>/<pkg>/lib/<pkg>/<exe>."""
-    prefix = install_prefix()
-    return None if prefix is None else prefix / package / 'lib' / package / exe
 
 
 def main(argv: list[str]) -> int:
@@ -51,10 +38,11 @@ def main(argv: list[str]) -> int:
         print(f'interfaces    NOT importable: {exc}')
     for package, exes in EXECUTABLES.items():
         for exe in exes:  # noqa: B007 - kind is for the tests
-            path = executable_path(package, exe)
-            good = path is not None and path.is_file() and os.access(path, os.X_OK)
-            ok &= good
-            print(f'executable    {package}/{exe}: {"ok" if good else "MISSING"} ({path})')
+            path = find_executable(package, exe)         # what `sslfr up` would run
+            ok &= path is not None
+            prefix = install_prefix()
+            where = path or (executable_path(package, exe, prefix) if prefix else 'ros_ws/install not built')
+            print(f'executable    {package}/{exe}: {"ok" if path else "MISSING"} ({where})')
     for tool in ('socat',):
         print(f'optional      {tool}: {"found" if shutil.which(tool) else "not found"}')
     print('verdict       ' + ('ok' if ok else 'PROBLEMS: run make setup'))

@@ -10,8 +10,8 @@ recorded nothing (no publisher, or write errors), 0 otherwise.
 """
 from __future__ import annotations
 
-from sslfr_planner._cliutil import (CliError, OneLineParser, file_name, output_dir, ranged_float, ros_node_name,
-                                    ros_topic, run)
+from sslfr_planner.cli_input import (CliError, OneLineParser, file_name, output_dir, ranged_float, ros_node_name,
+                                     ros_topic, run)
 
 from .bag.session import probe_output_dir
 

@@ -8,7 +8,7 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 - per-axis tracking error, RMS / max / 95th percentile [mrad], only while the axis is
   tracking: phase TRACKING and not inside one of the axis' deliberate moves (see
   :func:`axis_moves`): measured vs the commanded setpoint (``axes/<axis>/status``)
-  and measured vs the ideal command of :func:`sslfr_planner.daytable.evaluate` at the
+  and measured vs the ideal command of :func:`sslfr_planner.tracking_table.evaluate` at the
   same instants (when that module is installed; otherwise "ideal unavailable");
 - per-axis moves, reported separately: count, total duration and the largest
   (PRE_DAWN's slew from the sleeping position, stows, a law's repositioning);
@@ -34,10 +34,11 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
-from sslfr_planner._cliutil import CliError, OneLineParser, output_dir
+from sslfr_common.timeconv import to_sec
+from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
-from .bag.reader import BagReader
+from .bag.reader import BagReader, message_time
 from .nodeset import node_params
 
 MAX_GAP_S = 120.0
@@ -49,15 +50,6 @@ MOVE_RATE = math.radians(0.05)
 SETTLE = 1e-3
 #: a move not settled after this long ends anyway: what follows counts as tracking error [s]
 MOVE_CAP = 300.0
-
-
-def _t(header, log_ns: int) -> float:
-    s, n = int(header.stamp.sec), int(header.stamp.nanosec)
-    return log_ns / 1e9 if s == 0 and n == 0 else s + n * 1e-9
-
-
-def _time_msg(t) -> float:
-    return int(t.sec) + int(t.nanosec) * 1e-9
 
 
 def utc(t: float, fmt: str = '%H:%M:%S') -> str:
@@ -239,8 +231,8 @@ def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None)
 def planner_config(path: str | None) -> dict:
     """The planner's parameter values: its defaults, overlaid with the ``/**`` and
     ``planner`` sections of a ROS params file (the site config) when given."""
-    from sslfr_planner.planner_params import defaults
-    cfg = dict(defaults())
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    cfg = PLANNER_PARAMS.defaults()
     if path:
         import yaml
         with open(path, encoding='utf-8') as fh:
@@ -251,13 +243,13 @@ def planner_config(path: str | None) -> dict:
 
 
 def _ideal(site: dict, t: np.ndarray, config: str | None = None):
-    """Ideal axis commands at ``t`` from sslfr_planner.daytable, or (None, reason)."""
+    """Ideal axis commands at ``t`` from sslfr_planner.tracking_table, or (None, reason)."""
     try:
-        from sslfr_planner.day_planner import make_collector
-        from sslfr_planner.daytable import evaluate
+        from sslfr_planner.day_cycle import make_collector
+        from sslfr_planner.tracking_table import evaluate
         from sslfr_planner.site import Site
     except ImportError:
-        return None, 'ideal unavailable (sslfr_planner.daytable not installed)'
+        return None, 'ideal unavailable (sslfr_planner.tracking_table not installed)'
     if not site or not np.isfinite(site.get('latitude', np.nan)):
         return None, 'ideal unavailable (no site in the bag)'
     try:
@@ -265,7 +257,7 @@ def _ideal(site: dict, t: np.ndarray, config: str | None = None):
         s = Site.from_degrees(site['latitude'], site['longitude'], site.get('altitude', 0.0))
         table = evaluate(t, s, collector)
         return {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}, \
-            ('ideal = sslfr_planner.daytable.evaluate at the same instants, collector from '
+            ('ideal = sslfr_planner.tracking_table.evaluate at the same instants, collector from '
              + (config or 'the planner defaults') + ', site from the bag')
     except Exception as exc:  # noqa: BLE001 - any failure of the optional reference is reported
         return None, f'ideal unavailable ({type(exc).__name__}: {exc})'
@@ -298,26 +290,26 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         except Exception as exc:  # noqa: BLE001 - decoder errors vary
             raise BagError(f'cannot decode a {raw.type} message on {raw.topic}: {exc}') from exc
         if key == 'tracker/phase':
-            phase.add(_t(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
+            phase.add(message_time(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
             last_phase = m
         elif key == 'safety/state':
-            safety.add(_t(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
+            safety.add(message_time(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
         elif key.startswith('absorber/'):
-            temps.setdefault(key.split('/')[1], Series()).add(_t(m.header, raw.log_time),
+            temps.setdefault(key.split('/')[1], Series()).add(message_time(m.header, raw.log_time),
                                                               v=float(m.temperature))
         elif key == 'irradiance/beam':
-            beam.add(_t(m.header, raw.log_time), g=float(m.beam), sat=bool(m.saturated))
+            beam.add(message_time(m.header, raw.log_time), g=float(m.beam), sat=bool(m.saturated))
         elif key == 'gps/fix':
             if len(fix.t) < 10 and int(m.status.status) >= 0:
-                fix.add(_t(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
+                fix.add(message_time(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
         elif key == 'joint_states':
-            t = _t(m.header, raw.log_time)
+            t = message_time(m.header, raw.log_time)
             for name, pos in zip(m.name, m.position):
                 if name in joints:
                     joints[name].add(t, measured=float(pos))
         else:
             axis = key.split('/')[1]
-            status[axis].add(_t(m.header, raw.log_time), measured=float(m.measured),
+            status[axis].add(message_time(m.header, raw.log_time), measured=float(m.measured),
                              setpoint=float(m.setpoint), commanded=float(m.commanded),
                              link=int(m.link_state), lost=int(m.frames_lost), bad=int(m.frames_bad),
                              faults=int(m.fault_bits))
@@ -327,10 +319,10 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         rep.site = {'latitude': float(last_phase.latitude), 'longitude': float(last_phase.longitude),
                     'altitude': float(last_phase.altitude), 'source': str(last_phase.site_source)}
         if int(last_phase.day_type) == 0:
-            rep.events = {k: _time_msg(getattr(last_phase, k)) for k in ('sunrise', 'solar_noon', 'sunset')}
+            rep.events = {k: to_sec(getattr(last_phase, k)) for k in ('sunrise', 'solar_noon', 'sunset')}
         else:
             rep.events = {'day_type': {1: 'polar day', 2: 'polar night'}.get(int(last_phase.day_type), '?'),
-                          'solar_noon': _time_msg(last_phase.solar_noon)}
+                          'solar_noon': to_sec(last_phase.solar_noon)}
     elif fix.t:
         rep.site = {'latitude': float(fix.v['lat'][0]), 'longitude': float(fix.v['lon'][0]),
                     'altitude': float(fix.v['alt'][0]), 'source': 'gps/fix'}
@@ -426,13 +418,13 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
 
     ``beam`` [W/m^2] at ``t`` [s]; ``measured``: axis -> (t, {'measured': rad, ...}) from
     ``axes/<axis>/status``. The ideal angles and the sun come from
-    :func:`sslfr_planner.daytable.evaluate`; an axis without status counts as ideal.
+    :func:`sslfr_planner.tracking_table.evaluate`; an axis without status counts as ideal.
     """
     try:
         from sslfr_planner.analysis.optics import OpticalParameters
         from sslfr_planner.analysis.performance import day_energy
-        from sslfr_planner.day_planner import make_collector
-        from sslfr_planner.daytable import evaluate
+        from sslfr_planner.day_cycle import make_collector
+        from sslfr_planner.tracking_table import evaluate
         from sslfr_planner.site import Site
     except ImportError:
         return {'note': 'energy estimate unavailable (sslfr_planner not installed)'}

@@ -5,7 +5,7 @@ system scenario tests assert on. Pure Python + numpy (no rclpy); reads bags with
 - :func:`read_day` turns a bag into time series (ROS time [s since the Unix epoch]
   of each message's header stamp; angles [rad]).
 - :func:`tracking_error` compares each axis' measured angle with the ideal command
-  of :func:`sslfr_planner.daytable.evaluate` (seed 000 eqs. 9-13 and the
+  of :func:`sslfr_planner.tracking_table.evaluate` (seed 000 eqs. 9-13 and the
   collector's longitudinal law) for the same site and collector.
 
 Time quantisation in simulation. At ``--speed X`` the drivers poll their board on a
@@ -24,15 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from sslfr_common.contract import JOINTS
+from sslfr_common.timeconv import to_sec
 
-
-
-def _stamp(h) -> float:
-    return h.stamp.sec + h.stamp.nanosec * 1e-9
-
-
-def _time(t) -> float:
-    return t.sec + t.nanosec * 1e-9
 
 
 @dataclass
@@ -98,7 +91,7 @@ def _collect(reader, topic: str, fields: dict, log_time: bool = False) -> Series
     rows = []
     for raw, msg in reader.decoded([topic]):
         header = getattr(msg, 'header', None)
-        t = _stamp(header) if header is not None and not log_time else raw.log_time * 1e-9
+        t = to_sec(header.stamp) if header is not None and not log_time else raw.log_time * 1e-9
         rows.append((t, [f(msg) for f in fields.values()]))
     rows.sort(key=lambda r: r[0])
     cols = {}
@@ -129,7 +122,7 @@ def read_day(bag: str | Path) -> Day:
         'phase': lambda m: int(m.phase), 'name': lambda m: m.phase_name, 'reason': lambda m: m.reason,
         'mode': lambda m: m.mode, 'site_source': lambda m: m.site_source,
         'latitude': lambda m: float(m.latitude), 'longitude': lambda m: float(m.longitude),
-        'sunrise': lambda m: _time(m.sunrise), 'sunset': lambda m: _time(m.sunset)})
+        'sunrise': lambda m: to_sec(m.sunrise), 'sunset': lambda m: to_sec(m.sunset)})
     safety = _collect(reader, '/safety/state', {
         'level': lambda m: int(m.level), 'reasons': lambda m: list(m.reasons),
         'stow_required': lambda m: bool(m.stow_required), 'stopped_axes': lambda m: list(m.stopped_axes)})
@@ -142,7 +135,7 @@ def read_day(bag: str | Path) -> Day:
     rows = []
     for raw, msg in reader.decoded(['/diagnostics']):
         for st in msg.status:
-            rows.append((_stamp(msg.header), st.name, int(st.level) if not isinstance(st.level, bytes)
+            rows.append((to_sec(msg.header.stamp), st.name, int(st.level) if not isinstance(st.level, bytes)
                          else st.level[0], st.message, {kv.key: kv.value for kv in st.values}))
     rows.sort(key=lambda r: r[0])
     diag = Series(np.asarray([r[0] for r in rows], dtype=float),
@@ -169,7 +162,7 @@ def tracking_error(t: np.ndarray, measured: np.ndarray, ideal_fn, lag: float = 0
         Measured joint angles [rad].
     ideal_fn : callable
         ``ideal_fn(t_array) -> angles [rad]``, e.g. a column of
-        ``sslfr_planner.daytable.evaluate``.
+        ``sslfr_planner.tracking_table.evaluate``.
     lag : float
         Allowed lag [s] (>= 0); the ideal path over ``[t - lag, t]`` is sampled at
         ``samples`` points and the distance to the nearest is returned.
@@ -192,9 +185,9 @@ def planner_config(config: str | Path) -> dict:
     """The planner's parameter values for a site config: its defaults overlaid by the
     config's ``/**`` and ``planner`` sections (``sslfr_planner.planner_params``)."""
     from sslfr_bringup import nodeset
-    from sslfr_planner import planner_params
+    from sslfr_planner.planner_params import PLANNER_PARAMS
 
-    cfg = planner_params.defaults()
+    cfg = PLANNER_PARAMS.defaults()
     for key, value in nodeset.node_params(nodeset.read_params(config), 'planner').items():
         if key in cfg:
             cfg[key] = value
@@ -202,18 +195,18 @@ def planner_config(config: str | Path) -> dict:
 
 
 def reference(config: str | Path, latitude_deg: float, longitude_deg: float, elevation: float):
-    """``table(t) -> DayTable``: the ephemeris core's ideal table
-    (:func:`sslfr_planner.daytable.evaluate`, NREL SPA + seed 000 eqs. 9-16) for the
+    """``table(t) -> TrackingTable``: the ephemeris core's ideal table
+    (:func:`sslfr_planner.tracking_table.evaluate`, NREL SPA + seed 000 eqs. 9-16) for the
     config's collector at the given site [deg, deg, m] (the site the planner reports
     in ``tracker/phase``)."""
-    from sslfr_planner import daytable
-    from sslfr_planner.day_planner import make_collector, make_site
+    from sslfr_planner import tracking_table
+    from sslfr_planner.day_cycle import make_collector, make_site
     from sslfr_planner.site_source import SiteFix
 
     cfg = planner_config(config)
     site = make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters'))
     collector = make_collector(cfg)
-    return lambda t: daytable.evaluate(np.atleast_1d(np.asarray(t, dtype=float)), site, collector)
+    return lambda t: tracking_table.evaluate(np.atleast_1d(np.asarray(t, dtype=float)), site, collector)
 
 
 # ------------------------------------------------------------------------------ running

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
-from sslfr_planner._cliutil import (CliError, OneLineParser, bounded_int, output_dir, ros_namespace, run,
+from sslfr_planner.cli_input import (CliError, OneLineParser, bounded_int, output_dir, ros_namespace, run,
                                     write_atomically)
 
 UNIT_NAME = 'sslfr-tracker.service'

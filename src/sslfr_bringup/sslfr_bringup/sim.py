@@ -37,9 +37,10 @@ from pathlib import Path
 
 from sslfr_bringup import faults as faults_mod
 from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
-from sslfr_bringup.up import find_executable, select
-from sslfr_planner._cliutil import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_bringup.up import select
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float
 
 
 class SimClock:
@@ -113,7 +114,6 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
     return [json.dumps(cmd)]
 
 
-DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
 #: [s] wall time between starting the time-dependent simulators and their clock anchor.
 #: It must cover their own start-up (they tabulate the day's sun: 2-8 s on a loaded
 #: 2-core machine) and the nodes' reconnection (<= 2 s): a sensor simulator that runs
@@ -144,23 +144,6 @@ def _watch_topics(ns) -> dict:
     by_node = {'gps': ('gps/fix', NavSatFix), 'absorber_board': ('absorber/outlet_temperature', Temperature),
                'irradiance': ('irradiance/beam', Irradiance)}
     return dict(by_node[n.name] for n in ns.nodes if n.name in by_node)
-
-
-def acquire_domain(candidates=tuple(range(215, 233)) + tuple(range(102, 0, -1))):
-    """A ROS domain id nobody else on this machine holds (file lock in
-    /tmp/sslfr-ros-domains, the lock the test fixtures take too); returns
-    ``(domain_id, open lock file)`` -- keep the file open while the domain is used.
-    215..232 first: valid DDS port ranges outside the tests' 1..101."""
-    import fcntl
-    DOMAIN_LOCK_DIR.mkdir(exist_ok=True)
-    for i in candidates:
-        fh = open(DOMAIN_LOCK_DIR / f'{i}.lock', 'w')  # noqa: SIM115 - held by the caller
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return i, fh
-        except OSError:
-            fh.close()
-    raise RuntimeError('no free ROS domain id: pass --domain-id')
 
 
 #: Simulated days: ROS time is unsigned seconds since 1970 (a day before it cannot be
@@ -299,7 +282,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         try:   # a simulation must never share its domain (and /clock) with anything else
             args.domain_id, domain_lock = acquire_domain()
         except RuntimeError as exc:
-            print(f'sslfr sim: {exc}', file=sys.stderr)
+            print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
             return 1
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     env['SSLFR_SIM_WORLD'] = str(run / 'world.json')

@@ -553,6 +553,7 @@ class RosSide(threading.Thread):
         if self.clock_fn is not None:
             from rosgraph_msgs.msg import Clock as ClockMsg
             from rclpy.qos import QoSProfile, ReliabilityPolicy
+            from sslfr_common.timeconv import stamp
 
             clock_pub = node.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
 
@@ -560,10 +561,7 @@ class RosSide(threading.Thread):
                 t = self.clock_fn()
                 if t is None:   # clock held back: nothing published yet
                     return
-                msg = ClockMsg()
-                sec = int(t // 1)
-                msg.clock.sec, msg.clock.nanosec = sec, int(round((t - sec) * 1e9)) % 1_000_000_000
-                clock_pub.publish(msg)
+                clock_pub.publish(ClockMsg(clock=stamp(t)))
                 self.clock_published += 1
 
             node.create_timer(1.0 / self.clock_rate, publish_clock, clock=steady)

@@ -14,7 +14,6 @@ graph to a monitoring laptop.
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import shutil
 import sys
@@ -22,25 +21,9 @@ import tempfile
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
+from sslfr_bringup.host import find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
-from sslfr_planner._cliutil import CliError, OneLineParser, bounded_int
-
-
-def find_executable(package: str, exe: str) -> Path | None:
-    """Where ``ros2 run package exe`` looks: ``<prefix>/lib/<package>/<exe>``."""
-    candidates = []
-    root = os.environ.get('SSLFR_ROOT')
-    if root:
-        candidates.append(Path(root) / 'ros_ws' / 'install' / package / 'lib' / package / exe)
-    try:
-        from ament_index_python.packages import get_package_prefix
-        candidates.append(Path(get_package_prefix(package)) / 'lib' / package / exe)
-    except Exception:  # noqa: BLE001 - package not installed: no candidate
-        pass
-    for c in candidates:
-        if c.is_file() and os.access(c, os.X_OK):
-            return c
-    return None
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,

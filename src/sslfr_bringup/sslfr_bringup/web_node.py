@@ -15,7 +15,6 @@ import sys
 from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -24,12 +23,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase
 from sslfr_common.contract import JOINTS
-from sslfr_common.node import CONFIG_ERRORS, run_node
+from sslfr_common.node import CONFIG_ERRORS, declare_parameters, run_node, steady_now, to_sec
 
 from .web import commands, remote
 from .web.app import OperatorApp, Server
 from .web.live import DayBuffer, LiveState
-from .web.params import SPECS, coerce, validate
+from .web.params import WEB_PARAMS
 
 REMOTE_RETRY, REMOTE_REFRESH = 2.0, 60.0       # [s, steady] get_parameters: until answered / then
 SAMPLE_PERIOD = 0.5                            # [s, steady] check whether a day-plot sample is due
@@ -46,14 +45,7 @@ class WebNode(Node):
 
     def __init__(self):
         super().__init__('web')
-        for spec in SPECS:
-            self.declare_parameter(spec.name, spec.default, ParameterDescriptor(
-                description=spec.description, additional_constraints=spec.constraints,
-                read_only=spec.read_only, dynamic_typing=isinstance(spec.default, float)))
-        self.cfg = coerce({s.name: self.get_parameter(s.name).value for s in SPECS})
-        problems = validate(self.cfg)
-        if problems:
-            raise ValueError('; '.join(problems))
+        self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -93,8 +85,8 @@ class WebNode(Node):
 
     # ------------------------------------------------------------------ Backend (web thread)
     def ros_time(self) -> float | None:
-        ns = self.get_clock().now().nanoseconds
-        return ns / 1e9 if ns > 0 else None
+        t = to_sec(self.get_clock().now())
+        return t if t > 0 else None
 
     def bag_dir(self) -> str | None:
         return self.cfg['bag_dir'] or self.state.info.get('bag_dir')
@@ -153,7 +145,7 @@ class WebNode(Node):
             self.buffer.maybe_sample(t, self.state)
 
     def _steady_tick(self) -> None:
-        now = self._steady.now().nanoseconds / 1e9
+        now = steady_now(self._steady)
         for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
             client = self._param_clients.get(node)
             if now < due:

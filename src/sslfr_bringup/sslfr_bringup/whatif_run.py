@@ -1,16 +1,16 @@
 """Orchestration of ``sslfr replay BAG --what-if`` (processes + player + comparison).
 
-On a private ROS domain: start a recorder for the decisions (``use_sim_time``), a
-fresh ``planner`` (sslfr_planner) and ``safety`` (sslfr_drivers) with
-``use_sim_time:=true`` and the site config, play only the sensor inputs of the bag
-with /clock, stop the nodes (SIGINT), then compare the decisions the fresh nodes
-recorded with the ones in the bag (:mod:`sslfr_bringup.bag.whatif`). Executables
-that are not installed are reported and skipped.
+On a private ROS domain (held with the machine's domain lock, :mod:`.host`): start a
+recorder for the decisions (``use_sim_time``), a fresh ``planner`` (sslfr_planner) and
+``safety`` (sslfr_drivers) with ``use_sim_time:=true`` and the site config, play only
+the sensor inputs of the bag with /clock (:mod:`.player`), stop the nodes (SIGINT),
+then compare the decisions the fresh nodes recorded with the ones in the bag
+(:mod:`sslfr_bringup.bag.whatif`). Deciding nodes that are not installed are reported
+and skipped.
 """
 from __future__ import annotations
 
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -22,25 +22,27 @@ from .bag.metadata import BagError
 from .bag.playback import absolute
 from .bag.reader import BagReader
 from .bag.whatif import compare_bags
+from .host import acquire_domain, find_executable, install_prefix
+from .player import run_player
 
+#: Inputs played in what-if mode (relative names): the sensors (GPS, absorber
+#: temperatures, irradiance, limit switches) and the axes' measured state, which the
+#: safety supervisor watches (heartbeat watchdogs) and the planner does not produce.
+WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
+                 'absorber/outlet_temperature', 'irradiance/beam', 'irradiance/illuminance',
+                 'limit_switches', 'joint_states', 'axes/mirrors/status',
+                 'axes/mobile_structure/status', 'axes/secondary_reflector/status']
+#: Decisions compared in what-if mode.
+WHATIF_DECISIONS = ['tracker/phase', 'safety/state', 'tracker/trajectory']
 #: (package, executable) of the deciding nodes started fresh.
 DECIDERS = [('sslfr_planner', 'planner'), ('sslfr_drivers', 'safety')]
 
 
-def install_prefix() -> Path:
-    root = os.environ.get('SSLFR_ROOT') or str(Path(__file__).resolve().parents[3])
-    return Path(root) / 'ros_ws' / 'install'
-
-
-def executable(package: str, exe: str) -> Path:
-    """Where ``ros2 run package exe`` finds the executable."""
-    return install_prefix() / package / 'lib' / package / exe
-
-
 def default_config() -> Path | None:
     """The default site config (share/sslfr_bringup/config/almeria_sslfr.yaml) if installed."""
-    p = install_prefix() / 'sslfr_bringup' / 'share' / 'sslfr_bringup' / 'config' / 'almeria_sslfr.yaml'
-    return p if p.exists() else None
+    prefix = install_prefix()
+    p = prefix / 'sslfr_bringup' / 'share' / 'sslfr_bringup' / 'config' / 'almeria_sslfr.yaml' if prefix else None
+    return p if p is not None and p.exists() else None
 
 
 def _start(argv, env, log: Path) -> subprocess.Popen:
@@ -61,20 +63,39 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 
 def run_whatif(reader: BagReader, ns, start_ns, end_ns) -> int:
     """Run a what-if replay; print and write the comparison; return the exit status."""
-    from .replay import WHATIF_DECISIONS, WHATIF_INPUTS, run_player
-    out = Path(ns.out) if ns.out else Path(tempfile.mkdtemp(prefix='sslfr_whatif_'))
-    out.mkdir(parents=True, exist_ok=True)
-    domain = ns.domain if ns.domain is not None else random.randint(150, 230)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     inputs = [absolute(t) for t in (ns.inputs or WHATIF_INPUTS)]
     present = [t for t in inputs if t in reader.topics]
     if not present:
         print('sslfr replay --what-if: the bag has none of the input topics '
               + ', '.join(inputs), file=sys.stderr)
         return 1
+    rec_exe = find_executable('sslfr_bringup', 'recorder')
+    if rec_exe is None:
+        print('sslfr replay --what-if: sslfr_bringup/recorder is not installed (run make setup)',
+              file=sys.stderr)
+        return 1
+    lock = None
+    if ns.domain is not None:
+        domain = ns.domain
+    else:
+        try:
+            domain, lock = acquire_domain()
+        except RuntimeError as exc:
+            print(f'sslfr replay --what-if: {exc}: pass --domain', file=sys.stderr)
+            return 1
+    try:
+        return _run(reader, ns, start_ns, end_ns, present, rec_exe, domain)
+    finally:
+        if lock is not None:
+            lock.close()
+
+
+def _run(reader: BagReader, ns, start_ns, end_ns, present: list[str], rec_exe: Path, domain: int) -> int:
+    out = Path(ns.out) if ns.out else Path(tempfile.mkdtemp(prefix='sslfr_whatif_'))
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     config = Path(ns.config) if ns.config else default_config()
     procs = []
-    rec_exe = executable('sslfr_bringup', 'recorder')
     dec_root = out / 'decisions'
     rec_argv = [str(rec_exe), '--ros-args', '-p', f'output_dir:={dec_root}', '-p', 'prefix:=whatif',
                 '-p', 'per_day:=false', '-p', 'use_sim_time:=true', '-p', 'fsync:=false',
@@ -83,8 +104,8 @@ def run_whatif(reader: BagReader, ns, start_ns, end_ns) -> int:
     procs.append(('recorder', _start(rec_argv, env, out / 'recorder.log')))
     started = []
     for pkg, exe in DECIDERS:
-        path = executable(pkg, exe)
-        if not path.exists():
+        path = find_executable(pkg, exe)
+        if path is None:
             print(f'what-if: {pkg}/{exe} is not installed: its decisions are not compared',
                   file=sys.stderr)
             continue

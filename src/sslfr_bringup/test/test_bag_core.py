@@ -356,7 +356,7 @@ def test_report_figures_on_a_known_day(tmp_path):
 def test_playback_helpers():
     from sslfr_bringup.bag.playback import Timeline, parse_time_spec
     from sslfr_bringup.replay import remap_table
-    from sslfr_planner._cliutil import CliError
+    from sslfr_planner.cli_input import CliError
     s = T0
     assert parse_time_spec('90', s) == s + 90 * 10**9
     assert parse_time_spec('-10', s, s + 100 * 10**9) == s + 90 * 10**9

@@ -11,11 +11,11 @@ T0 = datetime(2024, 6, 21, 10, 0, tzinfo=timezone.utc).timestamp()
 
 
 def _ideal(t):
-    from sslfr_planner.daytable import evaluate
-    from sslfr_planner.day_planner import make_collector
-    from sslfr_planner.planner_params import defaults
+    from sslfr_planner.tracking_table import evaluate
+    from sslfr_planner.day_cycle import make_collector
+    from sslfr_planner.planner_params import PLANNER_PARAMS
     from sslfr_planner.site import Site
-    return evaluate(t, Site.from_degrees(36.8353, -2.4022, 22.0), make_collector(dict(defaults())))
+    return evaluate(t, Site.from_degrees(36.8353, -2.4022, 22.0), make_collector(PLANNER_PARAMS.defaults()))
 
 
 def test_measured_equal_to_ideal_achieves_everything():

@@ -51,7 +51,7 @@ def pwfile(tmp_path):
 def run(tmp_path, pwfile, body, backend=None, **cfg):
     """Run ``body(client, backend, op)`` against a live server on 127.0.0.1."""
     backend = backend or RecordingBackend()
-    conf = {**params.defaults(), 'password_file': str(pwfile), 'audit_file': str(tmp_path / 'audit.jsonl'),
+    conf = {**params.WEB_PARAMS.defaults(), 'password_file': str(pwfile), 'audit_file': str(tmp_path / 'audit.jsonl'),
             'report_dir': str(tmp_path / 'reports'), 'push_period': 0.05, **cfg}
     op = OperatorApp(conf, backend)
 

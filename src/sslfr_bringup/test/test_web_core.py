@@ -282,12 +282,13 @@ def test_day_buffer_samples_per_period_and_clears_at_local_solar_midnight():
 
 # ------------------------------------------------------------------ params and remote facts
 def test_params_defaults_valid_and_bad_values_named():
-    assert params.validate(params.defaults()) == []
-    assert params.defaults()['bind_address'] == '127.0.0.1'              # never every interface by default
-    bad = {**params.defaults(), 'bind_address': 'my-pi.local', 'port': 70000, 'push_period': 5.0}
-    errs = ' '.join(params.validate(bad))
+    table = params.WEB_PARAMS
+    assert table.validate(table.defaults()) == []
+    assert table.defaults()['bind_address'] == '127.0.0.1'              # never every interface by default
+    bad = {**table.defaults(), 'bind_address': 'my-pi.local', 'port': 70000, 'push_period': 5.0}
+    errs = ' '.join(table.validate(bad))
     assert 'bind_address' in errs and 'port' in errs and 'push_period' in errs
-    assert params.coerce({'session_timeout': 60})['session_timeout'] == 60.0
+    assert table.coerce({'session_timeout': 60})['session_timeout'] == 60.0
 
 
 def test_remote_parameter_nodes_exist_in_the_node_set_and_values_convert():

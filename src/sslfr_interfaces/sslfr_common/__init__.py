@@ -9,5 +9,8 @@ theirs):
 - :mod:`sslfr_common.params`: parameter tables (pure: the CLI validates site configs
   with the same tables the nodes declare);
 - :mod:`sslfr_common.node`: node plumbing (the Jazzy main pattern once, signals,
-  the log bridge, parameter declaration and run-time guard, time conversions).
+  the log bridge, parameter declaration and run-time guard; re-exports the time
+  conversions);
+- :mod:`sslfr_common.timeconv`: ROS time messages <-> float seconds (pure, for the
+  cores that read or build messages without rclpy).
 """

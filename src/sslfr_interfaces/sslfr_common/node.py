@@ -39,6 +39,8 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_sec  # noqa: F401 - re-exported
+
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
 CONFIG_ERRORS: tuple[type[BaseException], ...] = (
     ValueError, TypeError, ParameterException, InvalidParameterTypeException,
@@ -278,27 +280,38 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
 def declare_parameters(node, table) -> dict:
     """Declare every parameter of ``table`` (a :class:`sslfr_common.params.ParamTable`)
     on ``node`` with its description, unit and range, and return the values in force
-    (defaults overridden by the command line or params files).
+    (defaults overridden by the command line or params files; integers made floats
+    where the table takes them, :meth:`ParamTable.coerce`).
 
     Raises
     ------
     ValueError
-        One line listing every invalid value (``run_node`` turns it into exit 2).
+        One line listing every invalid value (``run_node`` turns it into exit 2):
+        the ones rclpy refuses when declaring (type, range) and the table's checks.
     """
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+    problems = []
     for spec in table:
         d = ParameterDescriptor(description=spec.description, read_only=spec.read_only,
                                 additional_constraints=spec.constraints)
         default = spec.default
+        floating = isinstance(default, float) or (isinstance(default, list) and bool(default)
+                                                  and isinstance(default[0], float))
+        if floating and table.integers_for_floats:
+            d.dynamic_typing = True           # 22 for 22.0; the table judges the value
         if spec.lo is not None and spec.hi is not None:
-            if isinstance(default, float) or (isinstance(default, list) and default
-                                               and isinstance(default[0], float)):
+            if floating:
                 d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi))]
             elif isinstance(default, int) and not isinstance(default, bool):
                 d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=1)]
-        node.declare_parameter(spec.name, default, d)
-    values = {spec.name: node.get_parameter(spec.name).value for spec in table}
+        try:
+            node.declare_parameter(spec.name, default, d)
+        except CONFIG_ERRORS as exc:
+            problems.append(f'{spec.name}: {exc}')
+    if problems:
+        raise ValueError('; '.join(problems))
+    values = table.coerce({spec.name: node.get_parameter(spec.name).value for spec in table})
     errors = table.validate(values)
     if errors:
         raise ValueError('; '.join(errors))
@@ -308,13 +321,16 @@ def declare_parameters(node, table) -> dict:
 class ParameterGuard:
     """Run-time parameter changes checked against the table, all or nothing.
 
-    ``apply(proposed)`` is called with the complete proposed set once the table's
-    checks pass; it may raise ``ValueError`` (a node-specific rule) to refuse the
-    change. On a refusal the reason is returned to the caller of ``set_parameters``
-    and the last good configuration (:attr:`values`) stays in force.
+    ``apply(proposed)`` is called with the complete proposed set (integers made
+    floats where the table takes them) once the table's checks pass; it may raise
+    ``ValueError`` (a node-specific rule) to refuse the change. On a refusal the
+    reason is returned to the caller of ``set_parameters``, logged as an error and
+    counted (:attr:`refused`), and the last good configuration (:attr:`values`)
+    stays in force.
     """
 
     def __init__(self, node, table, values: dict, apply: Callable[[dict], None]):
+        self.node = node
         self.table = table
         self.values = dict(values)
         self.apply = apply
@@ -324,15 +340,19 @@ class ParameterGuard:
 
     def _on_set(self, params):
         from rcl_interfaces.msg import SetParametersResult
+        from rclpy.parameter import Parameter
 
         proposed = dict(self.values)
         for prm in params:
             spec = self.table.by_name.get(prm.name)
             if spec is None:
                 continue
-            if spec.read_only and prm.value != self.values[prm.name]:
+            if prm.type_ == Parameter.Type.NOT_SET:
+                return self._refuse(f'{prm.name}: cannot be unset')
+            value = self.table.coerce({prm.name: prm.value})[prm.name]
+            if spec.read_only and value != self.values[prm.name]:
                 return self._refuse(f'{prm.name} is fixed at start-up')
-            proposed[prm.name] = prm.value
+            proposed[prm.name] = value
         errors = self.table.validate(proposed)
         if not errors:
             try:
@@ -349,38 +369,9 @@ class ParameterGuard:
 
         self.refused += 1
         self.last_refusal = reason
+        self.node.get_logger().error(
+            f'parameter change refused, keeping the last good configuration: {reason}')
         return SetParametersResult(successful=False, reason=reason)
-
-
-# ---------------------------------------------------------------- time
-def to_sec(t) -> float:
-    """Seconds [s] of a ``builtin_interfaces`` Time/Duration message, an
-    ``rclpy.time.Time``/``Duration`` or an integer of nanoseconds."""
-    if isinstance(t, int):
-        return t * 1e-9
-    ns = getattr(t, 'nanoseconds', None)
-    if ns is not None:
-        return ns * 1e-9
-    return t.sec + t.nanosec * 1e-9
-
-
-def stamp(seconds: float):
-    """``builtin_interfaces/Time`` for ``seconds`` [s since the epoch] (>= 0)."""
-    from builtin_interfaces.msg import Time
-    ns = int(round(seconds * 1e9))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def duration(seconds: float):
-    """``builtin_interfaces/Duration`` for ``seconds`` [s] (>= 0)."""
-    from builtin_interfaces.msg import Duration
-    ns = int(round(seconds * 1e9))
-    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def steady_now(clock) -> float:
-    """``clock.now()`` in seconds [s] (a steady or ROS clock)."""
-    return clock.now().nanoseconds * 1e-9
 
 
 def message_class(type_name: str):

@@ -42,6 +42,10 @@ class ParamSpec:
         Required length of an array parameter.
     read_only : bool
         Fixed at start-up (a run-time change is refused).
+    validator : callable or None
+        A rule no range or choice expresses (e.g. "a literal IP address"):
+        ``validator(value) -> None`` when valid, else the reason (without the
+        name); run after the type, range and choice checks pass.
     """
 
     name: str
@@ -53,6 +57,7 @@ class ParamSpec:
     choices: tuple[str, ...] = ()
     length: int | None = None
     read_only: bool = False
+    validator: Callable[[Any], str | None] | None = None
 
     @property
     def constraints(self) -> str:
@@ -69,9 +74,16 @@ class ParamSpec:
     def check(self, value: Any) -> str | None:
         """None when ``value`` is valid for this parameter, else a one-line reason
         naming the parameter, the value and what is allowed."""
+        why = self._check_type_and_range(value)
+        if why is None and self.validator is not None:
+            rule = self.validator(value)
+            why = None if rule is None else f'{self.name}: {rule}'
+        return why
+
+    def _check_type_and_range(self, value: Any) -> str | None:
         d = self.default
         if isinstance(d, bool):
-            return None if isinstance(value, bool) else f'{self.name}: expected true or false, got {value!r}'
+            return None if isinstance(value, bool) else f'{self.name}: expected a bool (true or false), got {value!r}'
         if isinstance(d, list):
             if not isinstance(value, (list, tuple)) or isinstance(value, str):
                 return f'{self.name}: expected a list, got {value!r}'
@@ -115,15 +127,22 @@ class ParamTable:
     cross_check : callable, optional
         ``cross_check(values) -> list[str]``: rules between parameters, run only
         when every single value is valid.
+    integers_for_floats : bool
+        True: a floating-point parameter (or array) also takes integers (a params
+        file's ``22`` for 22.0, ``ros2 param set ... horizon 60``), converted to float
+        (:meth:`coerce`; the node declares these parameters with dynamic typing).
+        False: rclpy's strict typing, which refuses them.
     """
 
     def __init__(self, specs: Iterable[ParamSpec],
-                 cross_check: Callable[[dict[str, Any]], list[str]] | None = None):
+                 cross_check: Callable[[dict[str, Any]], list[str]] | None = None, *,
+                 integers_for_floats: bool = False):
         self.specs: tuple[ParamSpec, ...] = tuple(specs)
         self.by_name: dict[str, ParamSpec] = {s.name: s for s in self.specs}
         if len(self.by_name) != len(self.specs):
             raise ValueError('duplicate parameter names in a table')
         self.cross_check = cross_check
+        self.integers_for_floats = integers_for_floats
 
     def __iter__(self):
         return iter(self.specs)
@@ -147,7 +166,18 @@ class ParamTable:
         if unknown:
             raise KeyError(f'unknown parameters: {", ".join(sorted(unknown))}')
         return ParamTable((replace(s, default=new[s.name]) if s.name in new else s for s in self.specs),
-                          self.cross_check)
+                          self.cross_check, integers_for_floats=self.integers_for_floats)
+
+    def coerce(self, values: dict[str, Any]) -> dict[str, Any]:
+        """A copy of ``values`` with integers given for floating-point parameters (and
+        elements of floating-point arrays) converted to float; other values unchanged
+        (:meth:`validate` judges them)."""
+        out = dict(values)
+        for name, value in values.items():
+            spec = self.by_name.get(name)
+            if spec is not None:
+                out[name] = _as_float(spec, value)
+        return out
 
     def validate(self, values: dict[str, Any]) -> list[str]:
         """Problems of a complete set of values (empty list: valid)."""
@@ -176,12 +206,26 @@ class ParamTable:
                 hint = f' (did you mean {" or ".join(close)}?)' if close else ''
                 errors.append(f'{name}: not a parameter of this node{hint}')
                 continue
-            why = _strict_type(spec, value) or spec.check(value)
+            why = (None if self.integers_for_floats else _strict_type(spec, value)) or spec.check(value)
             if why:
                 errors.append(why)
         if not errors and self.cross_check is not None:
             errors.extend(self.cross_check({**self.defaults(), **values}))
         return errors
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _as_float(spec: ParamSpec, value: Any) -> Any:
+    """``value`` with integers made floats where ``spec`` is floating-point."""
+    d = spec.default
+    if isinstance(d, float) and _is_int(value):
+        return float(value)
+    if isinstance(d, list) and d and isinstance(d[0], float) and isinstance(value, (list, tuple)):
+        return [float(v) if _is_int(v) else v for v in value]
+    return value
 
 
 def _strict_type(spec: ParamSpec, value: Any) -> str | None:

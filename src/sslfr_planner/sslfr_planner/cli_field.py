@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ._cliutil import OneLineParser, finite_float, run
+from .cli_input import OneLineParser, finite_float, run
 from .lepten import fit_linear
 
 HEADER = 'x_m,a,b,max_error_deg'

@@ -2,7 +2,7 @@
 
 One row per step of the whole UTC day: sun zenith and azimuth (NREL SPA), transversal
 and longitudinal incidence angles, the day-cycle phase and the commanded axis
-angles (:func:`sslfr_planner.daytable.plan_day`). Header (exact)::
+angles (:func:`sslfr_planner.tracking_table.tabulate_day`). Header (exact)::
 
     utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,mobile_structure_deg,secondary_reflector_deg
 
@@ -18,9 +18,9 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, PHASE_NAMES
 
-from ._cliutil import OneLineParser, finite_float, output_file, run, time_step, write_atomically
+from .cli_input import OneLineParser, finite_float, output_file, run, time_step, write_atomically
 from .collector import LAWS, Collector
-from .daytable import plan_day
+from .tracking_table import tabulate_day
 from .site import Site
 
 #: the most rows one day table may have (a step of 0.1 s; ~100 MB of CSV)
@@ -61,7 +61,7 @@ def parser() -> OneLineParser:
 
 
 def format_rows(table) -> list[str]:
-    """CSV lines (without header) of a DayTable, degrees with 6 decimals."""
+    """CSV lines (without header) of a TrackingTable, degrees with 6 decimals."""
     t = table.t
     whole = np.all(np.abs(t - np.round(t)) < 5e-4)
     stamps = np.datetime_as_string(np.round(t * 1000.0).astype('datetime64[ms]'),
@@ -85,7 +85,7 @@ def _main(argv) -> int:
     site = Site.from_degrees(a.lat, a.lon, a.elevation, pressure=a.pressure * 100.0,
                              temperature=a.temperature, delta_t=a.delta_t)
     collector = Collector(law=a.mode, azimuth=math.radians(a.collector_azimuth))
-    table = plan_day(day, site, collector, a.step)
+    table = tabulate_day(day, site, collector, a.step)
     text = HEADER + '\n' + '\n'.join(format_rows(table)) + '\n'
     if a.out:
         def write(path):

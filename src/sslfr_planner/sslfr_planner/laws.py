@@ -3,7 +3,7 @@
 Signs (docs/conventions.md): beta_M and beta_a are measured from the horizontal,
 positive when they lower the collector's +p end (the SOUTH end of a north-south
 collector), i.e. positive when the rows / the tube face the south. All angles radians;
-magnitudes are clipped to the collector's tilt_max by :mod:`sslfr_planner.daytable`,
+magnitudes are clipped to the collector's tilt_max by :mod:`sslfr_planner.tracking_table`,
 not here. docs/optics.md compares the laws' annual energy, area, EAR and LCOE
 (``sslfr analyse year``) and explains the default (``continuous``).
 

@@ -2,7 +2,7 @@
 
 The automatic day cycle of seed 000 section 4 (Steps 1-5: NIGHT -> PRE_DAWN ->
 TRACKING -> STOWING -> NIGHT) is computed by the ephemeris core
-(:func:`sslfr_planner.daytable.evaluate`). This module decides what overrides it:
+(:func:`sslfr_planner.tracking_table.evaluate`). This module decides what overrides it:
 
 * the operator's **mode** (``planner/set_mode``): ``auto`` follows the day cycle,
   ``stow`` sends the mirrors to the sleeping position, ``manual`` holds the axes where

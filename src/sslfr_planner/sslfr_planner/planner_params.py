@@ -1,10 +1,11 @@
-"""The planner node's parameters, declared in ONE place (pure Python, no rclpy).
+"""The planner node's parameters: one :class:`~sslfr_common.params.ParamTable` (pure).
 
 Every parameter has a default, a description that states its unit, and a range (or a
-set of choices). :func:`validate` checks a complete set of values (ranges, NaN,
-cross-parameter rules); the node uses it at start-up and in its
-``add_on_set_parameters_callback``, so a refused change leaves the last good
-configuration in force.
+set of choices). :data:`PLANNER_PARAMS` checks a complete set of values (ranges,
+NaN, the cross-parameter rules of :func:`cross_check`); the node declares it with
+``sslfr_common.node.declare_parameters`` and guards run-time changes with
+``ParameterGuard``, so a refused change leaves the last good configuration in force.
+Floating-point parameters also take integers (a site config's ``22`` for 22.0).
 
 Units are SI and angles radians, except the site's latitude/longitude in degrees
 (``_deg`` suffix, as NavSatFix) -- the team convention. Shared site keys
@@ -14,8 +15,9 @@ the ``/**`` section of the site config; the rest from its ``planner`` section.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
+
+from sslfr_common.params import ParamSpec, ParamTable
 
 from .collector import LAWS
 
@@ -23,52 +25,7 @@ ALMERIA_LAT = 36 + 50 / 60 + 7 / 3600      # 36 deg 50' 07" N (seed 000 section 
 ALMERIA_LON = -(2 + 24 / 60 + 8 / 3600)    # 2 deg 24' 08" W
 
 
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter.
-
-    Attributes
-    ----------
-    name : str
-        Parameter name (dots for groups).
-    default : bool, int, float, str or list
-        Default value; its type is the parameter's type.
-    description : str
-        Meaning, with the unit in brackets.
-    unit : str
-        Unit ('-' for none), repeated in the descriptor's ``additional_constraints``.
-    lo, hi : float or None
-        Inclusive range for numbers (each element of a number array).
-    choices : tuple of str
-        Allowed values of a string parameter (empty: any).
-    length : int or None
-        Required length of an array parameter.
-    """
-
-    name: str
-    default: Any
-    description: str
-    unit: str = '-'
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[str, ...] = ()
-    length: int | None = None
-    read_only: bool = False
-
-    @property
-    def constraints(self) -> str:
-        """Human-readable constraint, for the descriptor and error messages."""
-        parts = [f'unit: {self.unit}']
-        if self.lo is not None or self.hi is not None:
-            parts.append(f'range [{self.lo}, {self.hi}]')
-        if self.choices:
-            parts.append('one of ' + ', '.join(self.choices))
-        if self.length is not None:
-            parts.append(f'{self.length} values')
-        return '; '.join(parts)
-
-
-SPECS: tuple[ParamSpec, ...] = (
+_SPECS = (
     # --- site (fallback when there is neither a GPS fix nor a persisted one)
     ParamSpec('site.latitude_deg', ALMERIA_LAT,
               'Site latitude [deg], north positive (WGS-84); used without GPS fix or persisted fix',
@@ -161,74 +118,11 @@ SPECS: tuple[ParamSpec, ...] = (
               choices=('auto', 'stow', 'manual', 'maintenance')),
 )
 
-SPEC_BY_NAME: dict[str, ParamSpec] = {s.name: s for s in SPECS}
 
-
-def defaults() -> dict[str, Any]:
-    """Name -> default value of every parameter (copies of lists)."""
-    return {s.name: (list(s.default) if isinstance(s.default, list) else s.default) for s in SPECS}
-
-
-def check_value(spec: ParamSpec, value: Any) -> str | None:
-    """Check one value against its spec; None when valid, else a one-line reason."""
-    d = spec.default
-    if isinstance(d, bool):
-        if not isinstance(value, bool):
-            return f'{spec.name}: expected a bool, got {value!r}'
-        return None
-    if isinstance(d, list):
-        if not isinstance(value, (list, tuple)) or isinstance(value, str):
-            return f'{spec.name}: expected a list, got {value!r}'
-        if spec.length is not None and len(value) != spec.length:
-            return f'{spec.name}: expected {spec.length} values, got {len(value)}'
-        for v in value:
-            why = _check_number(spec, v)
-            if why:
-                return why
-        return None
-    if isinstance(d, str):
-        if not isinstance(value, str):
-            return f'{spec.name}: expected a string, got {value!r}'
-        if spec.choices and value not in spec.choices:
-            return f'{spec.name}: {value!r} is not one of {", ".join(spec.choices)}'
-        return None
-    if isinstance(d, int) and (not isinstance(value, int) or isinstance(value, bool)):
-        return f'{spec.name}: expected an integer, got {value!r}'
-    return _check_number(spec, value)
-
-
-def _check_number(spec: ParamSpec, v: Any) -> str | None:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return f'{spec.name}: expected a number, got {v!r}'
-    if not math.isfinite(v):
-        return f'{spec.name}: {v} is not finite'
-    if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi):
-        return f'{spec.name}: {v} {spec.unit} outside [{spec.lo}, {spec.hi}]'
-    return None
-
-
-def check_specs(specs, values: dict[str, Any]) -> list[str]:
-    """Check every parameter of ``specs`` in ``values`` (missing or invalid); one line each."""
+def cross_check(values: dict[str, Any]) -> list[str]:
+    """Rules between parameters: ``step <= horizon``; ``collector.tracking_start`` and
+    ``collector.tracking_end`` are both set or both unset (-1) and start < end."""
     errors = []
-    for spec in specs:
-        if spec.name not in values:
-            errors.append(f'{spec.name}: missing')
-            continue
-        why = check_value(spec, values[spec.name])
-        if why:
-            errors.append(why)
-    return errors
-
-
-def validate(values: dict[str, Any]) -> list[str]:
-    """Check a complete parameter set; return the list of problems (empty: valid).
-
-    Cross-parameter rules: ``step <= horizon``; ``collector.tracking_start`` and
-    ``collector.tracking_end`` are both set or both unset (-1) and start < end.
-    """
-    errors = check_specs(SPECS, values)
-    if errors:
-        return errors
     if values['step'] > values['horizon']:
         errors.append(f'step {values["step"]} s > horizon {values["horizon"]} s')
     ts, te = values['collector.tracking_start'], values['collector.tracking_end']
@@ -238,3 +132,7 @@ def validate(values: dict[str, Any]) -> list[str]:
     elif ts >= 0 and not ts < te:
         errors.append(f'collector.tracking_start {ts} s must be before collector.tracking_end {te} s')
     return errors
+
+
+#: Every parameter of the planner node, in declaration order.
+PLANNER_PARAMS = ParamTable(_SPECS, cross_check, integers_for_floats=True)

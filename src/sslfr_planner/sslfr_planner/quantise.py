@@ -27,12 +27,12 @@ def steps_to_angle(steps, axis_step: float):
 
 
 def step_database(table, collector: Collector, day_start: float | None = None) -> np.ndarray:
-    """Seed 000's per-row database from a :class:`~sslfr_planner.daytable.DayTable`.
+    """Seed 000's per-row database from a :class:`~sslfr_planner.tracking_table.TrackingTable`.
 
     Parameters
     ----------
-    table : DayTable
-        Rows in time order (e.g. :func:`plan_day` at 1 s).
+    table : TrackingTable
+        Rows in time order (e.g. :func:`tabulate_day` at 1 s).
     collector : Collector
         Gives the axis steps.
     day_start : float, optional

@@ -2,7 +2,7 @@
 
 One trace serves both the tracker and the offline analysis: the planner's
 ``continuous`` law and the mirrors' command come from it (:mod:`sslfr_planner.laws`,
-:mod:`sslfr_planner.daytable`), and so do the power, end losses and illuminated
+:mod:`sslfr_planner.tracking_table`), and so do the power, end losses and illuminated
 length of :mod:`sslfr_planner.analysis`. Everything is vectorised over any leading
 shape (instants) and the 2n+1 mirrors (last axis).
 

@@ -55,6 +55,11 @@ class SiteFix:
     source: str
     stamp: float = 0.0
 
+    def describe(self) -> str:
+        """One line for logs: ``lat,lon elevation m (source)``."""
+        return (f'{self.latitude_deg:.5f},{self.longitude_deg:.5f} {self.elevation:.0f} m '
+                f'({self.source})')
+
 
 def distance_m(a: SiteFix, b: SiteFix) -> float:
     """Great-circle (haversine) distance between two sites [m], elevations ignored."""
@@ -208,6 +213,18 @@ class SiteSelector:
             self.persisted, err = load_persisted(self.state_dir)
             if err:
                 self.errors.append(err)
+
+    @classmethod
+    def from_params(cls, cfg: dict, gps: SiteFix | None = None) -> 'SiteSelector':
+        """The selector of the planner parameters ``site.*``, ``gps.*`` and ``state_dir``
+        (``~`` expanded; '' disables persistence), keeping the GPS fix ``gps`` of
+        this run if given."""
+        state_dir = os.path.expanduser(cfg['state_dir']) if cfg['state_dir'] else ''
+        params_site = SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
+                              cfg['site.elevation'], 'parameters')
+        sel = cls(params_site, state_dir, cfg['gps.max_horizontal_std'], cfg['gps.persist_min_distance'])
+        sel.gps = gps
+        return sel
 
     def on_fix(self, status, latitude, longitude, altitude, covariance, covariance_type,
                stamp: float) -> str | None:

@@ -122,7 +122,7 @@ MODELS = ('seed000', 'seed003')
 
 
 def sun_position(t, site, model: str = 'seed000', equation_of_time: bool = True, collector_azimuth: float = 0.0):
-    """The seeds' sun position as a :class:`sslfr_planner.spa.SunPosition` (radians).
+    """The seeds' sun position as a :class:`sslfr_planner.spa.SunAngles` (radians).
 
     Same interface as :func:`sslfr_planner.spa.sun_position`, so callers (the
     benchmark, analysis tools) can swap the SPA for ``model`` = 'seed000' (eqs. 2-6)
@@ -130,11 +130,11 @@ def sun_position(t, site, model: str = 'seed000', equation_of_time: bool = True,
     ``elevation_geometric`` is 90 deg - zenith.
     """
     from .geometry import projection_angles
-    from .spa import SunPosition
+    from .spa import SunAngles
     fns = {'seed000': seed000_position, 'seed003': seed003_position}
     if model not in fns:
         raise ValueError(f'model must be one of {", ".join(MODELS)}; got {model!r}')
     t = np.atleast_1d(np.asarray(t, dtype=float))
     zen, az = fns[model](t, site.latitude, site.longitude, equation_of_time)
     tt, tl = projection_angles(zen, az, collector_azimuth)
-    return SunPosition(zen, az, np.pi / 2 - zen, tt, tl)
+    return SunAngles(zen, az, np.pi / 2 - zen, tt, tl)

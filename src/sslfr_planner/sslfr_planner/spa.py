@@ -717,7 +717,7 @@ def _topocentric_block(t, lat_deg, lon_deg, elevation, pressure, temperature, de
 
 
 @dataclass
-class SunPosition:
+class SunAngles:
     """Topocentric sun position at an array of instants (radians).
 
     Attributes
@@ -741,7 +741,7 @@ class SunPosition:
 
 
 def sun_position(t, site, exact: bool = False, collector_azimuth: float = 0.0,
-                 grid: GeocentricGrid | None = None) -> SunPosition:
+                 grid: GeocentricGrid | None = None) -> SunAngles:
     """Sun position for a :class:`~sslfr_planner.site.Site` at UTC instants (radians).
 
     Parameters
@@ -761,7 +761,7 @@ def sun_position(t, site, exact: bool = False, collector_azimuth: float = 0.0,
 
     Returns
     -------
-    SunPosition
+    SunAngles
     """
     from .geometry import projection_angles  # late import: geometry imports nothing from here
 
@@ -772,10 +772,10 @@ def sun_position(t, site, exact: bool = False, collector_azimuth: float = 0.0,
         r = solar_position_exact(t, lat, lon, site.elevation, p_mbar, site.temperature, site.delta_t)
         zen, az = np.radians(r['zenith']), np.radians(r['azimuth'])
         tt, tl = projection_angles(zen, az, collector_azimuth)
-        return SunPosition(zen, az, np.radians(r['e0']), tt, tl)
+        return SunAngles(zen, az, np.radians(r['e0']), tt, tl)
     e0, zen, az, tt, tl = _topocentric_fast(t, lat, lon, site.elevation, p_mbar, site.temperature,
                                             site.delta_t, collector_azimuth=collector_azimuth, grid=grid)
-    return SunPosition(zen, az, e0, tt, tl)
+    return SunAngles(zen, az, e0, tt, tl)
 
 
 def solar_position(unixtime, latitude, longitude, elevation=0.0, pressure=1013.25, temperature=12.0,

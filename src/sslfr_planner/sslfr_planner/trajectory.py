@@ -6,7 +6,7 @@ following the plan for the rest of the horizon if the planner dies (seed 000 Ste
 1.3: "the tracking system aligns the mirrors, the mobile structure and the secondary
 reflector system using the tabulated database").
 
-Axis order everywhere: :data:`JOINTS` = (mirrors, mobile_structure,
+Axis order everywhere: :data:`sslfr_common.contract.JOINTS` = (mirrors, mobile_structure,
 secondary_reflector). Positions in radians (mirrors = beta_0 = theta_t / 2, seed 000
 eq. 11, +pi/2 sleeping; beta_M and beta_a, seed 000 eq. 16), velocities in rad/s,
 times in float seconds since the Unix epoch (UTC).
@@ -18,8 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sslfr_common.contract import JOINTS  # noqa: F401 - the trajectory's joint order (used by the planner node)
-
 
 @dataclass
 class Horizon:
@@ -30,7 +28,7 @@ class Horizon:
     t : ndarray, shape (N,)
         Instants [s since the Unix epoch, UTC], strictly increasing, t[0] > now.
     positions : ndarray, shape (N, 3)
-        Setpoints [rad] in :data:`JOINTS` order.
+        Setpoints [rad] in :data:`sslfr_common.contract.JOINTS` order.
     velocities : ndarray, shape (N, 3)
         Setpoint rates [rad/s].
     """

@@ -14,8 +14,8 @@ from sslfr_planner.analysis.optics import OpticalParameters
 from sslfr_planner.analysis.performance import AnalysisSite, YearSky
 from sslfr_planner.collector import LAWS, Collector
 from sslfr_common.contract import Phase
-from sslfr_planner.daytable import plan_day
-from sslfr_planner.planner_params import defaults
+from sslfr_planner.tracking_table import tabulate_day
+from sslfr_planner.planner_params import PLANNER_PARAMS
 from sslfr_planner.site import Site
 
 TRACKING = Phase.TRACKING
@@ -35,7 +35,7 @@ JUMP = math.radians(0.05)
 def largest_tracking_step(law: str, site_key: str, day: dt.date) -> float:
     """Largest change of either longitudinal setpoint between two consecutive TRACKING seconds [rad]."""
     lat, lon, elev, azimuth = SITES[site_key]
-    tab = plan_day(day, Site.from_degrees(lat, lon, elev), Collector(law=law, azimuth=azimuth), 1.0)
+    tab = tabulate_day(day, Site.from_degrees(lat, lon, elev), Collector(law=law, azimuth=azimuth), 1.0)
     both = (tab.phase[1:] == TRACKING) & (tab.phase[:-1] == TRACKING)
     steps = [np.abs(np.diff(getattr(tab, axis)))[both] for axis in ('mobile_structure', 'secondary_reflector')]
     return float(max(s.max(initial=0.0) for s in steps))
@@ -53,7 +53,7 @@ def test_the_jump_check_catches_a_jumping_law():
     on 2024-06-21 it steps by 48 deg within one second while tracking; the same check flags it."""
     from sslfr_planner import spa
     site = Site.from_degrees(*SITES['almeria'][:3])
-    tab = plan_day(dt.date(2024, 6, 21), site, Collector(law='eq16'), 1.0)
+    tab = tabulate_day(dt.date(2024, 6, 21), site, Collector(law='eq16'), 1.0)
     sun = spa.sun_position(tab.t, site)
     signed = np.where(sun.longitudinal >= 0, 1.0, -1.0) * sun.zenith / 2
     both = (tab.phase[1:] == TRACKING) & (tab.phase[:-1] == TRACKING)
@@ -70,7 +70,7 @@ def test_default_law_is_the_most_energy_among_laws_without_jumps():
         p = performance.with_tube(OpticalParameters(), SEED_TUBES['horizontal' if law == 'horizontal' else 'tilting'])
         energy[law] = performance.annual_energy(sky, site, p, law).energy_wh
     best = max(energy, key=energy.get)
-    assert best == defaults()['collector.law'] == Collector().law == 'continuous', energy
+    assert best == PLANNER_PARAMS.defaults()['collector.law'] == Collector().law == 'continuous', energy
     # and by a margin no open assumption of docs/optics.md overturns (fixed mirror offsets)
     fixed = {law: performance.annual_energy(
         sky, site, performance.with_tube(OpticalParameters(mirror_aim='fixed'),

@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 
 from sslfr_planner import solar_simple, spa
 from sslfr_planner.collector import Collector
-from sslfr_planner.daytable import plan_day
+from sslfr_planner.tracking_table import tabulate_day
 from sslfr_planner.quantise import angle_to_steps, step_database, steps_to_angle
 from sslfr_planner.site import Site
 
@@ -26,7 +26,7 @@ def test_quantisation_error_is_at_most_half_a_step(angle, gear):
 
 def test_seed000_database_for_a_day():
     c = Collector(law='eq16', gear_ratio=(1.0, 2.0, 3.0))   # seed 000's tracker
-    tab = plan_day(dt.date(2026, 6, 21), Site.from_degrees(36.8353, -2.4022), c, 1.0)
+    tab = tabulate_day(dt.date(2026, 6, 21), Site.from_degrees(36.8353, -2.4022), c, 1.0)
     db = step_database(tab, c)
     assert db.size == 86400 and db['second'][0] == 0 and db['second'][-1] == 86399
     # 90 deg (sleeping) = 15000 steps of 0.006 deg
@@ -45,7 +45,7 @@ def test_seed000_database_for_a_day():
     assert db['mobile_structure_position'][tr].max() * c.axis_steps[1] <= math.pi / 2
     # under the 'continuous' law the rows face north on June mornings: the mirrors' angle in the
     # tilted rows' frame then runs back a little (0.14 deg) for ~20 min after sunrise and before sunset
-    tab = plan_day(dt.date(2026, 6, 21), Site.from_degrees(36.8353, -2.4022), Collector(), 1.0)
+    tab = tabulate_day(dt.date(2026, 6, 21), Site.from_degrees(36.8353, -2.4022), Collector(), 1.0)
     m = tab.mirrors[tab.phase == 2]
     back = np.diff(m) < 0
     assert int(np.sum(back[1:] != back[:-1])) <= 2 and float(np.ptp(m[:1800])) < math.radians(0.5)

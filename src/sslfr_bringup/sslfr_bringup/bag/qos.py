@@ -20,6 +20,8 @@ not know decode to ``unknown`` (rule M11).
 """
 from __future__ import annotations
 
+from sslfr_common.timeconv import split_seconds
+
 from . import yamlcpp
 
 #: RMW_DURATION_INFINITE as {sec, nsec} (rmw/time.h: INT64_MAX ns).
@@ -167,5 +169,5 @@ def duration_dict(seconds: float | None) -> dict:
     """{sec, nsec} of a duration [s]; None or >= INT64_MAX ns -> INFINITE."""
     if seconds is None or seconds >= 9223372036.854775807:
         return dict(INFINITE)
-    ns = int(round(seconds * 1e9))
-    return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+    sec, nsec = split_seconds(seconds)
+    return {'sec': sec, 'nsec': nsec}

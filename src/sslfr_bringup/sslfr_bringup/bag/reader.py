@@ -19,6 +19,7 @@ from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
+from sslfr_common.timeconv import to_sec
 
 from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError, TopicInfo,
                        read_metadata)
@@ -285,6 +286,13 @@ class BagReader:
         for i, t in enumerate(topics):
             lines.append(('Offered QoS:       ' if i == 0 else pad) + f'{t.name}: {qos_text(t)}')
         return '\n'.join(lines)
+
+
+def message_time(header, log_time_ns: int) -> float:
+    """When a recorded message happened [s since the epoch]: its ``header.stamp``, or
+    its log time when the stamp is zero (never set by the publisher)."""
+    t = to_sec(header.stamp)
+    return t if t != 0 else log_time_ns / 1e9
 
 
 def seconds_text(ns: int) -> str:

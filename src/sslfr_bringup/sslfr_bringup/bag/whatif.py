@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES
+from sslfr_common.timeconv import to_sec
 
+from .reader import message_time
 
 
 @dataclass
@@ -49,15 +51,6 @@ class Decisions:
     trajectories: list[Trajectory] = field(default_factory=list)
 
 
-def stamp_seconds(header, log_time_ns: int) -> float:
-    """header.stamp [s since epoch], or the log time when the stamp is zero."""
-    sec = int(header.stamp.sec)
-    nsec = int(header.stamp.nanosec)
-    if sec == 0 and nsec == 0:
-        return log_time_ns / 1e9
-    return sec + nsec * 1e-9
-
-
 def _topic(reader_topics, name: str) -> str | None:
     for cand in (name, '/' + name.lstrip('/')):
         if cand in reader_topics:
@@ -80,20 +73,19 @@ def extract_decisions(reader, start_ns: int | None = None, end_ns: int | None = 
         return d
     for raw, msg in reader.decoded(topics, start_ns, end_ns):
         if raw.topic == names['tracker/phase']:
-            pt.append(stamp_seconds(msg.header, raw.log_time))
+            pt.append(message_time(msg.header, raw.log_time))
             pv.append(int(msg.phase))
             d.phase_reason.append(str(msg.reason))
         elif raw.topic == names['safety/state']:
-            st.append(stamp_seconds(msg.header, raw.log_time))
+            st.append(message_time(msg.header, raw.log_time))
             sv.append(int(msg.level))
             d.safety_reasons.append([str(r) for r in msg.reasons])
         else:
-            t0 = stamp_seconds(msg.header, raw.log_time)
+            t0 = message_time(msg.header, raw.log_time)
             joints = list(msg.joint_names)
             if not msg.points or not joints:
                 continue
-            times = np.array([t0 + p.time_from_start.sec + p.time_from_start.nanosec * 1e-9
-                              for p in msg.points])
+            times = np.array([t0 + to_sec(p.time_from_start) for p in msg.points])
             pos = np.full((len(msg.points), len(joints)), np.nan)
             for i, p in enumerate(msg.points):
                 n = min(len(p.positions), len(joints))

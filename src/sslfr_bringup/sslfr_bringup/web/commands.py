@@ -28,8 +28,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from sslfr_planner.modes import MODES
-from sslfr_planner.trajectory import JOINTS
+from sslfr_common.contract import JOINTS, MODES
 
 #: service key -> (relative service name, service type). ``{axis}`` is filled per axis.
 SERVICES: dict[str, tuple[str, str]] = {

@@ -23,7 +23,8 @@ import time
 from collections import deque
 from typing import Any, Callable
 
-from sslfr_planner.trajectory import JOINTS
+from sslfr_common.contract import JOINTS
+from sslfr_common.timeconv import to_sec
 
 LEVELS = ('OK', 'WARN', 'STOW', 'ESTOP')
 LINK_STATES = ('LINK_DOWN', 'LINK_CONNECTING', 'LINK_UP', 'LINK_FAULT')
@@ -40,11 +41,9 @@ def num(x: Any, nd: int = 6) -> float | None:
     return round(v, nd) if math.isfinite(v) else None
 
 
-def stamp(t) -> float | None:
+def seconds_or_none(t) -> float | None:
     """builtin_interfaces/Time -> Unix seconds, None for the zero time (absent)."""
-    if t is None:
-        return None
-    s = int(getattr(t, 'sec', 0)) + int(getattr(t, 'nanosec', 0)) * 1e-9
+    s = None if t is None else to_sec(t)
     return s if s != 0 else None
 
 
@@ -81,8 +80,9 @@ def clear_hint(reason: str) -> str:
 # ------------------------------------------------------------------ message -> dict
 def phase_dict(m) -> dict:
     return {'phase': int(m.phase), 'name': m.phase_name, 'mode': m.mode, 'reason': m.reason,
-            'day_type': int(m.day_type), 'sunrise': stamp(m.sunrise), 'noon': stamp(m.solar_noon),
-            'sunset': stamp(m.sunset), 'stamp': stamp(m.header.stamp),
+            'day_type': int(m.day_type), 'sunrise': seconds_or_none(m.sunrise),
+            'noon': seconds_or_none(m.solar_noon), 'sunset': seconds_or_none(m.sunset),
+            'stamp': seconds_or_none(m.header.stamp),
             'site': {'latitude': num(m.latitude), 'longitude': num(m.longitude),
                      'altitude': num(m.altitude, 2), 'source': m.site_source}}
 
@@ -92,7 +92,7 @@ def safety_dict(m) -> dict:
     return {'level': level, 'name': LEVELS[level] if 0 <= level < len(LEVELS) else f'level {level}',
             'stow_required': bool(m.stow_required),
             'reasons': [{'text': r, 'hint': clear_hint(r)} for r in m.reasons],
-            'stopped_axes': list(m.stopped_axes), 'since': stamp(m.since), 'sequence': int(m.sequence)}
+            'stopped_axes': list(m.stopped_axes), 'since': seconds_or_none(m.since), 'sequence': int(m.sequence)}
 
 
 def axis_dict(m) -> dict:
@@ -103,23 +103,23 @@ def axis_dict(m) -> dict:
             'fault_bits': int(m.fault_bits), 'link_state': link,
             'link': LINK_STATES[link] if 0 <= link < len(LINK_STATES) else f'link {link}',
             'frames_lost': int(m.frames_lost), 'frames_bad': int(m.frames_bad),
-            'board_info': m.board_info, 'stamp': stamp(m.header.stamp)}
+            'board_info': m.board_info, 'stamp': seconds_or_none(m.header.stamp)}
 
 
 def sun_dict(m) -> dict:
     return {'zenith': num(m.zenith), 'azimuth': num(m.azimuth), 'transversal': num(m.transversal),
             'longitudinal': num(m.longitudinal),
             'elevation': num(math.pi / 2 - m.zenith) if math.isfinite(m.zenith) else None,
-            'above_horizon': bool(m.above_horizon), 'algorithm': m.algorithm, 'stamp': stamp(m.header.stamp)}
+            'above_horizon': bool(m.above_horizon), 'algorithm': m.algorithm, 'stamp': seconds_or_none(m.header.stamp)}
 
 
 def temperature_dict(m) -> dict:
-    return {'value': num(m.temperature, 2), 'variance': num(m.variance, 3), 'stamp': stamp(m.header.stamp)}
+    return {'value': num(m.temperature, 2), 'variance': num(m.variance, 3), 'stamp': seconds_or_none(m.header.stamp)}
 
 
 def beam_dict(m) -> dict:
     return {'beam': num(m.beam, 2), 'illuminance': num(m.illuminance, 1), 'saturated': bool(m.saturated),
-            'stamp': stamp(m.header.stamp)}
+            'stamp': seconds_or_none(m.header.stamp)}
 
 
 def fix_dict(m) -> dict:
@@ -129,7 +129,7 @@ def fix_dict(m) -> dict:
     status = int(m.status.status)
     return {'status': status, 'name': GPS_STATUS.get(status, f'status {status}'), 'service': int(m.status.service),
             'latitude': num(m.latitude, 7), 'longitude': num(m.longitude, 7), 'altitude': num(m.altitude, 2),
-            'horizontal_std': num(hstd, 2), 'stamp': stamp(m.header.stamp)}
+            'horizontal_std': num(hstd, 2), 'stamp': seconds_or_none(m.header.stamp)}
 
 
 # ------------------------------------------------------------------ the live state

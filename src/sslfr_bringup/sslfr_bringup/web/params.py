@@ -1,25 +1,35 @@
-"""The ``web`` node's parameters, declared in ONE place (pure Python, no rclpy).
+"""The ``web`` node's parameters: one :class:`~sslfr_common.params.ParamTable` (pure).
 
-Same pattern as :mod:`sslfr_planner.planner_params` (whose :class:`ParamSpec` and
-:func:`check_specs` are reused): a default, a description with the unit, a range or
-choices. Every parameter is read-only at runtime (the server binds once); a bad value
-at start-up stops the node with one line naming each bad parameter (exit code 2).
+The table type every node uses (:mod:`sslfr_common.params`): a default, a description
+with the unit, a range or choices. Every parameter is read-only at runtime (the server
+binds once); a bad value at start-up stops the node with one line naming each bad
+parameter (exit code 2). Floating-point parameters also take integers (YAML ``8``).
 """
 from __future__ import annotations
 
 import ipaddress
-from typing import Any
 
-from sslfr_planner.planner_params import ParamSpec, check_specs
+from sslfr_common.params import ParamSpec, ParamTable
 
 #: The password file `./sslfr web-password` writes and the node reads.
 DEFAULT_PASSWORD_FILE = '~/.config/sslfr/web_password'
 
-SPECS: tuple[ParamSpec, ...] = (
+
+def ip_address_error(addr: str) -> str | None:
+    """None for a literal IPv4/IPv6 address, else the reason (a host name could
+    resolve to every interface)."""
+    try:
+        ipaddress.ip_address(addr)
+    except ValueError:
+        return f'{addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)'
+    return None
+
+
+WEB_PARAMS = ParamTable((
     ParamSpec('bind_address', '127.0.0.1',
               'IP address the page is served on: 127.0.0.1 (this machine only, the default), '
               "the Pi's LAN address to open it to the local network; never every interface "
-              'unless 0.0.0.0 / :: is given explicitly', read_only=True),
+              'unless 0.0.0.0 / :: is given explicitly', read_only=True, validator=ip_address_error),
     ParamSpec('port', 8080, 'TCP port of the page (0: any free port, logged at start-up)', '-',
               0, 65535, read_only=True),
     ParamSpec('open_view', True,
@@ -58,34 +68,4 @@ SPECS: tuple[ParamSpec, ...] = (
               read_only=True),
     ParamSpec('max_request_bytes', 16384, 'Larger request bodies are refused (HTTP 413) [bytes]',
               'bytes', 256, 1048576, read_only=True),
-)
-
-SPEC_BY_NAME = {s.name: s for s in SPECS}
-
-
-def defaults() -> dict[str, Any]:
-    """Name -> default of every parameter."""
-    return {s.name: s.default for s in SPECS}
-
-
-def coerce(values: dict[str, Any]) -> dict[str, Any]:
-    """Accept an integer for a double parameter (YAML ``8`` for 8.0)."""
-    out = dict(values)
-    for spec in SPECS:
-        v = out.get(spec.name)
-        if isinstance(spec.default, float) and isinstance(v, int) and not isinstance(v, bool):
-            out[spec.name] = float(v)
-    return out
-
-
-def validate(values: dict[str, Any]) -> list[str]:
-    """Check a complete set; return the problems (empty: valid). ``bind_address`` must
-    be a literal IPv4/IPv6 address (a host name could resolve to every interface)."""
-    errors = check_specs(SPECS, values)
-    addr = values.get('bind_address')
-    if isinstance(addr, str):
-        try:
-            ipaddress.ip_address(addr)
-        except ValueError:
-            errors.append(f'bind_address: {addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)')
-    return errors
+), integers_for_floats=True)

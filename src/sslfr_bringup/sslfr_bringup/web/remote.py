@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sslfr_planner.trajectory import JOINTS
+from sslfr_common.contract import JOINTS
 
 #: node -> {parameter: key in LiveState.info}
 REMOTE_PARAMS: dict[str, dict[str, str]] = {

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._cliutil import (CliError, OneLineParser, ranged_float, bounded_int, load_yaml_file, output_file, run,
-                        time_step, write_atomically)
+from ..cli_input import (CliError, OneLineParser, ranged_float, bounded_int, load_yaml_file, output_file, run,
+                         time_step, write_atomically)
 from ..collector import LAWS, MOVING_LAWS, FieldGeometry
 from . import performance
 from .optics import AIMS, OpticalParameters

@@ -13,7 +13,7 @@ tracker by.
 
 Every power comes from the 3-D trace (:mod:`sslfr_planner.raytrace` through
 :mod:`.optics`); the axes follow the planner's own laws and mirror command
-(:mod:`sslfr_planner.daytable`), so the analysis judges exactly what the tracker
+(:mod:`sslfr_planner.tracking_table`), so the analysis judges exactly what the tracker
 commands. Sun positions: the project's NREL SPA; beam irradiance: :mod:`.beam`.
 Units: SI and radians; energies in Wh unless a name says otherwise.
 """
@@ -95,12 +95,12 @@ def sun_positions(t, site: AnalysisSite):
 def commands(law: str, zenith, azimuth, t, site: AnalysisSite, geometry: FieldGeometry | None = None):
     """The tracker's TRACKING commands (beta_0, beta_M, beta_a) [rad] and the sun vector.
 
-    The planner's own code (:func:`sslfr_planner.daytable.tracking_commands`): the
+    The planner's own code (:func:`sslfr_planner.tracking_table.tracking_commands`): the
     longitudinal law (``continuous``, ``eq16``, ``optimum_fixed``, ``daily``,
     ``horizontal``) and the mirrors' command in the tilted rows' frame.
     Returns (beta_0, beta_M, beta_a, sun (..., 3)).
     """
-    from ..daytable import tracking_commands
+    from ..tracking_table import tracking_commands
 
     if law not in LAWS:
         raise ValueError(f'unknown law {law!r}; expected one of {", ".join(LAWS)}')

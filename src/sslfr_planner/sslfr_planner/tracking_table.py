@@ -2,7 +2,7 @@
 
 :func:`evaluate` gives, for any array of UTC instants, the sun (SPA fast path), the
 projection angles, the day-cycle phase of seed 000 section 4 and what each axis is
-commanded to in that phase; :func:`plan_day` is the same on a whole UTC day grid
+commanded to in that phase; :func:`tabulate_day` is the same on a whole UTC day grid
 (the seed's per-second "database", section 4.1). Pure numpy, deterministic: an
 instant gets the same numbers whatever batch it is evaluated in, to the last bits of
 numpy's vectorised math (< 1e-12 rad; the SPA nodes and the sunrise/sunset search
@@ -49,7 +49,7 @@ RISE_EPSILON = 0.01
 
 
 @dataclass
-class DayTable:
+class TrackingTable:
     """Per-instant table (numpy arrays of equal length, one element per instant).
 
     Attributes
@@ -65,7 +65,7 @@ class DayTable:
     mirrors, mobile_structure, secondary_reflector : numpy.ndarray
         Commanded axis angles beta_0, beta_M, beta_a [rad].
     events : SunEvents
-        Events of the solar day of the table (plan_day) or of the middle instant.
+        Events of the solar day of the table (tabulate_day) or of the middle instant.
     """
     t: np.ndarray
     phase: np.ndarray
@@ -155,7 +155,7 @@ longitudinal_commands = _longitudinal
 resting_commands = _resting
 
 
-def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = None) -> DayTable:
+def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = None) -> TrackingTable:
     """The per-instant table at UTC instants ``t`` (module docstring for the phases).
 
     Parameters
@@ -173,7 +173,7 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
 
     Returns
     -------
-    DayTable
+    TrackingTable
     """
     t = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
     if t.size == 0:
@@ -186,7 +186,7 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
         back = np.empty_like(order)
         back[order] = np.arange(order.size)
         cols = {name: getattr(tab, name)[back] for name in _COLUMNS}
-        return DayTable(events=tab.events, **cols)
+        return TrackingTable(events=tab.events, **cols)
     c = collector
     lo = float(t[0]) - max(c.stow_duration, c.tracking_step) - 2 * SCAN_STEP
     hi = float(t[-1]) + max(c.pre_dawn_lead, c.tracking_step) + 2 * SCAN_STEP
@@ -254,7 +254,7 @@ def evaluate(t, site: Site, collector: Collector, events: SunEvents | None = Non
             events = events_from_crossings(noon, ct, rising, site, grid)
         else:
             events = events_around(noon, site)
-    return DayTable(t, phase, sun.zenith, sun.azimuth, sun.transversal, sun.longitudinal,
+    return TrackingTable(t, phase, sun.zenith, sun.azimuth, sun.transversal, sun.longitudinal,
                     mirrors, bm, ba, events)
 
 
@@ -265,7 +265,7 @@ def _evaluate_sparse(t, site: Site, c: Collector, events):
     """evaluate() for instants spread over a long span: one dense evaluation per instant."""
     parts = [evaluate(np.array([x]), site, c, events) for x in t]
     cat = {name: np.concatenate([getattr(p, name) for p in parts]) for name in _COLUMNS}
-    return DayTable(events=parts[len(parts) // 2].events, **cat)
+    return TrackingTable(events=parts[len(parts) // 2].events, **cat)
 
 
 def day_grid(day: datetime.date, step: float = 1.0) -> np.ndarray:
@@ -277,7 +277,7 @@ def day_grid(day: datetime.date, step: float = 1.0) -> np.ndarray:
     return start + np.arange(n) * float(step)
 
 
-def plan_day(day: datetime.date, site: Site, collector: Collector, step: float = 1.0) -> DayTable:
+def tabulate_day(day: datetime.date, site: Site, collector: Collector, step: float = 1.0) -> TrackingTable:
     """The whole UTC day of ``day`` every ``step`` seconds: ``evaluate(day_grid(day, step))``.
 
     ``events`` of the result are those of ``day`` (:func:`events.sun_events`; for

@@ -1,4 +1,4 @@
-"""Unit tests of the planner's parameter table and day plans (no rclpy)."""
+"""Unit tests of the planner's parameter table and day cycle (no rclpy)."""
 from __future__ import annotations
 
 import datetime as dt
@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 from sslfr_common.contract import Phase
-from sslfr_planner.daytable import evaluate
-from sslfr_planner.day_planner import STEP_RATE, DayPlanner
-from sslfr_planner.planner_params import SPEC_BY_NAME, SPECS, check_value, defaults, validate
+from sslfr_planner.tracking_table import evaluate
+from sslfr_planner.day_cycle import STEP_RATE, DayCycle
+from sslfr_planner.planner_params import PLANNER_PARAMS
 from sslfr_planner.site_source import SiteFix
 from sslfr_planner.trajectory import horizon_times
 
@@ -27,55 +27,54 @@ def _utc(*a) -> float:
 
 def _cfg_from(name: str) -> dict:
     data = yaml.safe_load((CONFIG / name).read_text())
-    cfg = defaults()
+    cfg = PLANNER_PARAMS.defaults()
     for section in ('/**', 'planner'):
         cfg.update(data[section]['ros__parameters'])
-    return {k: (float(v) if isinstance(SPEC_BY_NAME[k].default, float) and isinstance(v, int) else v)
-            for k, v in cfg.items()}
+    return PLANNER_PARAMS.coerce(cfg)
 
 
-def _planner(cfg: dict) -> DayPlanner:
-    return DayPlanner(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
+def _cycle(cfg: dict) -> DayCycle:
+    return DayCycle(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
                                    cfg['site.elevation'], 'parameters'))
 
 
 # ---------------------------------------------------------------------- parameters
 def test_defaults_are_valid_and_every_spec_documents_its_unit():
-    assert validate(defaults()) == []
-    for s in SPECS:
+    assert PLANNER_PARAMS.validate(PLANNER_PARAMS.defaults()) == []
+    for s in PLANNER_PARAMS:
         assert s.description and s.unit
         if isinstance(s.default, (int, float)) and not isinstance(s.default, bool):
             assert s.lo is not None and s.hi is not None and s.lo <= s.default <= s.hi, s.name
 
 
-@pytest.mark.parametrize('spec', [s for s in SPECS if s.lo is not None], ids=lambda s: s.name)
+@pytest.mark.parametrize('spec', [s for s in PLANNER_PARAMS if s.lo is not None], ids=lambda s: s.name)
 def test_out_of_range_and_nan_refused(spec):
-    cfg = defaults()
+    cfg = PLANNER_PARAMS.defaults()
     bad = spec.hi + abs(spec.hi) + 1
     cfg[spec.name] = [bad] * (spec.length or 1) if isinstance(spec.default, list) else \
         (int(bad) if isinstance(spec.default, int) else bad)
-    errs = validate(cfg)
+    errs = PLANNER_PARAMS.validate(cfg)
     assert errs and spec.name in errs[0]
     if isinstance(spec.default, float):
-        assert check_value(spec, math.nan) and check_value(spec, math.inf)
+        assert spec.check(math.nan) and spec.check(math.inf)
 
 
 def test_type_choice_and_cross_rules():
-    assert 'expected a bool' in check_value(SPEC_BY_NAME['site.delta_t_model'], 1)
-    assert 'not one of' in check_value(SPEC_BY_NAME['collector.law'], 'wobble')
-    assert 'expected an integer' in check_value(SPEC_BY_NAME['collector.n_per_side'], 2.5)
-    assert '3 values' in check_value(SPEC_BY_NAME['stow.speeds'], [0.1, 0.1])
-    cfg = defaults()
+    assert 'expected a bool' in PLANNER_PARAMS.by_name['site.delta_t_model'].check(1)
+    assert 'not one of' in PLANNER_PARAMS.by_name['collector.law'].check('wobble')
+    assert 'expected an integer' in PLANNER_PARAMS.by_name['collector.n_per_side'].check(2.5)
+    assert '3 values' in PLANNER_PARAMS.by_name['stow.speeds'].check([0.1, 0.1])
+    cfg = PLANNER_PARAMS.defaults()
     cfg['step'], cfg['horizon'] = 10.0, 5.0
-    assert any('horizon' in e for e in validate(cfg))
-    cfg = defaults()
+    assert any('horizon' in e for e in PLANNER_PARAMS.validate(cfg))
+    cfg = PLANNER_PARAMS.defaults()
     cfg['collector.tracking_start'] = 3600.0
-    assert any('both' in e for e in validate(cfg))
+    assert any('both' in e for e in PLANNER_PARAMS.validate(cfg))
     cfg['collector.tracking_end'] = 1800.0
-    assert any('before' in e for e in validate(cfg))
-    cfg = defaults()
+    assert any('before' in e for e in PLANNER_PARAMS.validate(cfg))
+    cfg = PLANNER_PARAMS.defaults()
     del cfg['horizon']
-    assert validate(cfg) == ['horizon: missing']
+    assert PLANNER_PARAMS.validate(cfg) == ['horizon: missing']
 
 
 @pytest.mark.parametrize('name', ['almeria_sslfr.yaml', 'bucaramanga_single_axis.yaml',
@@ -83,15 +82,15 @@ def test_type_choice_and_cross_rules():
 def test_seed_configs_are_valid_and_use_only_declared_keys(name):
     data = yaml.safe_load((CONFIG / name).read_text())
     keys = set(data['/**']['ros__parameters']) | set(data['planner']['ros__parameters'])
-    assert keys <= set(SPEC_BY_NAME), keys - set(SPEC_BY_NAME)
-    assert validate(_cfg_from(name)) == []
-    DayPlanner.check_config(_cfg_from(name))
+    assert keys <= set(PLANNER_PARAMS.by_name), keys - set(PLANNER_PARAMS.by_name)
+    assert PLANNER_PARAMS.validate(_cfg_from(name)) == []
+    DayCycle.check_config(_cfg_from(name))
 
 
 def test_site_template_documents_every_parameter():
     data = yaml.safe_load((CONFIG / 'site_template.yaml').read_text())
     keys = set(data['/**']['ros__parameters']) | set(data['planner']['ros__parameters'])
-    assert keys == set(SPEC_BY_NAME)
+    assert keys == set(PLANNER_PARAMS.by_name)
 
 
 def test_seed_numbers_in_configs():
@@ -108,10 +107,10 @@ def test_seed_numbers_in_configs():
     assert f['collector.receiver_height'] == 3.75 and f['collector.mirror_width'] == 0.45
 
 
-# ----------------------------------------------------------------------- day plans
+# ------------------------------------------------------------------- day schedules
 def test_day_table_is_the_core_table_and_covers_the_local_day():
     cfg = _cfg_from('almeria_sslfr.yaml')
-    p = _planner(cfg)
+    p = _cycle(cfg)
     now = _utc(2026, 6, 21, 10, 0, 0) + 0.5
     plan = p.plan(now)
     assert plan.start <= now < plan.start + 86400 and plan.table.t.size == 86401
@@ -128,7 +127,7 @@ def test_day_table_is_the_core_table_and_covers_the_local_day():
 
 
 def test_horizon_positions_and_rates():
-    p = _planner(_cfg_from('almeria_sslfr.yaml'))
+    p = _cycle(_cfg_from('almeria_sslfr.yaml'))
     now = _utc(2026, 6, 21, 10, 0, 0) + 0.3
     p.plan(now)
     t = horizon_times(now, 120.0, 1.0)
@@ -147,7 +146,7 @@ def test_horizon_positions_and_rates():
 
 
 def test_horizon_across_local_midnight_and_pre_dawn_step():
-    p = _planner(_cfg_from('almeria_sslfr.yaml'))
+    p = _cycle(_cfg_from('almeria_sslfr.yaml'))
     plan = p.plan(_utc(2026, 6, 21, 12))
     t = horizon_times(plan.start + 86400 - 60.5, 120.0, 1.0)
     h = p.auto_horizon(t)
@@ -166,7 +165,7 @@ def test_horizon_across_local_midnight_and_pre_dawn_step():
 
 def test_bucaramanga_window_and_15_minute_steps():
     cfg = _cfg_from('bucaramanga_single_axis.yaml')
-    p = _planner(cfg)
+    p = _cycle(cfg)
     plan = p.plan(_utc(2026, 3, 20, 17))
     tab = plan.table
     ws, we = _utc(2026, 3, 20, 12), _utc(2026, 3, 20, 22)      # 7:00 and 17:00 UTC-5
@@ -192,9 +191,9 @@ def test_bucaramanga_window_and_15_minute_steps():
 @pytest.mark.parametrize('date,day_type,phase', [((2026, 12, 21), 'polar_night', NIGHT),
                                                   ((2026, 6, 21), 'polar_day', TRACKING)])
 def test_polar_days(date, day_type, phase):
-    cfg = defaults()
+    cfg = PLANNER_PARAMS.defaults()
     cfg.update({'site.latitude_deg': 78.22, 'site.longitude_deg': 15.65})
-    p = _planner(cfg)
+    p = _cycle(cfg)
     plan = p.plan(_utc(*date, 11))
     assert plan.events.day_type == day_type and plan.events.sunrise is None
     assert np.all(plan.table.phase == phase)
@@ -203,11 +202,11 @@ def test_polar_days(date, day_type, phase):
 
 
 def test_sleep_pose_and_day_index():
-    p = _planner(defaults())
+    p = _cycle(PLANNER_PARAMS.defaults())
     pose = p.sleep_pose(_utc(2026, 1, 1))
     assert pose.tolist() == [math.pi / 2, 0.0, 0.0]
     for t in np.linspace(_utc(2026, 1, 1), _utc(2026, 1, 3), 37):
         d = p.day_index(t)
         assert p.day_start(d) <= t < p.day_start(d) + 86400
     with pytest.raises(ValueError):
-        DayPlanner.check_config({**defaults(), 'collector.law': 'wobble'})
+        DayCycle.check_config({**PLANNER_PARAMS.defaults(), 'collector.law': 'wobble'})

@@ -1,10 +1,10 @@
-"""The planner's day plans on top of the ephemeris core (pure numpy, no rclpy).
+"""The automatic day cycle: day schedules on top of the ephemeris core (pure numpy, no rclpy).
 
 Seed 000 Step 1.2: at the start of the (local solar) day the system computes sunrise,
 sunset and, for each second of the day, the sun, the incidence angles and the tilt of
 the mirrors, the mobile structure and the secondary reflector, "tabulated in a
 database"; Steps 2-4 follow that table; Step 5 starts again at 0:00. This module
-builds that table with :func:`sslfr_planner.daytable.evaluate` (the ephemeris core:
+builds that table with :func:`sslfr_planner.tracking_table.evaluate` (the ephemeris core:
 NREL SPA, seed 000 eqs. 9-16) for the local solar day [D, D + 1) of the site, where
 day D starts at 0:00 local mean solar time (UTC - longitude / 15 h), and answers the
 node's questions: the automatic phase and the setpoints at an instant, a rolling
@@ -29,9 +29,9 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, Phase
 
-from . import daytable, spa
+from . import tracking_table, spa
 from .collector import Collector, FieldGeometry
-from .daytable import DayTable, evaluate
+from .tracking_table import TrackingTable, evaluate
 from .events import H0_DEG, SunEvents, sun_events
 from .site import Site
 from .site_source import SiteFix
@@ -70,8 +70,9 @@ def make_collector(cfg: dict) -> Collector:
 
 
 @dataclass
-class DayPlan:
-    """One local solar day's table (the seed's per-second database).
+class DaySchedule:
+    """One local solar day's schedule: its per-second table (the seed's database),
+    sun events and tracking window.
 
     Attributes
     ----------
@@ -79,7 +80,7 @@ class DayPlan:
         Local mean solar date, days since 1970-01-01.
     start : float
         0:00 local mean solar time of that date [s, UTC epoch].
-    table : DayTable
+    table : TrackingTable
         Whole UTC seconds floor(start) .. floor(start) + 86400 (86,401 rows).
     events : SunEvents
         Sunrise, solar noon, sunset of the day (core :func:`events.sun_events`).
@@ -89,7 +90,7 @@ class DayPlan:
 
     day: int
     start: float
-    table: DayTable
+    table: TrackingTable
     events: SunEvents
     window: tuple[float, float] | None = None
 
@@ -110,8 +111,10 @@ class DayPlan:
         return text
 
 
-class DayPlanner:
-    """Day plans for one site and collector configuration.
+class DayCycle:
+    """The day cycle of one site and collector configuration: the schedule of each
+    local solar day (computed on demand, a few cached) and, from it, the automatic
+    phase, setpoints and horizons at any instant.
 
     Parameters
     ----------
@@ -135,8 +138,8 @@ class DayPlanner:
         self.window = (ts, te) if ts >= 0 and te >= 0 else None
         self.utc_offset = float(cfg['collector.utc_offset'])
         self._lon_s = math.degrees(self.site.longitude) * 240.0   # longitude as time [s]
-        self._plans: dict[int, DayPlan] = {}
-        self.current_plan: DayPlan | None = None
+        self._schedules: dict[int, DaySchedule] = {}
+        self.current_schedule: DaySchedule | None = None
 
     @staticmethod
     def check_config(cfg: dict) -> None:
@@ -145,7 +148,7 @@ class DayPlanner:
                                cfg['site.elevation'], 'parameters'))
         make_collector(cfg)
 
-    # ---------------------------------------------------------------- day plans
+    # ---------------------------------------------------------------- day schedules
     def day_index(self, t: float) -> int:
         """Local mean solar date of instant ``t`` [days since 1970-01-01]."""
         return int(math.floor((t + self._lon_s) / 86400.0))
@@ -155,18 +158,18 @@ class DayPlanner:
         return day * 86400.0 - self._lon_s
 
     def needs_new_day(self, now: float) -> bool:
-        """True when ``now`` is past the current plan's day (seed 000 Step 5)."""
-        return self.current_plan is None or self.day_index(now) != self.current_plan.day
+        """True when ``now`` is past the current schedule's day (seed 000 Step 5)."""
+        return self.current_schedule is None or self.day_index(now) != self.current_schedule.day
 
-    def plan(self, now: float) -> DayPlan:
-        """Compute today's plan afresh (drops cached days) and make it current."""
-        self._plans.clear()
-        self.current_plan = self.day_plan(self.day_index(now))
-        return self.current_plan
+    def plan(self, now: float) -> DaySchedule:
+        """Compute today's schedule afresh (drops cached days) and make it current."""
+        self._schedules.clear()
+        self.current_schedule = self.schedule(self.day_index(now))
+        return self.current_schedule
 
-    def day_plan(self, day: int) -> DayPlan:
-        """The plan of local solar ``day`` (cached; at most three days are kept)."""
-        plan = self._plans.get(day)
+    def schedule(self, day: int) -> DaySchedule:
+        """The schedule of local solar ``day`` (cached; at most three days are kept)."""
+        plan = self._schedules.get(day)
         if plan is None:
             start = self.day_start(day)
             t = math.floor(start) + np.arange(86401, dtype=np.float64)
@@ -175,12 +178,12 @@ class DayPlanner:
             window = self._window(events, start) if self.window else None
             if window is not None:
                 self._apply_window(table, window)
-            plan = DayPlan(day, start, table, events, window)
-            if len(self._plans) >= 3:
-                keep = self.current_plan.day if self.current_plan else day
-                for d in sorted(self._plans, key=lambda d: abs(d - keep), reverse=True)[:1]:
-                    del self._plans[d]
-            self._plans[day] = plan
+            plan = DaySchedule(day, start, table, events, window)
+            if len(self._schedules) >= 3:
+                keep = self.current_schedule.day if self.current_schedule else day
+                for d in sorted(self._schedules, key=lambda d: abs(d - keep), reverse=True)[:1]:
+                    del self._schedules[d]
+            self._schedules[day] = plan
         return plan
 
     # ------------------------------------------------------------ tracking window
@@ -196,7 +199,7 @@ class DayPlanner:
             we = min(we, ev.sunset if ev.sunset is not None else start + 86400.0)
         return (ws, max(ws, we))
 
-    def _apply_window(self, table: DayTable, window: tuple[float, float]) -> None:
+    def _apply_window(self, table: TrackingTable, window: tuple[float, float]) -> None:
         """Rewrite phases and commands of ``table`` in place for a tracking window."""
         ws, we = window
         t = table.t
@@ -227,10 +230,10 @@ class DayPlanner:
     def _rest(self, t: np.ndarray) -> np.ndarray:
         """NIGHT / STOW pose at instants t: mirrors sleeping, longitudinal axes at rest [rad].
 
-        The longitudinal values are the core's own NIGHT commands (``daytable._resting``:
+        The longitudinal values are the core's own NIGHT commands (``tracking_table._resting``:
         the rest position under the moving laws, the fixed/day's value otherwise).
         """
-        bm, ba = daytable._resting(t, self.site, self.collector)
+        bm, ba = tracking_table._resting(t, self.site, self.collector)
         return np.stack([np.full(t.size, self.collector.sleeping), bm, ba], axis=1)
 
     def sleep_pose(self, t: float) -> np.ndarray:
@@ -253,9 +256,9 @@ class DayPlanner:
         for day in np.unique(days):
             sel = np.nonzero(days == day)[0]
             ts = t[sel]
-            plan = self._plans.get(int(day))
-            if plan is None and self.current_plan is not None and abs(int(day) - self.current_plan.day) <= 1:
-                plan = self.day_plan(int(day))    # tomorrow, when a horizon crosses 0:00
+            plan = self._schedules.get(int(day))
+            if plan is None and self.current_schedule is not None and abs(int(day) - self.current_schedule.day) <= 1:
+                plan = self.schedule(int(day))    # tomorrow, when a horizon crosses 0:00
             if plan is not None and np.all(ts == np.floor(ts)):
                 idx = (ts - plan.table.t[0]).astype(np.int64)
                 if idx.min() >= 0 and idx.max() < plan.table.t.size:

@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 from sslfr_common.contract import Phase
 from sslfr_planner import laws, raytrace
 from sslfr_planner.collector import Collector, FieldGeometry
-from sslfr_planner.daytable import evaluate, plan_day
+from sslfr_planner.tracking_table import evaluate, tabulate_day
 from sslfr_planner.events import sun_events
 from sslfr_planner.site import Site
 
@@ -34,7 +34,7 @@ CITIES = {
 
 @pytest.fixture(scope='module')
 def june():
-    return plan_day(dt.date(2026, 6, 21), ALMERIA, Collector(), 10.0)
+    return tabulate_day(dt.date(2026, 6, 21), ALMERIA, Collector(), 10.0)
 
 
 def test_day_cycle_order_and_events(june):
@@ -75,7 +75,7 @@ def test_axis_commands_per_phase(june):
     np.testing.assert_allclose(june.mirrors[pdw], at_rise.mirrors[0], atol=1e-6)
     np.testing.assert_allclose(june.mobile_structure[pdw], at_rise.mobile_structure[0], atol=1e-6)
     # horizontal rows: sunrise at beta_0 = -45 deg, sunset at +45 deg (seed 000 section 4)
-    flat = plan_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='horizontal'), 10.0)
+    flat = tabulate_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='horizontal'), 10.0)
     assert math.isclose(flat.mirrors[flat.phase == PRE_DAWN][0], -math.pi / 4, abs_tol=1e-3)
     assert abs(flat.mirrors[flat.phase == TRACKING][-1] - math.pi / 4) < math.radians(0.5)
 
@@ -99,17 +99,17 @@ def test_noon_signs_northern_and_southern_hemisphere():
 def test_seed001_optimum_fixed_tilts(city):
     lat, lon, elev = CITIES[city]
     site = Site.from_degrees(lat, lon, elev)
-    tab = plan_day(dt.date(2026, 3, 20), site, Collector(law='optimum_fixed'), 600.0)
+    tab = tabulate_day(dt.date(2026, 3, 20), site, Collector(law='optimum_fixed'), 600.0)
     assert np.allclose(tab.mobile_structure, math.radians(lat) / 2, atol=1e-15)   # beta_M = lat/2
     assert np.allclose(tab.secondary_reflector, math.radians(lat), atol=1e-15)    # beta_a = lat
     assert np.all(tab.phase[tab.mirrors != Collector().sleeping] != NIGHT)
 
 
 def test_horizontal_and_daily_laws():
-    tab = plan_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='horizontal'), 900.0)
+    tab = tabulate_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='horizontal'), 900.0)
     assert np.all(tab.mobile_structure == 0) and np.all(tab.secondary_reflector == 0)
     ev = sun_events(dt.date(2026, 6, 21), ALMERIA)
-    tab = plan_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='daily'), 900.0)
+    tab = tabulate_day(dt.date(2026, 6, 21), ALMERIA, Collector(law='daily'), 900.0)
     # once a day: the value changes at local mean midnight (00:09:36 UTC at 2.4 W)
     local_day = np.floor((tab.t + math.degrees(ALMERIA.longitude) * 240.0) / 86400.0)
     assert np.ptp(tab.mobile_structure[local_day == local_day[-1]]) == 0.0
@@ -138,8 +138,8 @@ def test_law_signs():
 
 def test_polar_day_tracks_all_day_and_polar_night_sleeps():
     tromso = Site.from_degrees(69.65, 18.96)
-    summer = plan_day(dt.date(2026, 6, 21), tromso, Collector(), 300.0)
-    winter = plan_day(dt.date(2026, 12, 21), tromso, Collector(), 300.0)
+    summer = tabulate_day(dt.date(2026, 6, 21), tromso, Collector(), 300.0)
+    winter = tabulate_day(dt.date(2026, 12, 21), tromso, Collector(), 300.0)
     assert np.all(summer.phase == TRACKING) and summer.events.day_type == 'polar_day'
     assert np.all(winter.phase == NIGHT) and winter.events.day_type == 'polar_night'
     assert np.all(winter.mirrors == math.pi / 2)
@@ -147,7 +147,7 @@ def test_polar_day_tracks_all_day_and_polar_night_sleeps():
 
 def test_tracking_step_holds_the_mid_interval_position():
     c = Collector(tracking_step=900.0)
-    tab = plan_day(dt.date(2026, 3, 20), Site.from_degrees(7.1254, -73.1198), c, 60.0)  # Bucaramanga
+    tab = tabulate_day(dt.date(2026, 3, 20), Site.from_degrees(7.1254, -73.1198), c, 60.0)  # Bucaramanga
     tr = tab.phase == TRACKING
     k = np.floor(tab.t[tr] / 900.0)
     for kk in np.unique(k)[2:-2]:
@@ -183,7 +183,7 @@ def test_bad_inputs_rejected():
     with pytest.raises(ValueError):
         evaluate(np.array([np.nan]), ALMERIA, Collector())
     with pytest.raises(ValueError):
-        plan_day(dt.date(2026, 1, 1), ALMERIA, Collector(), 0.0)
+        tabulate_day(dt.date(2026, 1, 1), ALMERIA, Collector(), 0.0)
 
 
 T0 = dt.datetime(1950, 1, 1, tzinfo=dt.timezone.utc).timestamp()

@@ -1,0 +1,227 @@
+"""Playback of a recorded bag onto the ROS graph (the node side of ``sslfr replay``).
+
+:class:`Player` publishes the recorded serialized bytes (no decode/re-encode) from a
+worker thread, on publishers with the recorded QoS (reliability, durability), at
+their log times scaled by the rate (0: as fast as possible), with ``/clock``
+(rosgraph_msgs/Clock) following the bag time: before each message whose time
+advanced, and at ``clock_hz`` while waiting. :func:`run_player` owns the node, its
+context and executor for one playback. Used by ``sslfr replay`` (:mod:`.replay`) and
+its what-if mode (:mod:`.whatif_run`).
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+from sslfr_common.node import message_class
+from sslfr_common.timeconv import stamp_from_ns
+
+from .bag.metadata import BagError
+from .bag.playback import Timeline, absolute, progress_line
+from .bag.reader import BagReader
+
+
+def _qos_for(info, QoSProfile, ReliabilityPolicy, DurabilityPolicy):  # noqa: N803
+    """Publisher QoS from the recorded offers (rosbag2: reuse the offer if all agree)."""
+    offers = info.offered_qos_profiles
+    reliable = all(o.get('reliability') == 'reliable' for o in offers) if offers else True
+    latched = bool(offers) and all(o.get('durability') == 'transient_local' for o in offers)
+    return QoSProfile(depth=10 if not latched else 1,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                      else DurabilityPolicy.VOLATILE)
+
+
+class Player:
+    """Publishes a bag from a worker thread; the owning node spins in the main thread.
+
+    Parameters
+    ----------
+    node : rclpy Node
+    reader : BagReader
+    topics : list of str or None
+        Absolute recorded topic names to play (None: all).
+    remaps : dict
+        Recorded name -> published name.
+    rate : float
+        Speed factor (0: as fast as possible).
+    start_ns, end_ns : int or None
+        Window of log times [ns].
+    clock_hz : float
+        /clock publication rate while waiting [Hz, wall].
+    progress : bool
+        Draw a progress bar on stderr.
+    """
+
+    def __init__(self, node, reader: BagReader, topics=None, remaps=None, rate=1.0,
+                 start_ns=None, end_ns=None, clock_hz=100.0, progress=True, publish_clock=True):
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        self.node = node
+        self.reader = reader
+        self.rate = rate
+        self.start_ns = reader.start_ns if start_ns is None else max(start_ns, reader.start_ns)
+        self.end_ns = reader.end_ns + 1 if end_ns is None else end_ns
+        self.clock_period = 1.0 / clock_hz if clock_hz > 0 else 0.1
+        self.progress = progress
+        self.publish_clock = publish_clock
+        self.stop_event = threading.Event()
+        self.done = threading.Event()
+        self.count = 0
+        self.skipped: dict[str, str] = {}
+        self.error: str = ''
+        self.wall_elapsed = 0.0
+        self.last_ns = self.start_ns
+        self.interrupted = False
+        self._Clock = Clock
+        remaps = remaps or {}
+        self.publishers = {}
+        wanted = None if topics is None else {absolute(t) for t in topics}
+        for name, info in reader.topics.items():
+            if wanted is not None and name not in wanted:
+                continue
+            try:
+                cls = message_class(info.type)
+            except (ImportError, AttributeError, ValueError) as exc:
+                self.skipped[name] = f'type {info.type} not available ({exc})'
+                continue
+            out = remaps.get(name, name)
+            self.publishers[name] = node.create_publisher(
+                cls, out, _qos_for(info, QoSProfile, ReliabilityPolicy, DurabilityPolicy))
+        self.clock_pub = node.create_publisher(
+            Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)) \
+            if publish_clock else None
+        self._last_clock_ns = None
+        self._thread = threading.Thread(target=self._run, name='replay', daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        self._thread.join(5.0)
+
+    def publish_start_clock(self) -> None:
+        """Publish /clock at the start time (used while waiting for subscribers)."""
+        self._last_clock_ns = None
+        self._clock(self.start_ns)
+
+    def _clock(self, t_ns: int) -> None:
+        if self.clock_pub is None or t_ns == self._last_clock_ns:
+            return
+        self.clock_pub.publish(self._Clock(clock=stamp_from_ns(t_ns)))
+        self._last_clock_ns = t_ns
+
+    def _run(self) -> None:
+        wall0 = time.monotonic()
+        timeline = Timeline(self.start_ns, wall0, self.rate)
+        next_progress = wall0
+        next_clock = wall0
+        t_ns = self.start_ns
+        try:
+            self._clock(self.start_ns)
+            pubs = self.publishers
+            messages = self.reader.messages(list(pubs), self.start_ns, self.end_ns)
+            if self.rate <= 0:
+                # As fast as possible: no timing; /clock and progress every few ms of wall.
+                monotonic = time.monotonic
+                count = 0
+                for raw in messages:
+                    if count & 255 == 0:
+                        now = monotonic()
+                        if self.stop_event.is_set():
+                            break
+                        if now >= next_clock:
+                            self._clock(raw.log_time)
+                            next_clock = now + self.clock_period
+                        if self.progress and now >= next_progress:
+                            sys.stderr.write('\r' + progress_line(raw.log_time, self.start_ns,
+                                                                  self.end_ns, count, now - wall0))
+                            sys.stderr.flush()
+                            next_progress = now + 0.5
+                    pubs[raw.topic].publish(raw.data)
+                    count += 1
+                    t_ns = raw.log_time
+                self.count = count
+                messages = ()
+            for raw in messages:
+                if self.stop_event.is_set():
+                    break
+                due = timeline.due(raw.log_time)
+                while True:
+                    now = time.monotonic()
+                    if now >= due or self.stop_event.is_set():
+                        break
+                    step = min(due - now, self.clock_period)
+                    if self.stop_event.wait(step):
+                        break
+                    now = time.monotonic()
+                    if now >= next_clock:
+                        self._clock(min(timeline.bag_time(now), raw.log_time))
+                        next_clock = now + self.clock_period
+                if self.stop_event.is_set():
+                    break
+                t_ns = raw.log_time
+                self._clock(t_ns)
+                pubs[raw.topic].publish(raw.data)
+                self.count += 1
+                if self.progress and now >= next_progress:
+                    sys.stderr.write('\r' + progress_line(t_ns, self.start_ns, self.end_ns,
+                                                          self.count, now - wall0))
+                    sys.stderr.flush()
+                    next_progress = now + 0.5
+            if not self.stop_event.is_set():
+                self._clock(t_ns)
+        except BagError as exc:
+            self.error = str(exc)
+        finally:
+            self.wall_elapsed = time.monotonic() - wall0
+            self.last_ns = t_ns
+            if self.progress:
+                sys.stderr.write('\r' + progress_line(t_ns, self.start_ns, self.end_ns, self.count,
+                                                      self.wall_elapsed) + '\n')
+                sys.stderr.flush()
+            self.done.set()
+
+
+def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_ns=None,
+               end_ns=None, clock_hz=100.0, progress=True, node_name='sslfr_replay',
+               domain_id=None, wait_subscribers: float = 0.0, wait_for: list[str] | None = None,
+               before_play=None) -> Player:
+    """Create a node, play the bag (blocking until done or Ctrl-C), return the Player."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    context = rclpy.Context()
+    kwargs = {'context': context}
+    if domain_id is not None:
+        kwargs['domain_id'] = int(domain_id)
+    rclpy.init(**kwargs)
+    node = rclpy.create_node(node_name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    player = Player(node, reader, topics, remaps, rate, start_ns, end_ns, clock_hz, progress)
+    try:
+        if before_play is not None:
+            before_play(node, executor)
+        deadline = time.monotonic() + wait_subscribers
+        while time.monotonic() < deadline:
+            player.publish_start_clock()  # sim-time subscribers get a clock before any data
+            pubs = [p for t, p in player.publishers.items() if wait_for is None or t in wait_for]
+            if pubs and all(p.get_subscription_count() > 0 for p in pubs):
+                break
+            executor.spin_once(timeout_sec=0.05)
+        player.start()
+        while not player.done.is_set():
+            executor.spin_once(timeout_sec=0.05)
+    except KeyboardInterrupt:
+        player.interrupted = True
+        player.stop()
+        sys.stderr.write('\nreplay: interrupted\n')
+    finally:
+        player.stop()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return player
