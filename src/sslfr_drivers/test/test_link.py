@@ -7,7 +7,7 @@ import tty
 import pytest
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.link.board_link import BoardLink, LinkDown, LinkState, NackError
+from sslfr_drivers.link.board_link import BoardLink, BoardLinkState as LinkState, LinkDown, NackError
 from sslfr_drivers.link.protocol import Frame, Framer, encode_frame
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
@@ -212,16 +212,27 @@ def test_loss_counter_exact_across_board_sequence_wrap():
             lk.stop()
 
 
-def test_frame_protocol_with_pyserial_reader_thread():
-    import serial
-    import serial.threaded
-    from sslfr_drivers.link.transport import FrameProtocol
+def test_reader_thread_feeds_a_framing_protocol():
+    """The reader owns the port; a protocol object only parses (pyserial's
+    serial/threaded shape): frames split over 7-byte writes and after junk arrive whole."""
+    from sslfr_drivers.link.reader import Protocol, ReaderThread
     got = []
-    ser = serial.serial_for_url('loop://', timeout=0.05)
-    with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(got.append)) as proto:
+
+    class FrameCollector(Protocol):
+        def __init__(self):
+            self.framer = Framer()
+
+        def data_received(self, data):
+            got.extend(self.framer.feed(data))
+
+    reader = ReaderThread(make_transport('loop://'), FrameCollector()).start()
+    try:
+        assert wait_for(lambda: reader.connected, 2)
         frames = [Frame(0x83, i, bytes(range(i))) for i in range(30)]
         wire = b'junk' + b''.join(encode_frame(f) for f in frames)
         for i in range(0, len(wire), 7):
-            proto.transport.write(wire[i:i + 7])
+            reader.write(wire[i:i + 7])
         assert wait_for(lambda: len(got) == 30, 3)
+    finally:
+        reader.stop()
     assert got == frames
