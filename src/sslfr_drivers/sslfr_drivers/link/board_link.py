@@ -139,7 +139,8 @@ class BoardLink(Protocol):
         self._lock = threading.RLock()
         self._listeners: list[Callable[[m.Message, Frame], None]] = []
         self._state_listeners: list[Callable[[BoardLinkState, 'BoardLink'], None]] = []
-        self._state = BoardLinkState.DOWN
+        self._state = BoardLinkState.DOWN      # the link's own view, changed first
+        self._shown = BoardLinkState.DOWN      # what :attr:`state` shows: listeners told
         self._state_cv = threading.Condition()
         self._refreshing = False
         self._next_refresh = 0.0
@@ -201,18 +202,19 @@ class BoardLink(Protocol):
 
     @property
     def state(self) -> BoardLinkState:
-        """Current link state (:class:`BoardLinkState`)."""
-        return self._state
+        """Current link state (:class:`BoardLinkState`); the state listeners have
+        been told it before it shows here."""
+        return self._shown
 
     @property
     def is_up(self) -> bool:
         """True when the link state is UP."""
-        return self._state == BoardLinkState.UP
+        return self._shown == BoardLinkState.UP
 
     def wait_up(self, timeout: float) -> bool:
         """Block until the link is ``up`` (INFO read) or ``timeout`` [s] passes."""
         with self._state_cv:
-            return self._state_cv.wait_for(lambda: self._state == BoardLinkState.UP, timeout)
+            return self._state_cv.wait_for(lambda: self._shown == BoardLinkState.UP, timeout)
 
     def add_listener(self, fn: Callable[[m.Message, Frame], None]) -> None:
         """``fn(msg, frame)`` for every decoded new frame from the board (answers and
@@ -370,17 +372,23 @@ class BoardLink(Protocol):
             self._resolve(s, exc=exc)
 
     def _set_state(self, state: BoardLinkState, why: str = '') -> None:
+        """Change state: the link's own view at once, then the listeners, then what
+        :attr:`state` and :meth:`wait_up` show (unless a newer change came meanwhile,
+        from a listener or the other thread)."""
         with self._state_cv:
             if state == self._state:
                 return
             old, self._state = self._state, state
-            self._state_cv.notify_all()
         _log.info('%s: link %s -> %s %s', self.name, old.value, state.value, why)
         for fn in list(self._state_listeners):
             try:
                 fn(state, self)
             except Exception:  # noqa: BLE001 - a listener bug must not kill the link
                 _log.exception('%s: state listener failed', self.name)
+        with self._state_cv:
+            if self._state == state:
+                self._shown = state
+                self._state_cv.notify_all()
 
     # ------------------------------------------------- reader protocol (reader thread)
     def connection_made(self, reader: ReaderThread) -> None:
@@ -482,11 +490,11 @@ class BoardLink(Protocol):
             self._schedule_refresh()
 
     def _board_reset(self, why: str) -> None:
-        self.resets += 1
         _log.warning('%s: board reset detected (%s): position lost until re-homed',
                      self.name, why)
         if self._state == BoardLinkState.UP:
             self._set_state(BoardLinkState.CONNECTING, f'board reset ({why})')
+        self.resets += 1    # counted once the link no longer shows UP
         if not self._refreshing:
             self._schedule_refresh()
 
