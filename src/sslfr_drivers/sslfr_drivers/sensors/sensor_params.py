@@ -14,33 +14,30 @@ from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_drivers.sensors.veml7700 import LUMINOUS_EFFICACY
 
-
-def _port(board: str) -> ParamSpec:
-    return ParamSpec('port', '', f'{board} port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
-                                 'empty = no board (the node stays up and reports it) [-]')
-
-
-def _baudrate(text: str = 'serial line speed [bit/s]') -> ParamSpec:
-    return ParamSpec('baudrate', 115200, text, 'bit/s', 1200, 921600)
-
-
-def _max_sample_age(default: float, what: str) -> ParamSpec:
-    return ParamSpec('max_sample_age', default, f'diagnostics WARN when no {what} for this long [s]',
-                     's', 0.1, 3600.0)
-
-
 HEARTBEAT = ParamSpec('heartbeat', 0.5, 'board link PING period [s]', 's', 0.05, 5.0)
 
 #: Parameters whose change reopens the board (``framing``: the GPS only).
 SOURCE_KEYS: tuple[str, ...] = ('port', 'framing', 'baudrate', 'heartbeat')
 
+
+def _board_table(board: str, sample: str, max_age: float, *specs: ParamSpec,
+                 baudrate: str = 'serial line speed [bit/s]') -> ParamTable:
+    """The board parameters every sensor node has, around the node's own ``specs``."""
+    return ParamTable((
+        ParamSpec('port', '', f'{board} port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
+                              'empty = no board (the node stays up and reports it) [-]'),
+        ParamSpec('baudrate', 115200, baudrate, 'bit/s', 1200, 921600),
+        *specs,
+        ParamSpec('max_sample_age', max_age, f'diagnostics WARN when no {sample} for this long [s]',
+                  's', 0.1, 3600.0),
+        HEARTBEAT))
+
+
 #: ``gps`` node.
-GPS = ParamTable((
-    _port('GPS board'),
+GPS = _board_table(
+    'GPS board', 'NMEA sentence', 3.0,
     ParamSpec('framing', 'protocol', 'protocol: NMEA in board-protocol frames; raw_nmea: a bare GPS '
                                      'module streaming NMEA text [-]', choices=('protocol', 'raw_nmea')),
-    _baudrate('serial line speed [bit/s] (board protocol: 115200; a bare NEO-6M module with '
-              'framing raw_nmea: 9600)'),
     ParamSpec('frame_id', 'gps', 'frame_id of gps/fix (the antenna) [-]'),
     ParamSpec('time_ref_source', 'gps', 'TimeReference.source [-]'),
     ParamSpec('uere', 4.0, 'user-equivalent range error of an autonomous fix, GGA quality 1 '
@@ -49,14 +46,12 @@ GPS = ParamTable((
     ParamSpec('time_jump_threshold', 2.0, 'step of (receiver UTC - ROS time) between RMCs flagged as '
                                           'a time jump [s]', 's', 0.01, 1.0e9),
     ParamSpec('time_ref_without_fix', False, 'also publish gps/time_reference from RMC status V [-]'),
-    _max_sample_age(3.0, 'NMEA sentence'),
-    HEARTBEAT,
-))
+    baudrate='serial line speed [bit/s] (board protocol: 115200; a bare NEO-6M module with '
+             'framing raw_nmea: 9600)')
 
 #: ``absorber_board`` node.
-ABSORBER_BOARD = ParamTable((
-    _port('absorber board'),
-    _baudrate(),
+ABSORBER_BOARD = _board_table(
+    'absorber board', 'thermocouple sample', 1.5,
     ParamSpec('inlet_frame_id', 'absorber_inlet', 'frame_id of absorber/inlet_temperature [-]'),
     ParamSpec('outlet_frame_id', 'absorber_outlet', 'frame_id of absorber/outlet_temperature [-]'),
     ParamSpec('converter_error', 2.0, 'MAX6675 error bound, uniform [degC]', 'degC', 0.0, 50.0),
@@ -67,23 +62,16 @@ ABSORBER_BOARD = ParamTable((
     ParamSpec('debounce_time', 0.03, 'a raw switch change must hold this long to count [s]',
               's', 0.0, 5.0),
     ParamSpec('switch_rate', 10.0, 'limit_switches publication rate besides changes [Hz]',
-              'Hz', 0.5, 100.0),
-    _max_sample_age(1.5, 'thermocouple sample'),
-    HEARTBEAT,
-))
+              'Hz', 0.5, 100.0))
 
 #: ``irradiance`` node.
-IRRADIANCE = ParamTable((
-    _port('irradiance board'),
-    _baudrate(),
+IRRADIANCE = _board_table(
+    'irradiance board', 'sample', 3.0,
     ParamSpec('frame_id', 'irradiance', 'frame_id of the published messages [-]'),
     ParamSpec('luminous_efficacy', LUMINOUS_EFFICACY,
               'luminous efficacy of beam sunlight [lm/W] (seed 000: 104)', 'lm/W', 50.0, 250.0),
     ParamSpec('relative_uncertainty', 0.1, '1-sigma relative error of illuminance (sensor '
-                                           'calibration and spectrum) [-]', '-', 0.0, 1.0),
-    _max_sample_age(3.0, 'sample'),
-    HEARTBEAT,
-))
+                                           'calibration and spectrum) [-]', '-', 0.0, 1.0))
 
 #: Node name -> its table.
 TABLES: dict[str, ParamTable] = {'gps': GPS, 'absorber_board': ABSORBER_BOARD, 'irradiance': IRRADIANCE}
