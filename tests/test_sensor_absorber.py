@@ -7,6 +7,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
+from sslfr_common.node import to_sec
 from sslfr_drivers.sim.runner import SimThread
 from sslfr_drivers.sim.sensors import AbsorberSim
 
@@ -19,10 +20,6 @@ def _diag(arrays, name='absorber_board: board'):
             if st.name == name:
                 return st, {kv.key: kv.value for kv in st.values}
     return None, {}
-
-
-def _stamp(t):
-    return t.sec + t.nanosec * 1e-9
 
 
 @pytest.fixture
@@ -69,14 +66,14 @@ def test_temperatures_faults_switches_and_unplug(sim, launch, ros, tmp_path):
     assert ros.spin_until(lambda: any(abs(m.temperature - 180.0) <= 0.25 for m in outlet[n:]), 3)
 
     # limit switch: sleeping closes (with contact bounce) -> one debounced change
-    t0 = ros.node.get_clock().now().nanoseconds * 1e-9
+    t0 = to_sec(ros.node.get_clock().now())
     assert not switches[-1].sleeping
     with sim.locked():
         sim.board.control({'cmd': 'fault', 'kind': 'switch-bounce', 'name': 'sleeping'})
         sim.board.control({'cmd': 'fault', 'kind': 'switch', 'name': 'sleeping', 'closed': True})
     assert ros.spin_until(lambda: switches[-1].sleeping, 3)
     s = switches[-1]
-    assert t0 - 0.1 <= _stamp(s.sleeping_changed) <= _stamp(s.header.stamp)
+    assert t0 - 0.1 <= to_sec(s.sleeping_changed) <= to_sec(s.header.stamp)
     assert not (s.initial or s.last or s.longitudinal_1 or s.longitudinal_2)
     n = len(switches)
     ros.spin_for(0.6)

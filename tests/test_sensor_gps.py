@@ -10,6 +10,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
+from sslfr_common.node import to_sec
 from sslfr_drivers.sim.runner import SimThread
 from sslfr_drivers.sim.sensors import GpsSim
 
@@ -50,7 +51,7 @@ def test_fix_time_loss_recovery_and_unplug(gps_sim, launch, ros, tmp_path):
     assert good.header.frame_id == 'gps'
     # the time reference is the simulated day's UTC (date + time), not the wall clock
     assert ros.spin_until(lambda: times, 5)
-    t = times[-1].time_ref.sec + times[-1].time_ref.nanosec * 1e-9
+    t = to_sec(times[-1].time_ref)
     assert START <= t < START + 60 and times[-1].source == 'gps'
 
     # fix lost: NO_FIX with NaN position, never a stale position

@@ -7,7 +7,7 @@ import tty
 import pytest
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.link.board_link import BoardLink, LinkDown, LinkState, NackError
+from sslfr_drivers.link.board_link import BoardLink, BoardLinkState, LinkDown, NackError
 from sslfr_drivers.link.protocol import Frame, Framer, encode_frame
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
@@ -134,18 +134,18 @@ def test_board_reset_detected_and_state_reread(sim, link):
     states = []
     link.add_state_listener(lambda s, lk: states.append(s))
     sim.command('reset')
-    assert wait_for(lambda: link.resets > resets and link.state == LinkState.UP, 3)
+    assert wait_for(lambda: link.resets > resets and link.state == BoardLinkState.UP, 3)
     st = link.last_status
     assert not st.homed and st.fault_bits & m.FaultBits.RESET and st.position == 0
-    assert LinkState.CONNECTING in states and states[-1] == LinkState.UP
+    assert BoardLinkState.CONNECTING in states and states[-1] == BoardLinkState.UP
     with pytest.raises(NackError):
         link.move_to(50, 100)    # no move before re-homing
 
 
 def test_silence_then_recovery(sim, link):
     sim.command('disconnect 1.6')
-    assert wait_for(lambda: link.state == LinkState.SILENT, 2.5)
-    assert wait_for(lambda: link.state == LinkState.UP, 4)
+    assert wait_for(lambda: link.state == BoardLinkState.SILENT, 2.5)
+    assert wait_for(lambda: link.state == BoardLinkState.UP, 4)
     assert link.get_status().fault_bits & m.FaultBits.RESET   # state re-read
 
 
@@ -159,10 +159,10 @@ def test_unplug_reconnects_with_backoff(tmp_path):
             assert lk.wait_up(3)
             lk.set_zero(0)
             sim.command('unplug 1.0')
-            assert wait_for(lambda: lk.state == LinkState.DOWN, 2)
+            assert wait_for(lambda: lk.state == BoardLinkState.DOWN, 2)
             with pytest.raises(LinkDown):
                 lk.ping()
-            assert wait_for(lambda: lk.state == LinkState.UP, 5)
+            assert wait_for(lambda: lk.state == BoardLinkState.UP, 5)
             assert lk.reconnects == 1
             assert lk.get_status().homed       # same board, not reset: position kept
         finally:
@@ -174,7 +174,7 @@ def test_old_protocol_version_refused():
     with SimThread.plain(board) as sim:
         lk = BoardLink(SerialTransport(sim.path), timeout=0.1, retries=1).start()
         try:
-            assert wait_for(lambda: lk.state == LinkState.REFUSED, 3)
+            assert wait_for(lambda: lk.state == BoardLinkState.REFUSED, 3)
             assert 'protocol version 7' in str(lk.version_error)
             with pytest.raises(Exception, match='version 7'):
                 lk.move_to(1, 1)
@@ -212,16 +212,102 @@ def test_loss_counter_exact_across_board_sequence_wrap():
             lk.stop()
 
 
-def test_frame_protocol_with_pyserial_reader_thread():
-    import serial
-    import serial.threaded
-    from sslfr_drivers.link.transport import FrameProtocol
+def test_reader_thread_feeds_a_framing_protocol():
+    """The reader owns the port; a protocol object only parses (pyserial's
+    serial/threaded shape): frames split over 7-byte writes and after junk arrive whole."""
+    from sslfr_drivers.link.reader import Protocol, ReaderThread
     got = []
-    ser = serial.serial_for_url('loop://', timeout=0.05)
-    with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(got.append)) as proto:
+
+    class FrameCollector(Protocol):
+        def __init__(self):
+            self.framer = Framer()
+
+        def data_received(self, data):
+            got.extend(self.framer.feed(data))
+
+    reader = ReaderThread(make_transport('loop://'), FrameCollector()).start()
+    try:
+        assert wait_for(lambda: reader.connected, 2)
         frames = [Frame(0x83, i, bytes(range(i))) for i in range(30)]
         wire = b'junk' + b''.join(encode_frame(f) for f in frames)
         for i in range(0, len(wire), 7):
-            proto.transport.write(wire[i:i + 7])
+            reader.write(wire[i:i + 7])
         assert wait_for(lambda: len(got) == 30, 3)
+    finally:
+        reader.stop()
     assert got == frames
+
+
+def test_backoff_doubles_to_its_cap_and_resets():
+    from sslfr_drivers.link.reader import Backoff
+    b = Backoff(0.1, 1.0)
+    assert [b.next() for _ in range(6)] == pytest.approx([0.1, 0.2, 0.4, 0.8, 1.0, 1.0])
+    b.reset()
+    assert b.next() == 0.1
+    assert Backoff().lo == 0.1 and Backoff().hi == 2.0      # the one policy of every board port
+    for lo, hi in ((0.0, 1.0), (0.5, 0.1), (-1.0, 1.0)):
+        with pytest.raises(ValueError):
+            Backoff(lo, hi)
+
+
+def test_reader_retries_an_unopenable_port_with_backoff():
+    """Open attempts on a missing device are spaced by the back-off delays (lower
+    bounds only: a loaded machine may add to them)."""
+    from sslfr_drivers.link.reader import Backoff, Protocol, ReaderThread
+    attempts = []
+
+    class Watch(Protocol):
+        def open_failed(self, exc):
+            attempts.append((time.monotonic(), str(exc)))
+
+    reader = ReaderThread(SerialTransport('/dev/does-not-exist'), Watch(),
+                          backoff=Backoff(0.05, 0.2)).start()
+    try:
+        assert wait_for(lambda: len(attempts) >= 5, 5)
+    finally:
+        reader.stop()
+    gaps = [b[0] - a[0] for a, b in zip(attempts, attempts[1:])]
+    for gap, delay in zip(gaps, [0.05, 0.1, 0.2, 0.2]):
+        assert gap >= delay - 0.005
+    assert 'cannot open /dev/does-not-exist' in attempts[0][1]
+    assert reader.last_error == attempts[-1][1]
+    assert reader.opens == 0 and not reader.connected
+
+
+def test_reader_survives_a_failing_protocol_and_stops_cleanly():
+    from sslfr_drivers.link.reader import Protocol, ReaderThread
+    got = []
+
+    class Flaky(Protocol):
+        def data_received(self, data):
+            if data.startswith(b'boom'):
+                raise RuntimeError('parser bug')
+            got.append(data)
+
+    reader = ReaderThread(make_transport('loop://'), Flaky()).start()
+    assert wait_for(lambda: reader.connected, 2)
+    reader.write(b'boom')
+    assert wait_for(lambda: reader.bytes_received == 4, 2)
+    reader.write(b'fine')
+    assert wait_for(lambda: got == [b'fine'], 2)
+    reader.stop()
+    assert not reader.connected and reader.opens == 1 and reader.reconnects == 0
+    with pytest.raises(TransportError):
+        reader.write(b'x')
+
+
+def test_link_and_sensor_modules_never_import_the_simulators():
+    """Production code (board link, xbee_hub, sensor nodes) runs without sim/."""
+    import ast
+    from pathlib import Path
+    import sslfr_drivers
+    root = Path(sslfr_drivers.__file__).parent
+    offenders = []
+    for path in sorted([*root.glob('link/*.py'), *root.glob('sensors/*.py')]):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ''] if isinstance(node, ast.ImportFrom) else []
+            offenders += [f'{path.relative_to(root)}: {n}' for n in names
+                          if n.startswith('sslfr_drivers.sim') or (isinstance(node, ast.ImportFrom)
+                                                                   and node.level and 'sim' in n)]
+    assert len(list(root.glob('link/*.py'))) >= 8 and not offenders, offenders

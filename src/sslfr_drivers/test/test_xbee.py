@@ -14,7 +14,7 @@ from digi.xbee.packets.raw import RX64Packet, TX64Packet, TXStatusPacket
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_drivers.link.board_link import BoardLink, LinkState
+from sslfr_drivers.link.board_link import BoardLink, BoardLinkState
 from sslfr_drivers.sim.axis import AxisConfig, AxisSim
 from sslfr_drivers.sim.base import FaultInjector
 from sslfr_drivers.sim.runner import SimControl, SimThread
@@ -91,8 +91,8 @@ def test_two_boards_behind_one_coordinator(xbee_sim):
         xbee_sim.command(f'disconnect 0.6 @{ADDR_B.lower()}')
         time.sleep(0.7)
         assert lb.transport.tx_failures > 0 and lb.tx_failures == lb.transport.tx_failures
-        assert la.transport.tx_failures == 0 and la.state == LinkState.UP
-        assert wait_for(lambda: lb.state == LinkState.UP, 3)
+        assert la.transport.tx_failures == 0 and la.state == BoardLinkState.UP
+        assert wait_for(lambda: lb.state == BoardLinkState.UP, 3)
         assert lb.get_status().position == 500
         assert coord.tx_failures == lb.transport.tx_failures
     finally:
@@ -145,7 +145,7 @@ def test_hub_gives_each_remote_board_a_pty(xbee_sim, tmp_path):
         time.sleep(0.6)
         st = SimControl(str(tmp_path / 'hub.sock')).cmd('status')
         assert st['boards'][0]['tx_failures'] > 0 and st['boards'][1]['tx_failures'] == 0
-        assert wait_for(lambda: links[0].state == LinkState.UP, 3)
+        assert wait_for(lambda: links[0].state == BoardLinkState.UP, 3)
     finally:
         for lk in links:
             lk.stop()
@@ -166,8 +166,8 @@ def test_coordinator_port_lost_and_reopened(tmp_path):
             assert lk.wait_up(5)
             lk.set_zero(0)
             sim.command('unplug 1.0')                 # the coordinator's USB adapter vanishes
-            assert wait_for(lambda: lk.state == LinkState.DOWN, 3)
-            assert wait_for(lambda: lk.state == LinkState.UP, 6)
+            assert wait_for(lambda: lk.state == BoardLinkState.DOWN, 3)
+            assert wait_for(lambda: lk.state == BoardLinkState.UP, 6)
             assert lk.reconnects == 1 and lk.get_status().homed
         finally:
             lk.stop()

@@ -1,18 +1,20 @@
-"""BoardLink: request/response over one board's transport, with a reader thread.
+"""BoardLink: request/response with one board, on the project's reconnecting reader.
 
 Pure Python (no rclpy). A node creates one :class:`BoardLink` per board, calls
 :meth:`BoardLink.start` and then uses :meth:`submit` (returns a
 ``concurrent.futures.Future``, never blocks) or :meth:`request` (blocks up to
-``timeout * (retries + 1)``). A background thread reads the transport, feeds the
-:class:`~sslfr_drivers.link.protocol.Framer`, matches answers to requests, retries
-unanswered requests with the SAME sequence number (the board answers a duplicated
-request from its cache and does not execute it twice), sends heartbeats, and
-reopens a lost port with exponential back-off. After every (re)connection, after a
-silence and after a detected board reset it re-reads INFO and STATUS before the link
-is ``UP`` again; listeners are told (a reset board has lost its position: STATUS
-shows HOMED cleared and FaultBits.RESET).
+``timeout * (retries + 1)``). The port belongs to a
+:class:`~sslfr_drivers.link.reader.ReaderThread` (it opens, reads and reopens a lost
+port with :class:`~sslfr_drivers.link.reader.Backoff`); the link is its protocol
+object: it feeds the :class:`~sslfr_drivers.link.protocol.Framer`, matches answers to
+requests, retries unanswered requests with the SAME sequence number (the board
+answers a duplicated request from its cache and does not execute it twice) and sends
+heartbeats. After every (re)connection, after a silence and after a detected board
+reset it re-reads INFO and STATUS before the link is ``UP`` again; listeners are
+told (a reset board has lost its position: STATUS shows HOMED cleared and
+FaultBits.RESET).
 
-States (:class:`LinkState`): ``down`` (port closed/unopenable), ``connecting``
+States (:class:`BoardLinkState`): ``down`` (port closed/unopenable), ``connecting``
 (port open, INFO not read yet), ``up``, ``silent`` (port open but the board stopped
 answering), ``refused`` (board speaks another protocol version).
 """
@@ -29,7 +31,9 @@ from typing import Callable
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, ProtocolError,
-                       ProtocolVersionError, SequenceCounter, SequenceTracker, encode_frame)
+                                         ProtocolVersionError, SequenceCounter, SequenceTracker,
+                                         encode_frame)
+from sslfr_drivers.link.reader import BACKOFF_MAX, BACKOFF_MIN, Backoff, Protocol, ReaderThread
 from sslfr_drivers.link.transport import TransmitError, Transport, TransportError
 
 _log = logging.getLogger(__name__)
@@ -61,12 +65,19 @@ class NackError(LinkError):
         self.code = code
 
 
-class LinkState(str, enum.Enum):
+class BoardLinkState(str, enum.Enum):
+    """State of one :class:`BoardLink` (its value is the text shown in diagnostics).
+    Not the ``AxisStatus.LINK_*`` codes (``sslfr_common.contract.LinkState``)."""
+
     DOWN = 'down'
     CONNECTING = 'connecting'
     UP = 'up'
     SILENT = 'silent'
     REFUSED = 'refused'
+
+
+#: The former name, kept for existing call sites (axis/board_session.py).
+LinkState = BoardLinkState
 
 
 @dataclass
@@ -80,7 +91,7 @@ class _Pending:
     deadline: float
 
 
-class BoardLink:
+class BoardLink(Protocol):
     """One board: requests, answers, counters, heartbeat, reconnect.
 
     Parameters
@@ -100,7 +111,8 @@ class BoardLink:
         No frame received for this long while requests are outstanding or
         heartbeats are sent -> state ``silent`` [s].
     backoff_min, backoff_max : float
-        Reopen / re-read back-off bounds [s] (doubling between them).
+        Reopen / re-read back-off bounds [s] (doubling between them; default the
+        reader's policy, 0.1 s to 2 s).
     read_timeout : float
         Reader thread poll period [s]; bounds timer resolution.
     clock : callable
@@ -109,38 +121,33 @@ class BoardLink:
 
     def __init__(self, transport: Transport, *, name: str | None = None, timeout: float = 0.25,
                  retries: int = 2, heartbeat: float | None = None, silence: float = 1.0,
-                 backoff_min: float = 0.1, backoff_max: float = 5.0, read_timeout: float = 0.02,
-                 clock: Callable[[], float] = time.monotonic):
-        self.transport = transport
+                 backoff_min: float = BACKOFF_MIN, backoff_max: float = BACKOFF_MAX,
+                 read_timeout: float = 0.02, clock: Callable[[], float] = time.monotonic):
         self.name = name or getattr(transport, 'name', 'board')
         self.timeout = timeout
         self.retries = retries
         self.heartbeat = heartbeat
         self.silence = silence
-        self.backoff_min = backoff_min
-        self.backoff_max = backoff_max
-        self.read_timeout = read_timeout
         self.clock = clock
+        self._reader = ReaderThread(transport, self, name=self.name, read_timeout=read_timeout,
+                                    backoff=Backoff(backoff_min, backoff_max))
 
         self.framer = Framer()
         self.tracker = SequenceTracker()
         self._seq = SequenceCounter()
         self._pending: dict[int, _Pending] = {}
         self._lock = threading.RLock()
-        self._wlock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._listeners: list[Callable[[m.Message, Frame], None]] = []
-        self._state_listeners: list[Callable[[LinkState, 'BoardLink'], None]] = []
-        self._state = LinkState.DOWN
+        self._state_listeners: list[Callable[[BoardLinkState, 'BoardLink'], None]] = []
+        self._state = BoardLinkState.DOWN      # the link's own view, changed first
+        self._shown = BoardLinkState.DOWN      # what :attr:`state` shows: listeners told
         self._state_cv = threading.Condition()
         self._refreshing = False
         self._next_refresh = 0.0
-        self._refresh_backoff = backoff_min
+        self._refresh_backoff = Backoff(backoff_min, backoff_max)
         self._consecutive_stale = 0
         self._last_tx = -1e9
         self._last_rx = -1e9
-        self._opened = 0
 
         self.info: m.Info | None = None
         self.last_status: m.Status | None = None
@@ -154,34 +161,21 @@ class BoardLink:
         self.timeouts = 0
         self.retries_sent = 0
         self.tx_failures = 0
-        self.reconnects = 0
         self.resets = 0
         self.version_errors = 0
         self.seq_resyncs = 0
-        self.bytes_received = 0
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> 'BoardLink':
         """Start the reader thread (it opens the transport, with back-off)."""
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name=f'link-{self.name}',
-                                            daemon=True)
-            self._thread.start()
+        self._reader.start()
         return self
 
     def stop(self) -> None:
-        """Stop the thread, fail pending requests, close the transport."""
-        self._stop.set()
-        t, self._thread = self._thread, None
-        if t is not None and t is not threading.current_thread():
-            t.join(timeout=2.0)
+        """Stop the reader thread and close the port, fail pending requests."""
+        self._reader.stop()
         self._fail_all(LinkDown('link stopped'))
-        try:
-            self.transport.close()
-        except TransportError:
-            pass
-        self._set_state(LinkState.DOWN)
+        self._set_state(BoardLinkState.DOWN)
 
     close = stop
 
@@ -192,19 +186,35 @@ class BoardLink:
         self.stop()
 
     @property
-    def state(self) -> LinkState:
-        """Current link state (:class:`LinkState`)."""
-        return self._state
+    def transport(self) -> Transport:
+        """The board's port (owned by the reader thread)."""
+        return self._reader.transport
+
+    @property
+    def reconnects(self) -> int:
+        """Times the port was reopened after the first open."""
+        return self._reader.reconnects
+
+    @property
+    def bytes_received(self) -> int:
+        """Bytes read from the port, frames or not."""
+        return self._reader.bytes_received
+
+    @property
+    def state(self) -> BoardLinkState:
+        """Current link state (:class:`BoardLinkState`); the state listeners have
+        been told it before it shows here."""
+        return self._shown
 
     @property
     def is_up(self) -> bool:
         """True when the link state is UP."""
-        return self._state == LinkState.UP
+        return self._shown == BoardLinkState.UP
 
     def wait_up(self, timeout: float) -> bool:
         """Block until the link is ``up`` (INFO read) or ``timeout`` [s] passes."""
         with self._state_cv:
-            return self._state_cv.wait_for(lambda: self._state == LinkState.UP, timeout)
+            return self._state_cv.wait_for(lambda: self._shown == BoardLinkState.UP, timeout)
 
     def add_listener(self, fn: Callable[[m.Message, Frame], None]) -> None:
         """``fn(msg, frame)`` for every decoded new frame from the board (answers and
@@ -212,7 +222,7 @@ class BoardLink:
         short and never call :meth:`request` from it (use :meth:`submit`)."""
         self._listeners.append(fn)
 
-    def add_state_listener(self, fn: Callable[[LinkState, 'BoardLink'], None]) -> None:
+    def add_state_listener(self, fn: Callable[[BoardLinkState, 'BoardLink'], None]) -> None:
         """``fn(state, link)`` on every state change (reader or refresh thread)."""
         self._state_listeners.append(fn)
 
@@ -226,10 +236,10 @@ class BoardLink:
         :class:`ProtocolVersionError`. Never blocks beyond one transport write.
         """
         fut: Future = Future()
-        if self._state == LinkState.REFUSED and not isinstance(msg, m.GetInfo):
+        if self._state == BoardLinkState.REFUSED and not isinstance(msg, m.GetInfo):
             fut.set_exception(self.version_error or ProtocolVersionError(-1))
             return fut
-        if not self.transport.is_open:
+        if not self._reader.connected:
             fut.set_exception(LinkDown(f'{self.name}: port not open ({self.last_error})'))
             return fut
         timeout = self.timeout if timeout is None else timeout
@@ -258,7 +268,7 @@ class BoardLink:
 
     def send(self, msg: m.Message) -> None:
         """Fire and forget (no answer is awaited even if the type has one)."""
-        if not self.transport.is_open:
+        if not self._reader.connected:
             raise LinkDown(f'{self.name}: port not open')
         with self._lock:
             data = encode_frame(m.encode(msg, self._seq.next()))
@@ -331,8 +341,7 @@ class BoardLink:
     # ------------------------------------------------------------------ internals
     def _write(self, data: bytes, pending: _Pending | None) -> None:
         try:
-            with self._wlock:
-                self.transport.write(data)
+            self._reader.write(data)
             self.frames_sent += 1
             self._last_tx = self.clock()
         except TransmitError as exc:
@@ -362,60 +371,58 @@ class BoardLink:
         for s in seqs:
             self._resolve(s, exc=exc)
 
-    def _set_state(self, state: LinkState, why: str = '') -> None:
+    def _set_state(self, state: BoardLinkState, why: str = '') -> None:
+        """Change state: the link's own view at once, then the listeners, then what
+        :attr:`state` and :meth:`wait_up` show (unless a newer change came meanwhile,
+        from a listener or the other thread)."""
         with self._state_cv:
             if state == self._state:
                 return
             old, self._state = self._state, state
-            self._state_cv.notify_all()
         _log.info('%s: link %s -> %s %s', self.name, old.value, state.value, why)
         for fn in list(self._state_listeners):
             try:
                 fn(state, self)
             except Exception:  # noqa: BLE001 - a listener bug must not kill the link
                 _log.exception('%s: state listener failed', self.name)
+        with self._state_cv:
+            if self._state == state:
+                self._shown = state
+                self._state_cv.notify_all()
 
-    def _run(self) -> None:
-        backoff = self.backoff_min
-        while not self._stop.is_set():
-            if not self.transport.is_open:
-                try:
-                    self.transport.open()
-                except (TransportError, ValueError) as exc:
-                    self.last_error = str(exc)
-                    self._set_state(LinkState.DOWN, str(exc))
-                    self._stop.wait(backoff)
-                    backoff = min(backoff * 2, self.backoff_max)
-                    continue
-                backoff = self.backoff_min
-                self._opened += 1
-                if self._opened > 1:
-                    self.reconnects += 1
-                self.framer.reset()
-                self.tracker.restart()
-                self._set_state(LinkState.CONNECTING, f'opened {self.name}')
-                self._refresh_backoff = self.backoff_min
-                self._schedule_refresh()
+    # ------------------------------------------------- reader protocol (reader thread)
+    def connection_made(self, reader: ReaderThread) -> None:
+        """Port (re)opened: drop partial frames, forget the board's sequence and
+        re-read INFO/STATUS before the link is UP."""
+        self.framer.reset()
+        self.tracker.restart()
+        self._set_state(BoardLinkState.CONNECTING, f'opened {self.name}')
+        self._refresh_backoff.reset()
+        self._schedule_refresh()
+
+    def open_failed(self, exc: BaseException) -> None:
+        """The port could not be opened (the reader retries with back-off)."""
+        self.last_error = str(exc)
+        self._set_state(BoardLinkState.DOWN, str(exc))
+
+    def connection_lost(self, exc: BaseException) -> None:
+        """The port failed: every pending request ends with :class:`LinkDown`."""
+        self.last_error = str(exc)
+        self._fail_all(LinkDown(str(exc)))
+        self._set_state(BoardLinkState.DOWN, str(exc))
+
+    def data_received(self, data: bytes) -> None:
+        """Deframe ``data``; handle every valid frame."""
+        now = self.clock()
+        for frame in self.framer.feed(data):
             try:
-                data = self.transport.read(self.read_timeout)
-            except TransportError as exc:
-                self.last_error = str(exc)
-                try:
-                    self.transport.close()
-                except TransportError:
-                    pass
-                self._fail_all(LinkDown(str(exc)))
-                self._set_state(LinkState.DOWN, str(exc))
-                continue
-            now = self.clock()
-            if data:
-                self.bytes_received += len(data)
-                for frame in self.framer.feed(data):
-                    try:
-                        self._on_frame(frame, now)
-                    except Exception:  # noqa: BLE001 - never let one frame kill the reader
-                        _log.exception('%s: error handling frame %r', self.name, frame)
-            self._service(now)
+                self._on_frame(frame, now)
+            except Exception:  # noqa: BLE001 - never let one frame kill the reader
+                _log.exception('%s: error handling frame %r', self.name, frame)
+
+    def tick(self) -> None:
+        """Retries, time-outs, heartbeat, silence and re-read timers."""
+        self._service(self.clock())
 
     def _on_frame(self, frame: Frame, now: float) -> None:
         if frame.version != PROTOCOL_VERSION:
@@ -424,7 +431,7 @@ class BoardLink:
             self.last_error = str(self.version_error)
             _log.error('%s: %s', self.name, self.version_error)
             self._fail_all(self.version_error)
-            self._set_state(LinkState.REFUSED, str(self.version_error))
+            self._set_state(BoardLinkState.REFUSED, str(self.version_error))
             return
         msg: m.Message | None
         try:
@@ -479,15 +486,15 @@ class BoardLink:
                 fn(msg, frame)
             except Exception:  # noqa: BLE001
                 _log.exception('%s: listener failed', self.name)
-        if self._state in (LinkState.SILENT, LinkState.CONNECTING) and not self._refreshing:
+        if self._state in (BoardLinkState.SILENT, BoardLinkState.CONNECTING) and not self._refreshing:
             self._schedule_refresh()
 
     def _board_reset(self, why: str) -> None:
-        self.resets += 1
         _log.warning('%s: board reset detected (%s): position lost until re-homed',
                      self.name, why)
-        if self._state == LinkState.UP:
-            self._set_state(LinkState.CONNECTING, f'board reset ({why})')
+        if self._state == BoardLinkState.UP:
+            self._set_state(BoardLinkState.CONNECTING, f'board reset ({why})')
+        self.resets += 1    # counted once the link no longer shows UP
         if not self._refreshing:
             self._schedule_refresh()
 
@@ -510,15 +517,15 @@ class BoardLink:
             self.timeouts += 1
             self._resolve(p.seq, exc=LinkTimeout(
                 f'{self.name}: no answer to {type(p.msg).__name__} (seq {p.seq})'))
-        if expired and self._state == LinkState.UP and now - self._last_rx > self.silence:
-            self._set_state(LinkState.SILENT, 'requests unanswered')
+        if expired and self._state == BoardLinkState.UP and now - self._last_rx > self.silence:
+            self._set_state(BoardLinkState.SILENT, 'requests unanswered')
         if self.heartbeat and now - self._last_tx >= self.heartbeat \
-                and self._state != LinkState.REFUSED:
+                and self._state != BoardLinkState.REFUSED:
             self.submit(m.Ping(int(now * 1000) & 0xFFFFFFFF), retries=0)
-        if self._state == LinkState.UP and self.heartbeat \
+        if self._state == BoardLinkState.UP and self.heartbeat \
                 and now - self._last_rx > max(self.silence, 2 * self.heartbeat):
-            self._set_state(LinkState.SILENT, 'no frame heard')
-        if self._state in (LinkState.CONNECTING, LinkState.SILENT, LinkState.REFUSED) \
+            self._set_state(BoardLinkState.SILENT, 'no frame heard')
+        if self._state in (BoardLinkState.CONNECTING, BoardLinkState.SILENT, BoardLinkState.REFUSED) \
                 and not self._refreshing and now >= self._next_refresh:
             self._schedule_refresh()
 
@@ -538,19 +545,18 @@ class BoardLink:
                 self.request(m.GetStatus())
             except NackError:
                 pass   # boards without STATUS (some sensor boards) are fine
-            self._refresh_backoff = self.backoff_min
+            self._refresh_backoff.reset()
             self.version_error = None
-            self._set_state(LinkState.UP, f'{info.name_str} fw {info.firmware}')
+            self._set_state(BoardLinkState.UP, f'{info.name_str} fw {info.firmware}')
         except ProtocolVersionError as exc:
             self.version_error = exc
             self.version_errors += 1
             self.last_error = str(exc)
-            self._set_state(LinkState.REFUSED, str(exc))
+            self._set_state(BoardLinkState.REFUSED, str(exc))
         except (LinkError, ProtocolError) as exc:
             self.last_error = str(exc)
-            if self.transport.is_open and self._state == LinkState.UP:
-                self._set_state(LinkState.SILENT, str(exc))
+            if self._reader.connected and self._state == BoardLinkState.UP:
+                self._set_state(BoardLinkState.SILENT, str(exc))
         finally:
-            self._next_refresh = self.clock() + self._refresh_backoff
-            self._refresh_backoff = min(self._refresh_backoff * 2, self.backoff_max)
+            self._next_refresh = self.clock() + self._refresh_backoff.next()
             self._refreshing = False

@@ -1,4 +1,5 @@
-"""Byte transports under a :class:`~sslfr_drivers.link.board_link.BoardLink` (no rclpy).
+"""Byte transports under the reconnecting reader (:mod:`sslfr_drivers.link.reader`) of a
+:class:`~sslfr_drivers.link.board_link.BoardLink` or a raw NMEA source (no rclpy).
 
 * :class:`SerialTransport` - any pyserial URL or device: ``/dev/ttyUSB0``,
   ``/dev/serial0``, a pty slave such as ``/dev/pts/7`` (what the simulated boards
@@ -17,8 +18,8 @@ pyserial URL or device path.
 
 Every transport has ``open()``, ``close()``, ``is_open``, ``write(data)`` and
 ``read(timeout) -> bytes`` (returns ``b''`` on timeout). Port loss raises
-:class:`TransportError` from ``read``/``write``; the link then closes the transport
-and reopens it with back-off.
+:class:`TransportError` from ``read``/``write``; the reader that owns the transport
+then closes it and reopens it with back-off.
 """
 from __future__ import annotations
 
@@ -395,29 +396,3 @@ def make_transport(port: str, baudrate: int = 115200) -> Transport:
         return XBeeBoardTransport(shared_coordinator(serial_port, baud), query['addr'][0])
     return SerialTransport(port, baudrate)
 
-
-class FrameProtocol:
-    """Adapter for ``serial.threaded.ReaderThread``: feeds every chunk pyserial reads
-    into a :class:`~sslfr_drivers.link.protocol.Framer` and calls ``on_frame(frame)`` for
-    each valid frame (for code that prefers pyserial's own reader thread to
-    :class:`~sslfr_drivers.link.board_link.BoardLink`)::
-
-        with serial.threaded.ReaderThread(ser, lambda: FrameProtocol(cb)) as proto: ...
-    """
-
-    def __init__(self, on_frame):
-        from sslfr_drivers.link.protocol import Framer
-        self.framer = Framer()
-        self.on_frame = on_frame
-        self.transport = None
-
-    # serial.threaded.Protocol interface
-    def connection_made(self, transport) -> None:
-        self.transport = transport
-
-    def data_received(self, data: bytes) -> None:
-        for frame in self.framer.feed(data):
-            self.on_frame(frame)
-
-    def connection_lost(self, exc) -> None:
-        self.transport = None

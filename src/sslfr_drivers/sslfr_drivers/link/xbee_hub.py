@@ -13,8 +13,9 @@ USB-connected board or a ``sim_board`` pty:
   counted per board; the driver's link sees the missing answer and retries);
 * data received from a board (RX64) is written to that board's pty as is.
 
-If the coordinator UART disappears, the hub reopens it with back-off (0.2 s doubling
-to 5 s) while the ptys stay up. ``--control PATH`` answers ``status`` (per-board
+If the coordinator UART disappears, the hub reopens it with the link's back-off
+(:class:`~sslfr_drivers.link.reader.Backoff`: 0.1 s doubling to 2 s) while the ptys
+stay up. ``--control PATH`` answers ``status`` (per-board
 counters, JSON) like ``sim_board``.
 
 Example (three axis boards behind one coordinator)::
@@ -34,8 +35,9 @@ import sys
 import threading
 import time
 
+from sslfr_drivers.link.endpoint import PtyEndpoint, close_control, listen_control, serve_until_signalled
 from sslfr_drivers.link.protocol import Framer, encode_frame
-from sslfr_drivers.sim.runner import PtyEndpoint, close_control, listen_control, serve_until_signalled
+from sslfr_drivers.link.reader import Backoff
 from sslfr_drivers.link.transport import TransmitError, TransportError, XBeeBoardTransport, XBeeCoordinator
 
 
@@ -95,7 +97,7 @@ class XBeeHub:
                 'boards': [b.status() for b in self.boards]}
 
     def _keep_radio(self) -> None:
-        backoff = 0.2
+        backoff = Backoff()
         while self.running:
             if not self.coordinator.is_open:
                 try:
@@ -104,11 +106,10 @@ class XBeeHub:
                         self.coordinator.attach(b.transport)
                         b.transport._open = True
                     self.coordinator_opens += 1
-                    backoff = 0.2
+                    backoff.reset()
                 except TransportError as exc:
                     self.last_error = str(exc)
-                    time.sleep(backoff)
-                    backoff = min(backoff * 2, 5.0)
+                    time.sleep(backoff.next())
                     continue
             time.sleep(0.2)
 

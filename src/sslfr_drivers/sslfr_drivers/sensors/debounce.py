@@ -93,3 +93,66 @@ class SwitchDebouncer:
         if self.states is None:
             return 0
         return sum(1 << i for i, n in enumerate(self.names) if self.states[n].closed)
+
+
+class BoardClock:
+    """The board's millisecond tick (u32) -> continuous seconds [s]: a wrap-around
+    adds 2**32 ms, a board reset (the tick going back by less than half the range)
+    keeps the time continuous instead of jumping back."""
+
+    def __init__(self):
+        self._last: int | None = None
+        self._offset = 0.0
+
+    def seconds(self, ms: int) -> float:
+        """Continuous board time [s] of the tick ``ms`` [ms]."""
+        if self._last is not None and ms < self._last:
+            if self._last - ms > 1 << 31:
+                self._offset += (1 << 32) / 1000.0      # u32 wrap-around
+            else:
+                self._offset += (self._last - ms) / 1000.0  # board reset: stay continuous
+        self._last = ms
+        return ms / 1000.0 + self._offset
+
+
+class SwitchTracker:
+    """Raw switch samples (board tick, bits) received at host times -> debounced
+    states and the host time each switch changed.
+
+    The debouncing runs on the board's clock (:class:`BoardClock`, so transport
+    jitter does not count as holding time); a change is dated at the host time of
+    the first raw sample showing the new state: ``received - (board time now - board
+    time of that sample)``, never below 0 (at sim time ~0, before /clock, the receive
+    time itself).
+
+    Parameters
+    ----------
+    hold_time : float
+        Debounce hold time [s] (:class:`SwitchDebouncer`).
+    """
+
+    def __init__(self, hold_time: float = 0.03, names: tuple = SWITCHES):
+        self.debouncer = SwitchDebouncer(hold_time, names)
+        self.board_clock = BoardClock()
+        #: switch name -> host time [s] of its last change (the first sample's time at first)
+        self.changed_at: dict[str, float] = {}
+
+    @property
+    def states(self) -> dict[str, SwitchState] | None:
+        """Debounced states (None before the first sample)."""
+        return self.debouncer.states
+
+    def update(self, board_ms: int, bits: int, received: float) -> list[str]:
+        """Feed one sample of tick ``board_ms`` [ms] received at ``received`` [s, host
+        clock]; return the switches whose debounced state changed (every switch for
+        the first sample: its initial state)."""
+        t = self.board_clock.seconds(board_ms)
+        if self.debouncer.states is None:
+            self.debouncer.update(bits, t)
+            self.changed_at = {n: received for n in self.debouncer.names}
+            return list(self.debouncer.names)
+        changed = self.debouncer.update(bits, t)
+        for name in changed:
+            lag = max(0.0, t - self.debouncer.states[name].changed)
+            self.changed_at[name] = received - lag if received >= lag else received
+        return changed

@@ -19,30 +19,18 @@ from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
 
-from sslfr_drivers.sensors import veml7700
-from sslfr_drivers.link.sensor_messages import AlsSample
-from sslfr_drivers.sensors.board_node import SensorBoardNode, board_status
 from sslfr_common.node import run_node
-
-PARAMS = {
-    'port': ('', 'irradiance board port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
-                 'empty = no board (the node stays up and reports it) [-]', None),
-    'baudrate': (115200, 'serial line speed [bit/s]', (1200, 921600)),
-    'frame_id': ('irradiance', 'frame_id of the published messages [-]', None),
-    'luminous_efficacy': (veml7700.LUMINOUS_EFFICACY,
-                          'luminous efficacy of beam sunlight [lm/W] (seed 000: 104)', (50.0, 250.0)),
-    'relative_uncertainty': (0.1, '1-sigma relative error of illuminance (sensor calibration and '
-                                  'spectrum) [-]', (0.0, 1.0)),
-    'max_sample_age': (3.0, 'diagnostics WARN when no sample for this long [s]', (0.1, 3600.0)),
-    'heartbeat': (0.5, 'board link PING period [s]', (0.05, 5.0)),
-}
+from sslfr_drivers.link.sensor_messages import AlsSample
+from sslfr_drivers.sensors import veml7700
+from sslfr_drivers.sensors.sensor_node import SensorBoardNode
+from sslfr_drivers.sensors.sensor_params import IRRADIANCE
 
 
 class IrradianceNode(SensorBoardNode):
-    """See the module docstring."""
+    """See the module docstring; parameters: :data:`sensor_params.IRRADIANCE`."""
 
     def __init__(self):
-        super().__init__('irradiance', PARAMS, queue_len=1000)
+        super().__init__('irradiance', IRRADIANCE, queue_len=1000)
         self._saturated = False
         self._saturated_count = 0
         self._invalid = 0
@@ -53,16 +41,12 @@ class IrradianceNode(SensorBoardNode):
         self.get_logger().info(f'irradiance: port {self._values["port"] or "(none)"}, '
                                f'efficacy {self._values["luminous_efficacy"]:.1f} lm/W')
 
-    def _apply(self, new: dict) -> None:
-        self._reopen_if_changed(new)
-
     def _on_message(self, msg) -> None:
         if isinstance(msg, AlsSample):
             self._enqueue(msg)
 
     def _drain(self) -> None:
-        while self._queue:
-            msg, stamp = self._queue.popleft()
+        for msg, received in self._queue.drain():
             s = veml7700.decode(msg.count, msg.gain_code, msg.it_code,
                                 self._values['relative_uncertainty'])
             if not s.valid:
@@ -80,7 +64,7 @@ class IrradianceNode(SensorBoardNode):
             eff = self._values['luminous_efficacy']
             beam, var = veml7700.beam_irradiance(s.illuminance, s.variance, eff)
             lux = Illuminance()
-            lux.header.stamp = stamp.to_msg()
+            lux.header.stamp = received.to_msg()
             lux.header.frame_id = self._values['frame_id']
             lux.illuminance, lux.variance = s.illuminance, s.variance
             self._pub_lux.publish(lux)
@@ -97,10 +81,8 @@ class IrradianceNode(SensorBoardNode):
                  'gain': f'{s.gain:g}' if s else 'none',
                  'integration_time_s': f'{s.integration_time:g}' if s else 'none',
                  'saturated_samples': self._saturated_count, 'invalid_samples': self._invalid,
-                 'queue_dropped': self._queue_dropped}
-        st = board_status('irradiance: board', self._source, self._meter,
-                          self._values['max_sample_age'], faults, extra)
-        self._publish_diagnostics(st)
+                 'queue_dropped': self._queue.dropped}
+        self._publish_diagnostics(faults, extra)
 
 
 def main(args=None) -> int:
