@@ -1,9 +1,10 @@
 """Benchmark: the safety supervisor.
 
-1. Rules core (sslfr_drivers.safety.core): one simulated hour of a tracking day at the
-   real message rates (2 thermocouples at 4 Hz, switches at 10 Hz, 3 axis statuses at
-   5 Hz, phase/beam/fix at 1 Hz) and a verdict at 20 Hz, on a fake clock: cost per
-   event and per verdict, and the CPU share it would take at the real rates.
+1. Rules core (sslfr_drivers.safety.core + the rule table): one simulated hour of a
+   tracking day at the real message rates (2 thermocouples at 4 Hz, switches at 10 Hz,
+   3 axis statuses at 5 Hz (motion and driver report: two core events each),
+   phase/beam/fix at 1 Hz) and a verdict at 20 Hz, on a fake clock: cost per event and
+   per verdict, and the CPU share it would take at the real rates.
 2. Node (optional, ``--node``; needs a build): the real ``safety`` process, N over-
    temperature samples published from this process -> time until the STOW verdict is
    received here (issue goal: STOW published within 200 ms of the sample's arrival).
@@ -21,7 +22,7 @@ import time
 from pathlib import Path
 
 from sslfr_common.contract import JOINTS as AXES
-from sslfr_common.contract import SWITCHES
+from sslfr_common.contract import SWITCHES, LinkState
 from sslfr_drivers.safety.core import FakeClock, SafetyConfig, SafetyCore
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,7 +48,8 @@ def bench_core(hours: float = 1.0) -> None:
         if k % 4 == 0:                          # 5 Hz axis statuses
             for axis in AXES:
                 core.on_axis_status(axis, False, 0.3, commanded=0.3)
-            events += 3
+                core.on_driver_state(axis, 'following', LinkState.LINK_UP, True)
+            events += 6
         if k % 20 == 0:                         # 1 Hz phase, beam, fix
             core.on_phase(2, 'gps')
             core.on_beam(850.0)

@@ -36,6 +36,8 @@ class World:
                                       False)
         self.positions = {'mirrors': 0.3, 'mobile_structure': 0.6, 'secondary_reflector': 0.6}
         self.homing: set[str] = set()
+        self.driver_state: dict[str, str] = {}     # axis -> state reported instead of following/homing
+        self.link: dict[str, int] = {}             # axis -> link_state instead of LINK_UP
         self.stamp = None          # builtin_interfaces/Time for headers (None: harness clock)
         self._types = (Temperature, LimitSwitches, TrackerPhase, AxisStatus, NavSatFix, Irradiance)
         pub = self.node.create_publisher
@@ -100,8 +102,9 @@ class World:
                                                          mode='auto')))
         for axis, pos in self.positions.items():
             self.axis_pub[axis].publish(self._header(AxisStatus(
-                axis=axis, state='homing' if axis in self.homing else 'active', measured=pos,
-                setpoint=pos, commanded=pos, link_state=AxisStatus.LINK_UP)))
+                axis=axis, state=self.driver_state.get(axis, 'homing' if axis in self.homing else 'following'),
+                measured=pos, setpoint=pos, commanded=pos, homed=axis not in self.homing,
+                link_state=self.link.get(axis, AxisStatus.LINK_UP))))
         fix = self._header(NavSatFix(latitude=36.83, longitude=-2.40, altitude=50.0))
         fix.status.status = 0
         self.fix_pub.publish(fix)
@@ -258,6 +261,35 @@ def test_limit_switch_outside_homing_estops_that_axis_naming_the_switch(launch, 
     assert world.wait_level(SafetyState.OK, 1.0)
 
 
+def test_an_idle_driver_or_a_link_down_stows_naming_the_axis_until_active_and_homed(launch, ros):
+    """Issue 21: the heartbeats of an unconfigured driver do not make the tracker OK."""
+    from sslfr_interfaces.msg import AxisStatus, SafetyState
+    _proc, world = _start(launch, ros)
+    world.driver_state['mobile_structure'] = 'unconfigured'
+    sent = time.monotonic()
+    assert world.wait_level(SafetyState.STOW, 1.0), world.latest()
+    print(f'unconfigured driver status -> STOW after {(time.monotonic() - sent) * 1e3:.0f} ms')
+    assert 'mobile_structure axis not ready: its driver is unconfigured, not active' in world.latest().reasons
+    ros.spin_for(1.0)                           # heartbeats keep coming: still STOW, no watchdog reason
+    assert world.latest().level == SafetyState.STOW
+    assert not any('heartbeat watchdog' in r for r in world.latest().reasons)
+    # active again but still homing (not referenced): held
+    del world.driver_state['mobile_structure']
+    world.homing.add('mobile_structure')
+    ros.spin_for(0.8)
+    assert world.latest().level == SafetyState.STOW
+    assert any(r.startswith('mobile_structure axis not ready: driver active, axis not referenced')
+               for r in world.latest().reasons), world.latest().reasons
+    world.homing.clear()
+    assert world.wait_level(SafetyState.OK, 1.0), world.latest()
+    # the mirrors' board link drops: STOW naming the axis; back up (still referenced): OK
+    world.link['mirrors'] = AxisStatus.LINK_DOWN
+    assert world.wait_level(SafetyState.STOW, 1.0), world.latest()
+    assert list(world.latest().reasons) == ['mirrors axis not ready: board link down']
+    del world.link['mirrors']
+    assert world.wait_level(SafetyState.OK, 1.0), world.latest()
+
+
 def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
@@ -307,10 +339,10 @@ def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros)
 
 
 def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
-    from builtin_interfaces.msg import Time
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from sslfr_common.node import stamp, to_sec
     from sslfr_interfaces.msg import SafetyState
     clock_pub = ros.node.create_publisher(Clock, '/clock',
                                           QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
@@ -318,9 +350,9 @@ def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
 
     def tick():
         sim['t'] += 0.05
-        stamp = Time(sec=int(sim['t']), nanosec=int((sim['t'] % 1) * 1e9))
-        clock_pub.publish(Clock(clock=stamp))
-        world.stamp = stamp
+        now = stamp(sim['t'])
+        clock_pub.publish(Clock(clock=now))
+        world.stamp = now
     proc = launch('sslfr_drivers', 'safety', params={**FAST, 'use_sim_time': True})
     world = World(ros)
     ros.node.create_timer(0.05, tick)
@@ -337,5 +369,5 @@ def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
         assert rate >= 10.0, f'stalled after a {jump} s jump: {rate:.1f} Hz'
         assert all(m.level == SafetyState.OK for m in window), [list(m.reasons) for m in window if m.level]
         # the node really runs on sim time: its stamps followed the jump
-        last = window[-1].header.stamp.sec + window[-1].header.stamp.nanosec * 1e-9
+        last = to_sec(window[-1].header.stamp)
         assert abs(last - (start_stamp + jump)) < 5.0, (last, start_stamp + jump)

@@ -189,6 +189,8 @@ class Plant:
         TRACK, or (``ramp_t0`` set) a 0.02 rad/s ramp from TRACK starting at ``ramp_t0``."""
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectoryPoint
+
+        from sslfr_common.node import stamp
         self.pub_phase.publish(self._TrackerPhase(phase=self._TrackerPhase.TRACKING, phase_name='TRACKING',
                                                   mode='auto', site_source='parameters'))
         if time.monotonic() - self._last_traj < 5.0:
@@ -198,8 +200,7 @@ class Plant:
         if self.ramp_t0 is None:
             msg.header.stamp = self.ros.node.get_clock().now().to_msg()
         else:
-            msg.header.stamp.sec = int(self.ramp_t0)
-            msg.header.stamp.nanosec = int((self.ramp_t0 % 1) * 1e9)
+            msg.header.stamp = stamp(self.ramp_t0)
         rate = 0.0 if self.ramp_t0 is None else 0.02
         msg.joint_names = list(self.axes)
         for k in range(61):
@@ -305,10 +306,11 @@ def test_overtemp_and_open_thermocouple_stow_on_the_wire(plant_factory, ros):
 
 
 def test_sigkill_of_safety_stops_every_axis_within_1_2_s_then_stows(plant_factory, ros):
+    from sslfr_common.node import to_sec
     plant = plant_factory(axes=('mirrors', 'mobile_structure', 'secondary_reflector'))
     plant.wait_tracking()
     # every axis follows a slow ramp, so the boards are moving when the supervisor dies
-    plant.ramp_t0 = ros.node.get_clock().now().nanoseconds * 1e-9
+    plant.ramp_t0 = to_sec(ros.node.get_clock().now())
     plant._last_traj = 0.0
     assert ros.spin_until(lambda: all(st[-1].measured > TRACK + 0.01 and st[-1].moving
                                       for st in plant.statuses.values()), 10.0)

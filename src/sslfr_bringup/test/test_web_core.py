@@ -250,14 +250,20 @@ def test_every_safety_reason_of_the_real_core_gets_its_own_hint():
     core.on_limit_switches({'initial': True, 'last': False, 'sleeping': False, 'longitudinal_1': False,
                             'longitudinal_2': False})
     texts += list(core.evaluate().reasons)
+    core.on_driver_state('mobile_structure', 'unconfigured', 0, False)
+    texts += list(core.evaluate().reasons)
     expected = {'over-temperature': 'cooled', 'operator e-stop': 'Release the e-stop',
                 'e-stop released': 'stays stowed', 'thermocouple': 'wiring', 'heartbeat watchdog': 'not publishing',
-                'limit switch initial tripped': 'home the axis', 'no site': 'GPS fix'}
+                'limit switch initial tripped': 'home the axis', 'no site': 'GPS fix',
+                'mobile_structure axis not ready': 'active and the axis homed'}
     for key, words in expected.items():
         found = [t for t in texts if key in t]
         assert found, (key, texts)
         assert words in live.clear_hint(found[0]), (found[0], live.clear_hint(found[0]))
     assert 'docs/operator.md' in live.clear_hint('something new')
+    # one source: every reason the core gave has its rule's hint on the page
+    from sslfr_drivers.safety.rules import hint_for
+    assert all(live.clear_hint(t) == hint_for(t) != '' for t in texts), texts
 
 
 def test_day_buffer_samples_per_period_and_clears_at_local_solar_midnight():

@@ -12,8 +12,8 @@ theta_t / 2 from ``tracker/sun`` (seed 000 eq. 11), absorber temperatures, beam
 irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
 planner's day), so a reload of the page shows the day so far.
 
-:func:`clear_hint` says how to clear each safety reason (the texts of
-:mod:`sslfr_drivers.safety.core`).
+:func:`clear_hint` says how to clear each safety reason: the hint of the rule that
+gives it (:mod:`sslfr_drivers.safety.rules`).
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 from sslfr_common.contract import JOINTS
 from sslfr_common.timeconv import to_sec
+from sslfr_drivers.safety.rules import hint_for
 
 LEVELS = ('OK', 'WARN', 'STOW', 'ESTOP')
 LINK_STATES = ('LINK_DOWN', 'LINK_CONNECTING', 'LINK_UP', 'LINK_FAULT')
@@ -48,33 +49,14 @@ def seconds_or_none(t) -> float | None:
 
 
 # ------------------------------------------------------------------ safety hints
-#: (substring of a safety reason, how to clear it). First match wins; the texts are
-#: those of sslfr_drivers.safety.core (tested against it).
-_HINTS: tuple[tuple[str, str], ...] = (
-    ('operator e-stop', 'Release the e-stop, then press Safety reset once the cause is gone.'),
-    ('e-stop released', 'Press Safety reset: the tracker stays stowed until then.'),
-    ('over-temperature', 'Wait until the absorber has cooled below the limit minus the hysteresis '
-                         'for the hold time (stowed mirrors defocus it), then press Safety reset.'),
-    ('stuck closed', 'Free or repair the stuck limit switch (it must read open), then press Safety '
-                     'reset and home the axis.'),
-    ('limit switch', 'Check the axis and the switch on site; once the switch reads open press '
-                     'Safety reset, then home the axis.'),
-    ('thermocouple', 'Check the thermocouple and its wiring at the absorber board; it clears by '
-                     'itself once readings are valid again for the hold time (Safety reset if latched).'),
-    ('heartbeat watchdog', 'That node is not publishing: check that it runs (./sslfr up restarts '
-                           'it) and its board link; clears by itself when it is heard again.'),
-    ('no site', 'Wait for a GPS fix, or set site.latitude_deg / site.longitude_deg in the site config.'),
-    ('no time', 'Wait for a GPS fix (a trusted time); check the GPS antenna.'),
-)
+#: Said about a reason no safety rule gives (a newer supervisor, a foreign node).
+UNKNOWN_HINT = 'See the safety node\'s log and docs/operator.md; Safety reset clears latched faults.'
 
 
 def clear_hint(reason: str) -> str:
-    """How an operator clears ``reason`` (a ``safety/state`` reason)."""
-    low = reason.lower()
-    for key, hint in _HINTS:
-        if key in low:
-            return hint
-    return 'See the safety node\'s log and docs/operator.md; Safety reset clears latched faults.'
+    """How an operator clears ``reason`` (a ``safety/state`` reason): the hint of the
+    safety rule that gives this text (sslfr_drivers.safety.rules, the one source)."""
+    return hint_for(reason) or UNKNOWN_HINT
 
 
 # ------------------------------------------------------------------ message -> dict

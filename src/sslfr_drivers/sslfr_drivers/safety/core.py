@@ -1,12 +1,24 @@
-"""Safety supervisor rules: the pure core of the ``safety`` node (no rclpy).
+"""Safety supervisor: the pure core of the ``safety`` node (no rclpy).
 
 The supervisor keeps the SSLFR from damaging itself. Seed 000 section 3.5.3: the two
 type-K thermocouples (MAX6675) watch the absorber tube inlet and outlet; "the maximum
 temperature value is 150 degC. In the case this value is exceeded, the mirrors would
 move to the sleeping position" (beta_0 = +pi/2, seed 000 section 4, i.e. defocus).
-Around that rule this module adds what any trusted tracker does: thermocouple
-plausibility, limit switches outside homing, heartbeat watchdogs on every link, an
-operator e-stop and the "no site, no time -> sleep" rule.
+Around that rule the supervisor adds what any trusted tracker does: thermocouple
+plausibility, limit switches outside homing, heartbeat watchdogs on every link, axes
+whose driver is not driving them, an operator e-stop and "no site, no time -> sleep".
+
+Shape (PX4's failsafe framework: rules as data, one generic evaluation)
+-----------------------------------------------------------------------
+- The rules are the table :data:`sslfr_drivers.safety.rules.RULES`: each names its
+  condition, level, how it clears, its reason texts and the operator's hint.
+- :class:`SafetyCore` keeps the facts. State changes ONLY in its event handlers: the
+  inputs (``on_*``), the operator calls (:meth:`~SafetyCore.estop`,
+  :meth:`~SafetyCore.reset`) and the passing of time (:meth:`~SafetyCore.on_time`:
+  time-detected faults, recoveries). Events raise faults of the rules that an input
+  trips (over-temperature, invalid thermocouple, switch trips).
+- :meth:`SafetyCore.verdict` is the ONE evaluation: read-only, over every rule.
+  :meth:`SafetyCore.evaluate` = ``on_time`` + ``verdict`` + the transition record.
 
 Time model
 ----------
@@ -18,13 +30,12 @@ used only to judge whether the system time is plausible at all (``min_valid_unix
 and to label transitions for people. A wall-clock or ROS-time step of +/-1 h therefore
 neither fakes a timeout nor stalls a watchdog (unit-tested with :class:`FakeClock`).
 
-Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
--------------------------------------------------------------------------------
+The rules (keys ``kind:name``; texts and clearing in rules.py)
+---------------------------------------------------------------
 ``overtemp:<sensor>``  STOW, latched. A valid sample > ``temperature_limit`` [degC]
-    trips at once (the node evaluates it in the subscription callback). Cleared by
-    :meth:`SafetyCore.reset` only when the sensor is fresh and has stayed below
-    ``temperature_limit - hysteresis`` for ``cool_hold`` [s]; with ``auto_reset`` the
-    same condition clears it without a call (off by default).
+    trips at once (the node evaluates it in the subscription callback). Reset allowed
+    only when the sensor is fresh and has stayed below ``temperature_limit -
+    hysteresis`` for ``cool_hold`` [s]; ``auto_reset`` clears it by itself then.
 ``thermocouple:<sensor>``  STOW: open circuit / NaN / out of the physical range
     (immediate); *stuck*: no change > ``stuck_tolerance`` [K] for ``stuck_timeout``
     [s] while the sun is on the receiver (phase TRACKING and beam irradiance, when
@@ -32,18 +43,19 @@ Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
     [s] (default 2 s) while TRACKING. Held until the sensor has recovered: fresh valid
     samples for ``sensor_recover_hold`` [s] (and, for *stuck*, a change), whatever the
     phase does meanwhile, so the stow it causes cannot clear it (no stow/track
-    oscillation). With ``sensor_fault_latched`` it also needs :meth:`SafetyCore.reset`.
-``switch:<name>``  ESTOP for the switch's axis (:data:`SWITCH_AXIS`), latched. A
-    switch closing while its axis is not homing and its nominal angle
-    (``switch_positions``) is not on the axis' path, i.e. not within the span of the
-    angles measured over the last ``switch_lookback`` [s] and the commanded angle
-    (+/- ``switch_window`` [rad], from a fresh axis status), is a trip. The look-back
-    absorbs the different delays of the switch and status messages of a moving axis. The seed's switches are position references the mechanism reaches or passes
-    in normal operation (mirrors on the sleeping switch every night, passing the
-    ``last`` switch on the way), hence the path test. With the position unknown (no
-    fresh status, or NaN: no board, the axis cannot move) the closure is judged as
-    soon as a position is known. Reset acknowledges a trip even while the switch is
-    still closed (so the axis can be jogged off it); it re-arms when the switch opens.
+    oscillation). With ``sensor_fault_latched`` it needs :meth:`SafetyCore.reset` instead.
+``switch:<name>``  ESTOP for the switch's axis (SWITCH_AXIS), latched. A switch closing
+    while its axis is not homing and its nominal angle (``switch_positions``) is not
+    on the axis' path, i.e. not within the span of the angles measured over the last
+    ``switch_lookback`` [s] and the commanded angle (+/- ``switch_window`` [rad], from
+    a fresh axis status), is a trip. The look-back absorbs the different delays of
+    the switch and status messages of a moving axis. The seed's switches are position
+    references the mechanism reaches or passes in normal operation (mirrors on the
+    sleeping switch every night, passing the ``last`` switch on the way), hence the
+    path test. With the position unknown (no fresh status, or NaN: no board, the axis
+    cannot move) the closure is judged as soon as a position is known. Reset
+    acknowledges a trip even while the switch is still closed (so the axis can be
+    jogged off it); it re-arms when the switch opens.
 ``stuck_switch:<name>``  ESTOP for the axis, latched: detected at homing, when the
     switch stays closed while the axis travels more than ``stuck_switch_travel``
     [rad], or when two switches of one axis read closed together during homing.
@@ -51,6 +63,12 @@ Rules (each active rule is a :class:`Condition`; the verdict is their maximum)
 ``watchdog:<node>``  WARN or STOW per the ``watchdogs`` table (node -> (timeout [s],
     action)), from the arrival times of the node's topics; self-clearing when the node
     speaks again. A node never heard is judged from start-up + ``startup_grace``.
+``axis:<axis>``  STOW (the other axes defocus): the axis' driver reported a lifecycle
+    state of IDLE_DRIVER_STATES (unconfigured, inactive, finalized) or a board link
+    that is not up. Self-clearing once the driver reports active, link up and the axis
+    referenced (``homed``). After a silence > ``status_max_age`` the first report must
+    show that again (a restarted driver still homing is not ready). An axis never
+    reported is left to its watchdog (never heard after ``startup_grace``).
 ``estop``  ESTOP of every axis, latched until :meth:`SafetyCore.estop` ``(False)``;
     the release leaves ``post_estop`` (STOW) until :meth:`SafetyCore.reset`, so a
     released e-stop never resumes tracking by itself.
@@ -64,138 +82,32 @@ Refused requests (reset while hot, release without e-stop, nothing to reset) ret
 from __future__ import annotations
 
 import math
-import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
-from sslfr_common.contract import JOINTS, SWITCH_AXIS, SWITCH_POSITION, SWITCHES, THERMOCOUPLES, Level, Phase, driver_node
+from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, SWITCHES, THERMOCOUPLES, Level,
+                                   LinkState, Phase, driver_node)
 
-#: Watchable nodes (default node names, docs/architecture.md).
-WATCHABLE = ('planner', *(driver_node(j) for j in JOINTS), 'absorber_board', 'irradiance', 'gps')
+from sslfr_drivers.safety.config import WATCHABLE, FakeClock, SafetyConfig, SystemClock, with_changes
+from sslfr_drivers.safety.rules import LATCHED, RECOVERS, RULES, Clear, Fault, Rule, key_of, link_name
 
-
-class SystemClock:
-    """Real clocks: ``steady()`` = CLOCK_MONOTONIC [s], ``wall()`` = Unix time [s]."""
-
-    @staticmethod
-    def steady() -> float:
-        return time.monotonic()
-
-    @staticmethod
-    def wall() -> float:
-        return time.time()
-
-
-class FakeClock:
-    """Injectable clock for tests: steady and wall time advanced/stepped by hand."""
-
-    def __init__(self, steady: float = 1000.0, wall: float = 1_750_000_000.0):
-        self._steady = float(steady)
-        self._wall = float(wall)
-
-    def steady(self) -> float:
-        return self._steady
-
-    def wall(self) -> float:
-        return self._wall
-
-    def advance(self, dt: float) -> None:
-        """Let ``dt`` [s] pass on both clocks."""
-        self._steady += dt
-        self._wall += dt
-
-    def step_wall(self, dt: float) -> None:
-        """Step only the wall clock by ``dt`` [s] (NTP/GPS correction, operator)."""
-        self._wall += dt
-
-
-@dataclass(frozen=True)
-class SafetyConfig:
-    """Tunable limits. Units: degC, K, s, rad, W/m^2 as named.
-
-    ``watchdogs`` maps a node name (:data:`WATCHABLE`) to ``(timeout [s], action)``
-    with action ``'WARN'`` or ``'STOW'``.
-    """
-
-    temperature_limit: float = 150.0      # [degC] seed 000 section 3.5.3
-    hysteresis: float = 10.0              # [K] must cool below limit - hysteresis
-    cool_hold: float = 60.0               # [s] ... for this long before reset
-    auto_reset: bool = False              # clear temperature latches without a call
-    silent_timeout: float = 2.0           # [s] thermocouple silent while TRACKING
-    sensor_recover_hold: float = 2.0      # [s] valid samples before a sensor fault clears
-    sensor_fault_latched: bool = False    # thermocouple faults also need safety/reset
-    stuck_timeout: float = 300.0          # [s] no change while the sun is on the receiver
-    stuck_tolerance: float = 0.0          # [K] a change must exceed this
-    stuck_min_beam: float = 200.0         # [W/m^2] beam at which the sun counts as on
-    valid_min: float = -40.0              # [degC] plausible thermocouple range
-    valid_max: float = 1100.0             # [degC]
-    switch_window: float = 0.05           # [rad] closure expected within this of nominal
-    switch_lookback: float = 1.0          # [s] measured angles that make up the axis' path
-    switch_positions: dict = field(default_factory=lambda: dict(SWITCH_POSITION))
-    stuck_switch_travel: float = 0.1      # [rad] travel with a switch closed at homing
-    status_max_age: float = 1.0           # [s] axis status older than this is unknown
-    beam_max_age: float = 5.0             # [s] beam older than this is unknown
-    startup_grace: float = 10.0           # [s] before never-heard nodes count as silent
-    require_site_and_time: bool = True
-    trust_system_clock: bool = True       # a plausible system clock counts as time
-    min_valid_unix_time: float = 1_704_067_200.0  # [s] 2024-01-01T00:00Z
-    watchdogs: dict = field(default_factory=lambda: {
-        'planner': (5.0, 'STOW'),
-        'mirrors_driver': (2.0, 'STOW'),
-        'mobile_structure_driver': (2.0, 'STOW'),
-        'secondary_reflector_driver': (2.0, 'STOW'),
-        'absorber_board': (2.0, 'STOW'),
-        'irradiance': (5.0, 'WARN'),
-        'gps': (5.0, 'WARN'),
-    })
-
-    def validate(self) -> None:
-        """Raise ValueError naming the first bad value."""
-        def pos(name, v, zero_ok=False):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
-                raise ValueError(f'{name} must be a finite {"non-negative" if zero_ok else "positive"} '
-                                 f'number, got {v!r}')
-        if not (math.isfinite(self.temperature_limit) and -40.0 < self.temperature_limit < 1100.0):
-            raise ValueError(f'temperature_limit must be in (-40, 1100) degC, got {self.temperature_limit!r}')
-        pos('hysteresis', self.hysteresis, zero_ok=True)
-        pos('cool_hold', self.cool_hold, zero_ok=True)
-        pos('silent_timeout', self.silent_timeout)
-        pos('sensor_recover_hold', self.sensor_recover_hold, zero_ok=True)
-        pos('stuck_timeout', self.stuck_timeout)
-        pos('stuck_tolerance', self.stuck_tolerance, zero_ok=True)
-        pos('stuck_min_beam', self.stuck_min_beam, zero_ok=True)
-        pos('switch_window', self.switch_window, zero_ok=True)
-        pos('switch_lookback', self.switch_lookback, zero_ok=True)
-        pos('stuck_switch_travel', self.stuck_switch_travel)
-        pos('status_max_age', self.status_max_age)
-        pos('beam_max_age', self.beam_max_age)
-        pos('startup_grace', self.startup_grace, zero_ok=True)
-        if not (self.valid_min < self.valid_max):
-            raise ValueError(f'valid_min {self.valid_min} must be < valid_max {self.valid_max}')
-        if set(self.switch_positions) != set(SWITCHES) or not all(
-                math.isfinite(v) for v in self.switch_positions.values()):
-            raise ValueError(f'switch_positions needs finite angles for exactly {SWITCHES}')
-        for node, spec in self.watchdogs.items():
-            if node not in WATCHABLE:
-                raise ValueError(f'watchdog node {node!r} unknown; known: {", ".join(WATCHABLE)}')
-            timeout, action = spec
-            pos(f'watchdog {node} timeout', timeout)
-            if action not in ('WARN', 'STOW'):
-                raise ValueError(f'watchdog {node} action must be WARN or STOW, got {action!r}')
+__all__ = ['WATCHABLE', 'FakeClock', 'SafetyConfig', 'SystemClock', 'with_changes', 'Condition',
+           'Verdict', 'Transition', 'SafetyCore']
 
 
 @dataclass(frozen=True)
 class Condition:
-    """One active rule: its level, the reason (naming the source), axes to stop."""
+    """One active rule instance: its level, the reason (naming the source), the axes it
+    stops and whether the others stow."""
 
     key: str
     level: Level
     reason: str
     axes: tuple[str, ...] = ()
-    latched: bool = False
+    stow_others: bool = False
 
 
 @dataclass(frozen=True)
-class SafetyState:
+class Verdict:
     """The supervisor's verdict (maps 1:1 to sslfr_interfaces/SafetyState).
 
     ``since`` is the steady time [s] at which ``level`` was entered.
@@ -237,7 +149,6 @@ class _Sensor:
     last_change: float | None = None  # steady time the value last moved > tolerance
     ref_value: float | None = None    # value the change is measured from
     cool_since: float | None = None   # steady time it went below limit - hysteresis
-    changed_since_fault: bool = False
     valid_since: float | None = None  # steady time of the first of the current valid run
 
 
@@ -250,10 +161,15 @@ class _Axis:
     recent: list = field(default_factory=list)   # [(arrival, measured)] within switch_lookback
     #: switch -> (min, max) measured angle [rad] while homing with the switch continuously closed
     closed_travel: dict = field(default_factory=dict)
+    # the driver's own report (lifecycle / link / reference)
+    report_arrival: float | None = None
+    driver_state: str = ''
+    link_state: int = LinkState.LINK_DOWN
+    ready: bool | None = None    # None: never reported; True: active, link up, referenced
 
 
 class SafetyCore:
-    """The rules. Feed events (``on_*``), read :meth:`evaluate`; see the module doc.
+    """The facts and the generic rule machinery; see the module doc.
 
     Parameters
     ----------
@@ -262,17 +178,21 @@ class SafetyCore:
     clock : object with ``steady()`` and ``wall()`` [s]
         :class:`SystemClock` in the node, :class:`FakeClock` in tests. Event methods
         take an explicit ``arrival`` [steady s] or read ``clock.steady()``.
+    rules : tuple of Rule
+        The rule table (default :data:`~sslfr_drivers.safety.rules.RULES`).
     """
 
-    def __init__(self, config: SafetyConfig | None = None, clock=None):
+    def __init__(self, config: SafetyConfig | None = None, clock=None, rules: tuple[Rule, ...] = RULES):
         self.config = config or SafetyConfig()
         self.config.validate()
         self.clock = clock or SystemClock()
+        self.rules: dict[str, Rule] = {r.kind: r for r in rules}
         self.start = self.clock.steady()
         self.sensors = {s: _Sensor() for s in THERMOCOUPLES}
         self.axes = {a: _Axis() for a in JOINTS}
         self.switch_closed: dict[str, bool | None] = {s: None for s in SWITCHES}
         self.switch_ack: set[str] = set()        # acknowledged trips, re-armed when open
+        self.pending_switches: set[str] = set()   # closed while the axis position was unknown
         self.heard: dict[str, float] = {}        # node -> last arrival [steady s]
         self.phase: int | None = None
         self.tracking_since: float | None = None
@@ -281,22 +201,27 @@ class SafetyCore:
         self.beam_arrival: float | None = None
         self.gps_fix_seen = False
         self.site_source = ''
-        self.latched: dict[str, Condition] = {}
-        self.sensor_faults: dict[str, Condition] = {}   # held until the sensor recovers
+        self.faults: dict[str, Fault] = {}       # raised faults of stored rules, by key
         self.counters = {'samples': 0, 'invalid_samples': 0, 'refused_requests': 0,
                          'transitions': 0, 'bad_inputs': 0}
-        self._state = SafetyState(Level.OK, (), (), False, self.start)
+        self._state = Verdict(Level.OK, (), (), False, self.start)
         self._pending: list[Transition] = []
-        self.pending_switches: set[str] = set()   # closed while the axis position was unknown
         self.evaluate(self.start)
 
     # ----------------------------------------------------------------- helpers
     def _now(self, arrival: float | None) -> float:
         return self.clock.steady() if arrival is None else float(arrival)
 
-    def _latch(self, cond: Condition) -> None:
-        if cond.key not in self.latched:
-            self.latched[cond.key] = cond
+    def _raise(self, kind: str, name: str, variant: str, fields: dict, now: float) -> None:
+        """Raise the fault ``kind:name`` (a stored rule); the first reason is kept."""
+        key = key_of(kind, name)
+        if key not in self.faults:
+            rule = self.rules[kind]
+            self.faults[key] = Fault(kind, name, variant, rule.text(variant, fields), now)
+
+    def _blocker(self, fault: Fault, now: float) -> str | None:
+        rule = self.rules[fault.kind]
+        return rule.blocker(self, fault, now) if rule.blocker is not None else None
 
     def configure(self, config: SafetyConfig) -> None:
         """Replace the limits (validated first; raises ValueError, keeping the old ones)."""
@@ -310,7 +235,7 @@ class SafetyCore:
     # ----------------------------------------------------------------- inputs
     def on_temperature(self, sensor: str, value: float, arrival: float | None = None,
                        open_circuit: bool = False) -> None:
-        """A thermocouple sample [degC] (``sensor`` in :data:`THERMOCOUPLES`).
+        """A thermocouple sample [degC] (``sensor`` in THERMOCOUPLES).
 
         NaN, +/-inf, a value outside ``valid_min..valid_max`` or ``open_circuit``
         mark the thermocouple faulty (STOW). A valid value above
@@ -335,24 +260,19 @@ class SafetyCore:
             st.cool_since = None
             what = 'open circuit' if open_circuit else (
                 'NaN' if math.isnan(value) else f'{value} degC outside {cfg.valid_min}..{cfg.valid_max} degC')
-            self._sensor_fault(Condition(f'thermocouple:{sensor}', Level.STOW,
-                                         f'{sensor} thermocouple invalid ({what}): temperature not watched'))
+            self._raise('thermocouple', sensor, 'invalid', {'sensor': sensor, 'what': what}, now)
             return
         st.valid = True
         if st.valid_since is None:
             st.valid_since = now
         if st.ref_value is None or abs(value - st.ref_value) > cfg.stuck_tolerance:
-            if st.ref_value is not None:
-                st.changed_since_fault = True
             st.ref_value = value
             st.last_change = now
         st.value = value
         if value > cfg.temperature_limit:
             st.cool_since = None
-            self._latch(Condition(f'overtemp:{sensor}', Level.STOW,
-                                  f'{sensor} over-temperature: {value:.1f} degC > '
-                                  f'{cfg.temperature_limit:.1f} degC (latched until reset)',
-                                  latched=True))
+            self._raise('overtemp', sensor, 'hot',
+                        {'sensor': sensor, 'value': value, 'limit': cfg.temperature_limit}, now)
         elif value < cfg.temperature_limit - cfg.hysteresis:
             if st.cool_since is None:
                 st.cool_since = now
@@ -360,7 +280,7 @@ class SafetyCore:
             st.cool_since = None
 
     def on_limit_switches(self, states: dict, arrival: float | None = None) -> None:
-        """Debounced switch states ``{name: closed}`` for the names in :data:`SWITCHES`."""
+        """Debounced switch states ``{name: closed}`` for the names in SWITCHES."""
         now = self._now(arrival)
         self.heartbeat('absorber_board', now)
         for name in SWITCHES:
@@ -376,11 +296,11 @@ class SafetyCore:
 
     def on_axis_status(self, axis: str, homing: bool, measured: float, arrival: float | None = None,
                        commanded: float = math.nan) -> None:
-        """An ``axes/<axis>/status``: homing flag, measured and commanded angles [rad]
-        (NaN = unknown, e.g. no board)."""
+        """The motion part of an ``axes/<axis>/status``: homing flag, measured and
+        commanded angles [rad] (NaN = unknown, e.g. no board); the driver's heartbeat."""
         now = self._now(arrival)
         ax = self.axes[axis]
-        self.heartbeat(f'{axis}_driver', now)
+        self.heartbeat(driver_node(axis), now)
         ax.arrival = now
         measured, commanded = float(measured), float(commanded)
         ax.measured = measured if math.isfinite(measured) else None
@@ -395,6 +315,22 @@ class SafetyCore:
         self._check_homing(now)
         for name in [n for n in self.pending_switches if SWITCH_AXIS[n] == axis]:
             self._judge_closure(name, now)
+
+    def on_driver_state(self, axis: str, state: str, link_state: int, homed: bool,
+                        arrival: float | None = None) -> None:
+        """The driver part of an ``axes/<axis>/status``: ``state`` (a lifecycle label
+        when the driver is not active), ``link_state`` (LINK_* code), ``homed`` (the
+        axis is referenced). Sets the axis' readiness for the ``axis`` rule."""
+        now = self._now(arrival)
+        ax = self.axes[axis]
+        gap = ax.report_arrival is None or now - ax.report_arrival > self.config.status_max_age
+        ax.report_arrival, ax.driver_state, ax.link_state = now, str(state), int(link_state)
+        if ax.driver_state in IDLE_DRIVER_STATES or ax.link_state != LinkState.LINK_UP:
+            ax.ready = False
+        elif homed:
+            ax.ready = True
+        elif gap:
+            ax.ready = False
 
     def on_phase(self, phase: int, site_source: str = '', arrival: float | None = None) -> None:
         """A ``tracker/phase``: phase code and the planner's site source."""
@@ -448,10 +384,9 @@ class SafetyCore:
         w = self.config.switch_window
         if min(ends) - w <= nominal <= max(ends) + w:
             return
-        self._latch(Condition(f'switch:{name}', Level.ESTOP,
-                              f'limit switch {name} tripped outside homing ({axis} at {ax.measured:.3f} rad, '
-                              f'commanded {ax.commanded if ax.commanded is not None else math.nan:.3f} rad, '
-                              f'switch at {nominal:.3f} rad): {axis} stopped', axes=(axis,), latched=True))
+        self._raise('switch', name, 'trip', {
+            'switch': name, 'axis': axis, 'measured': ax.measured, 'nominal': nominal,
+            'commanded': ax.commanded if ax.commanded is not None else math.nan}, now)
 
     def _check_homing(self, now: float) -> None:
         """Stuck-closed switches, judged while an axis homes: a switch that stays
@@ -471,186 +406,126 @@ class SafetyCore:
                 lo, hi = min(lo, ax.measured), max(hi, ax.measured)
                 ax.closed_travel[s] = (lo, hi)
                 if hi - lo > self.config.stuck_switch_travel:
-                    self._latch(Condition(f'stuck_switch:{s}', Level.ESTOP,
-                                          f'limit switch {s} stuck closed (closed over {hi - lo:.3f} rad '
-                                          f'of {axis} homing travel): {axis} stopped',
-                                          axes=(axis,), latched=True))
+                    self._raise('stuck_switch', s, 'travel', {'switch': s, 'axis': axis, 'travel': hi - lo}, now)
             closed = [s for s in own if self.switch_closed[s] is True]
             if len(closed) >= 2:
                 for s in closed:
-                    self._latch(Condition(f'stuck_switch:{s}', Level.ESTOP,
-                                          f'limit switch {s} stuck closed ({" and ".join(closed)} closed '
-                                          f'together during {axis} homing): {axis} stopped',
-                                          axes=(axis,), latched=True))
+                    self._raise('stuck_switch', s, 'together',
+                                {'switch': s, 'axis': axis, 'closed': ' and '.join(closed)}, now)
 
     # ----------------------------------------------------------------- operator
     def estop(self, engage: bool, arrival: float | None = None) -> tuple[bool, str]:
         """``safety/estop``: engage (True) or release (False). Returns (success, message)."""
         now = self._now(arrival)
         if engage:
-            if 'estop' in self.latched:
+            if 'estop' in self.faults:
                 return True, 'e-stop already engaged'
-            self._latch(Condition('estop', Level.ESTOP, 'operator e-stop (safety/estop): every axis stopped',
-                                  axes=JOINTS, latched=True))
+            self._raise('estop', '', 'engaged', {}, now)
             self.evaluate(now)
             return True, 'e-stop engaged: every axis stopped'
-        if 'estop' not in self.latched:
+        if 'estop' not in self.faults:
             self.counters['refused_requests'] += 1
             return False, 'refused: no e-stop is engaged, nothing to release'
-        del self.latched['estop']
-        self._latch(Condition('post_estop', Level.STOW,
-                              'e-stop released: stowing until safety/reset', latched=True))
+        del self.faults['estop']
+        self._raise('post_estop', '', 'released', {}, now)
         self.evaluate(now)
         return True, 'e-stop released: tracker stows until safety/reset'
 
-    def _sensor_fault(self, cond: Condition) -> None:
-        """Raise a thermocouple fault (held until recovery, or latched by config)."""
-        if self.config.sensor_fault_latched:
-            self._latch(replace(cond, latched=True))
-        elif cond.key not in self.latched:
-            self.sensor_faults.setdefault(cond.key, cond)
-
-    def _sensor_blocker(self, name: str, reason: str, now: float) -> str | None:
-        """Why the thermocouple ``name`` has not recovered (None: it has)."""
-        cfg, st = self.config, self.sensors[name]
-        if st.arrival is None or now - st.arrival > cfg.silent_timeout:
-            return f'{name} thermocouple still silent'
-        if not st.valid or st.valid_since is None:
-            return f'{name} thermocouple still invalid'
-        if now - st.valid_since < cfg.sensor_recover_hold:
-            return (f'{name} thermocouple valid for {now - st.valid_since:.1f} s of '
-                    f'{cfg.sensor_recover_hold:.1f} s')
-        if 'stuck' in reason and not st.changed_since_fault:
-            return f'{name} thermocouple still stuck at {st.value:.2f} degC'
-        return None
-
-    def _reset_blocker(self, key: str, now: float) -> str | None:
-        """Why the latched condition ``key`` cannot be cleared now (None: it can)."""
-        cfg = self.config
-        kind, _, name = key.partition(':')
-        if kind == 'overtemp':
-            st = self.sensors[name]
-            if st.arrival is None or now - st.arrival > cfg.silent_timeout or not st.valid:
-                return f'{name}: no fresh valid reading to confirm it cooled'
-            threshold = cfg.temperature_limit - cfg.hysteresis
-            if st.cool_since is None:
-                return f'{name} still hot: {st.value:.1f} degC, must be < {threshold:.1f} degC'
-            held = now - st.cool_since
-            if held < cfg.cool_hold:
-                return f'{name} cooling: below {threshold:.1f} degC for {held:.1f} s of {cfg.cool_hold:.1f} s'
-            return None
-        if kind == 'thermocouple':
-            return self._sensor_blocker(name, self.latched[key].reason, now)
-        if kind == 'stuck_switch':
-            if self.switch_closed[name]:
-                return f'limit switch {name} still reads closed'
-            return None
-        if kind == 'estop':
-            return 'e-stop engaged: release it first with safety/estop false'
-        return None            # switch trips, post_estop: acknowledged
-
     def reset(self, arrival: float | None = None) -> tuple[bool, str]:
-        """``safety/reset``: clear every latched condition, or none (with the reasons)."""
+        """``safety/reset``: clear every latched fault, or none (with the reasons)."""
         now = self._now(arrival)
-        if not self.latched:
+        latched = [f for f in self.faults.values() if self.rules[f.kind].clearing(self.config) in LATCHED]
+        if not latched:
             self.counters['refused_requests'] += 1
-            held = ''.join(f'; {k} clears by itself once the sensor has recovered' for k in self.sensor_faults)
+            held = ''.join(f'; {f.key} {self.rules[f.kind].held_note}' for f in self.faults.values()
+                           if self.rules[f.kind].held_note)
             return False, 'refused: nothing latched to reset' + held
-        blockers = [b for k in self.latched if (b := self._reset_blocker(k, now))]
+        blockers = [b for f in latched if (b := self._blocker(f, now))]
         if blockers:
             self.counters['refused_requests'] += 1
             return False, 'refused: ' + '; '.join(blockers)
-        cleared = sorted(self.latched)
-        for key in cleared:
-            kind, _, name = key.partition(':')
-            if kind == 'switch' and self.switch_closed.get(name):
-                self.switch_ack.add(name)
-            if kind == 'thermocouple':
-                self.sensors[name].changed_since_fault = False
-        self.latched.clear()
+        for fault in latched:
+            del self.faults[fault.key]
+            rule = self.rules[fault.kind]
+            if rule.on_reset is not None:
+                rule.on_reset(self, fault.name)
         self.evaluate(now)
-        return True, 'reset: cleared ' + ', '.join(cleared)
+        return True, 'reset: cleared ' + ', '.join(sorted(f.key for f in latched))
+
+    # ----------------------------------------------------------------- time
+    def on_time(self, now: float | None = None) -> None:
+        """Time has passed (steady ``now`` [s]): the faults judged on time are raised
+        (stored rules with a condition: thermocouple silent/stuck) and the faults
+        that recover by themselves are cleared once their blocker is gone."""
+        now = self._now(now)
+        cfg = self.config
+        beam_known = self.beam_arrival is not None and now - self.beam_arrival <= cfg.beam_max_age
+        sun_on = self.tracking_since is not None and (not beam_known or self.beam >= cfg.stuck_min_beam)
+        if not sun_on:
+            self.sun_on_since = None
+        elif self.sun_on_since is None:
+            self.sun_on_since = now
+        for rule in self.rules.values():
+            if rule.clears is Clear.SELF or rule.condition is None:
+                continue
+            for name in rule.names(self):
+                hit = rule.condition(self, name, now)
+                if hit is not None:
+                    self._raise(rule.kind, name, hit[0], hit[1], now)
+        for fault in list(self.faults.values()):
+            if self.rules[fault.kind].clearing(cfg) in RECOVERS and self._blocker(fault, now) is None:
+                del self.faults[fault.key]
 
     # ----------------------------------------------------------------- verdict
-    def _live_conditions(self, now: float) -> list[Condition]:
-        cfg = self.config
-        out: list[Condition] = []
-        tracking = self.phase == Phase.TRACKING
-        # thermocouple silent / stuck (latched once detected)
-        beam_known = self.beam_arrival is not None and now - self.beam_arrival <= cfg.beam_max_age
-        sun_on = tracking and (not beam_known or self.beam >= cfg.stuck_min_beam)
-        if sun_on and self.sun_on_since is None:
-            self.sun_on_since = now
-        elif not sun_on:
-            self.sun_on_since = None
-        for name, st in self.sensors.items():
-            if tracking:
-                ref = max(st.arrival if st.arrival is not None else -math.inf, self.tracking_since or now)
-                if now - ref > cfg.silent_timeout:
-                    self._sensor_fault(Condition(f'thermocouple:{name}', Level.STOW,
-                                                 f'{name} thermocouple silent > {cfg.silent_timeout:.1f} s '
-                                                 'while tracking: temperature not watched'))
-            if sun_on and st.valid and st.last_change is not None:
-                ref = max(st.last_change, self.sun_on_since)
-                if now - ref > cfg.stuck_timeout:
-                    st.changed_since_fault = False
-                    self._sensor_fault(Condition(f'thermocouple:{name}', Level.STOW,
-                                                 f'{name} thermocouple stuck at {st.value:.2f} degC for > '
-                                                 f'{cfg.stuck_timeout:.0f} s with the sun on the receiver'))
-        # heartbeat watchdogs
-        for node, (timeout, action) in cfg.watchdogs.items():
-            last = self.heard.get(node)
-            ref = last if last is not None else self.start + cfg.startup_grace
-            if now - ref > timeout:
-                out.append(Condition(f'watchdog:{node}', Level[action],
-                                     f'{node} {"silent" if last is not None else "never heard"} > '
-                                     f'{timeout:.1f} s (heartbeat watchdog)'))
-        # site and time
-        if cfg.require_site_and_time:
-            if not self.gps_fix_seen and self.site_source not in ('persisted', 'parameters'):
-                out.append(Condition('site', Level.STOW, 'no site: no GPS fix since boot and no persisted '
-                                     'site from the planner: staying in the sleeping position'))
-            wall_ok = cfg.trust_system_clock and self.clock.wall() >= cfg.min_valid_unix_time
-            if not self.gps_fix_seen and not wall_ok:
-                out.append(Condition('time', Level.STOW, 'no time: no GPS fix since boot and no trusted '
-                                     'system clock: staying in the sleeping position'))
-        # thermocouple faults clear once the sensor has recovered
-        for key, cond in list(self.sensor_faults.items()):
-            if self._sensor_blocker(key.partition(':')[2], cond.reason, now) is None:
-                del self.sensor_faults[key]
-        # auto-reset of temperature latches
-        if cfg.auto_reset:
-            for key in [k for k in self.latched if k.startswith(('overtemp:', 'thermocouple:'))]:
-                if self._reset_blocker(key, now) is None:
-                    del self.latched[key]
-        return list(self.latched.values()) + list(self.sensor_faults.values()) + out
-
-    def evaluate(self, now: float | None = None) -> SafetyState:
-        """Apply every rule at steady time ``now`` [s] and return the verdict.
-
-        Records a :class:`Transition` (see :meth:`drain_transitions`) when the
-        level or the set of reasons changed.
-        """
+    def conditions(self, now: float | None = None) -> list[Condition]:
+        """Every active rule instance at steady ``now`` [s] (read-only)."""
         now = self._now(now)
-        conds = self._live_conditions(now)
+        out = []
+        for fault in self.faults.values():
+            out.append(self._condition(self.rules[fault.kind], fault.name, fault.reason))
+        for rule in self.rules.values():
+            if rule.clears is not Clear.SELF:
+                continue
+            for name in rule.names(self):
+                hit = rule.condition(self, name, now)
+                if hit is not None:
+                    out.append(self._condition(rule, name, rule.text(*hit)))
+        return out
+
+    def _condition(self, rule: Rule, name: str, reason: str) -> Condition:
+        return Condition(key_of(rule.kind, name), rule.level_of(self, name), reason, rule.stops(name),
+                         rule.stow_others)
+
+    def verdict(self, now: float | None = None) -> Verdict:
+        """The ONE evaluation: the verdict of every rule at steady ``now`` [s] (read-only;
+        ``since`` continues the last recorded verdict's when the level is the same)."""
+        now = self._now(now)
+        conds = self.conditions(now)
         level = max((c.level for c in conds), default=Level.OK)
         reasons = tuple(c.reason for c in sorted(conds, key=lambda c: (-c.level, c.key)))
         axes = tuple(a for a in JOINTS if any(a in c.axes for c in conds if c.level == Level.ESTOP))
-        stow = any(c.level == Level.STOW for c in conds) or any(
-            c.key.startswith(('switch:', 'stuck_switch:')) for c in conds)
-        old = self._state
-        since = old.since if level == old.level else now
-        self._state = SafetyState(level, reasons, axes, stow, since)
-        if level != old.level or set(reasons) != set(old.reasons):
+        stow = any(c.level == Level.STOW or c.stow_others for c in conds)
+        since = self._state.since if level == self._state.level else now
+        return Verdict(level, reasons, axes, stow, since)
+
+    def evaluate(self, now: float | None = None) -> Verdict:
+        """Let time pass to ``now`` (:meth:`on_time`), take the :meth:`verdict` and
+        record a :class:`Transition` (see :meth:`drain_transitions`) when the level or
+        the set of reasons changed."""
+        now = self._now(now)
+        self.on_time(now)
+        new, old = self.verdict(now), self._state
+        self._state = new
+        if new.level != old.level or set(new.reasons) != set(old.reasons):
             self.counters['transitions'] += 1
-            self._pending.append(Transition(now, self.clock.wall(), old.level, level,
-                                            tuple(r for r in reasons if r not in old.reasons),
-                                            tuple(r for r in old.reasons if r not in reasons)))
-        return self._state
+            self._pending.append(Transition(now, self.clock.wall(), old.level, new.level,
+                                            tuple(r for r in new.reasons if r not in old.reasons),
+                                            tuple(r for r in old.reasons if r not in new.reasons)))
+        return new
 
     @property
-    def state(self) -> SafetyState:
-        """The last verdict (no re-evaluation)."""
+    def state(self) -> Verdict:
+        """The last recorded verdict (no re-evaluation)."""
         return self._state
 
     def drain_transitions(self) -> list[Transition]:
@@ -668,14 +543,10 @@ class SafetyCore:
         for node in self.config.watchdogs:
             last = self.heard.get(node)
             kv[f'heartbeat {node} age [s]'] = 'never' if last is None else f'{now - last:.2f}'
+        for axis, ax in self.axes.items():
+            kv[f'axis {axis} driver'] = 'never reported' if ax.ready is None else (
+                f'{"ready" if ax.ready else "not ready"} ({ax.driver_state}, link {link_name(ax.link_state)})')
         for name in SWITCHES:
             kv[f'switch {name}'] = {None: 'unknown', True: 'closed', False: 'open'}[self.switch_closed[name]]
         kv.update({k: str(v) for k, v in self.counters.items()})
         return kv
-
-
-def with_changes(config: SafetyConfig, **changes) -> SafetyConfig:
-    """A validated copy of ``config`` with ``changes`` applied (raises ValueError)."""
-    new = replace(config, **changes)
-    new.validate()
-    return new
