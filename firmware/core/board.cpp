@@ -1,5 +1,6 @@
 /* Common firmware of the SSLFR boards: see board.h and docs/firmware.md. */
 #include "board.h"
+#include "common.h"
 
 #include <avr/eeprom.h>
 #include <avr/sleep.h>
@@ -29,70 +30,23 @@ static void serial_write(void *, const uint8_t *data, uint8_t n) { Serial.write(
 
 void board_send(uint8_t type, const uint8_t *payload, uint8_t len) { session_send(&g_session, type, payload, len); }
 
-static void load_config(void)
-{
-    uint8_t raw[CONFIG_EEPROM_SIZE];
-    eeprom_read_block(raw, (const void *)0, CONFIG_EEPROM_SIZE);
-    uint16_t crc = proto_crc16(raw, CONFIG_SIZE, 0xFFFF);
-    config_unpack(raw, &g_config);
-    if (crc != proto_get_u16(raw + CONFIG_SIZE) || config_check(&g_config, BOARD.kind) != 0)
-        config_defaults(&g_config, BOARD.kind);      /* blank or foreign EEPROM */
-}
-
 static uint8_t store_config(const board_config_t *c)
 {
     uint8_t raw[CONFIG_EEPROM_SIZE], back[CONFIG_EEPROM_SIZE];
-    config_pack(c, raw);
-    proto_put_u16(raw + CONFIG_SIZE, proto_crc16(raw, CONFIG_SIZE, 0xFFFF));
+    config_image(c, raw);
     eeprom_update_block(raw, (void *)0, CONFIG_EEPROM_SIZE);
     eeprom_read_block(back, (const void *)0, CONFIG_EEPROM_SIZE);
     return memcmp(raw, back, CONFIG_EEPROM_SIZE) == 0;
 }
 
-static uint8_t common_type(uint8_t type)
-{
-    return type == MSG_PING || type == MSG_GET_INFO || type == MSG_RESET
-        || type == MSG_GET_CONFIG || type == MSG_SET_CONFIG;
-}
+static const common_board_t COMMON = {
+    0, FW_MAJOR, FW_MINOR, FW_PATCH, 0, &g_config, 0, 0, store_config,
+};
+static common_board_t g_common;
 
 static uint8_t handle(session_t *s, const proto_frame_t *req, proto_frame_t *ans)
 {
-    if (!common_type(req->type)) {
-        /* a board request (the board checks its payload) or UNKNOWN_TYPE */
-        if (BOARD.handle(req, ans))
-            return 1;
-        return session_nack(req, ans, ERR_UNKNOWN_TYPE);
-    }
-    if (req->len != (uint8_t)msg_request_size(req->type))
-        return session_nack(req, ans, ERR_BAD_PAYLOAD);
-    switch (req->type) {
-    case MSG_PING:
-        return session_ack(req, ans);
-    case MSG_GET_INFO:
-        ans->type = MSG_INFO;
-        ans->len = msg_info(ans->payload, BOARD.kind, FW_MAJOR, FW_MINOR, FW_PATCH,
-                            g_config.board_id, BOARD.name);
-        return 1;
-    case MSG_RESET:
-        s->reset_pending = 1;
-        return session_ack(req, ans);
-    case MSG_GET_CONFIG:
-        ans->type = MSG_CONFIG;
-        config_pack(&g_config, ans->payload);
-        ans->len = CONFIG_SIZE;
-        return 1;
-    default: {   /* MSG_SET_CONFIG */
-        board_config_t c;
-        config_unpack(req->payload, &c);
-        if (config_check(&c, BOARD.kind) != 0)
-            return session_nack(req, ans, ERR_OUT_OF_RANGE);
-        if (BOARD.busy())
-            return session_nack(req, ans, ERR_BUSY);
-        if (!store_config(&c))
-            return session_nack(req, ans, ERR_INTERNAL);
-        return session_ack(req, ans);   /* takes effect at the next start (RESET) */
-    }
-    }
+    return common_handle(&g_common, s, req, ans);
 }
 
 static void reboot(void)
@@ -110,7 +64,14 @@ void setup(void)
      * reset default "low level". No effect on the hardware (EIMSK stays 0), but simavr
      * polls a low INT pin every cycle in low-level mode, 10x slower simulation. */
     EICRA = _BV(ISC11) | _BV(ISC10) | _BV(ISC01) | _BV(ISC00);
-    load_config();
+    uint8_t raw[CONFIG_EEPROM_SIZE];
+    eeprom_read_block(raw, (const void *)0, CONFIG_EEPROM_SIZE);
+    config_load(raw, BOARD.kind, &g_config);      /* defaults when blank or foreign */
+    g_common = COMMON;
+    g_common.kind = BOARD.kind;
+    g_common.name = BOARD.name;
+    g_common.handle = BOARD.handle;
+    g_common.busy = BOARD.busy;
     Serial.begin(g_config.baud);
     session_init(&g_session, BOARD.kind, handle, serial_write, 0);
     BOARD.setup();

@@ -27,6 +27,7 @@ Model
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 from dataclasses import dataclass
@@ -75,6 +76,7 @@ class AxisSim(SimBoard):
     kind = m.BoardKind.AXIS_STEPPER
     name = 'sim-axis'
     firmware = (1, 0, 0)
+    REQUESTS = SimBoard.REQUESTS | {m.GetStatus.TYPE, m.MoveTo.TYPE, m.Stop.TYPE, m.Home.TYPE, m.SetZero.TYPE}
 
     def __init__(self, config: AxisConfig | None = None, board_id: int = 1,
                  rng: random.Random | None = None, **kw):
@@ -83,6 +85,8 @@ class AxisSim(SimBoard):
         self.angle = c.sleep if c.initial_angle is None else c.initial_angle
         self.stalled = False
         super().__init__(board_id=board_id, rng=rng, **kw)
+        axis = m.ConfigRecord.AXES.index(c.axis) if c.axis in m.ConfigRecord.AXES else 0
+        self.config = dataclasses.replace(self.config, axis=axis, max_speed=c.max_speed, accel=c.accel)
 
     @classmethod
     def from_options(cls, options: dict, rng: random.Random, board_id: int = 1) -> 'AxisSim':
@@ -104,6 +108,9 @@ class AxisSim(SimBoard):
 
     # ------------------------------------------------------------------ state
     def boot_state(self) -> None:
+        stored = getattr(self, 'stored_config', None)
+        if stored is not None:        # a SET_CONFIG record takes effect at boot
+            self.cfg.max_speed, self.cfg.accel = stored.max_speed, stored.accel
         self.counter = 0.0
         self.target = 0.0
         self.speed = 0.0            # [steps/s] signed
@@ -188,6 +195,9 @@ class AxisSim(SimBoard):
             self.faults &= ~m.FaultBits.RESET
             return m.Ack(msg.TYPE)
         return super().handle(msg, frame)
+
+    def busy_for_config(self) -> bool:
+        return self.busy()
 
     # ---------------------------------------------------------------- dynamics
     def busy(self) -> bool:

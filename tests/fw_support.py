@@ -1,0 +1,26 @@
+"""Shared helpers of the firmware tests (tests/test_fw_*.py).
+
+:func:`require` builds the firmware parts a test needs (``make -C firmware``) and skips
+the test with the reason (printed in pytest's summary, ``-ra``) when the toolchain is
+missing; with ``CI=true`` a missing toolchain FAILS instead (CI must run them).
+"""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+
+def require(*parts: str) -> None:
+    """Build ``parts`` ('firmware', 'sim', 'host'); skip / fail (CI) when impossible."""
+    from sslfr_drivers import fw
+    targets = {'firmware': 'all', 'sim': 'sim', 'host': 'host'}
+    problem = fw.toolchain_problem(*parts)
+    if problem:
+        if os.environ.get('CI', '').lower() in ('1', 'true', 'yes'):
+            pytest.fail(f'CI=true and {problem}')
+        pytest.skip(problem)
+    try:
+        fw.build(*(targets[p] for p in parts))
+    except fw.FirmwareError as exc:
+        pytest.fail(str(exc))
