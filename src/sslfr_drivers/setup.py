@@ -22,6 +22,7 @@ setup(
             'lifecycle_ctl = sslfr_drivers.lifecycle_util:main',
             'safety = sslfr_drivers.safety_node:main',
             'sim_board = sslfr_drivers.sim.runner:main',
+            'fw_board = sslfr_drivers.fw.board:main',
             'xbee_hub = sslfr_drivers.xbee_hub:main',
             'gps = sslfr_drivers.gps_node:main',
             'absorber_board = sslfr_drivers.absorber_board_node:main',
