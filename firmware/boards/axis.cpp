@@ -61,6 +61,17 @@ static inline uint8_t blocked(uint8_t sw, int8_t d)
     return (d > 0 && (sw & LIM_HIGH)) || (d < 0 && (sw & LIM_LOW));
 }
 
+/* Next compare interrupt `ticks` after the last one, but never in the past: a compare
+ * value the counter has already passed would only match after a full 32.8 ms wrap. */
+static inline void schedule(uint16_t ticks)
+{
+    uint16_t next = (uint16_t)(OCR1A + ticks);
+    uint16_t soonest = (uint16_t)(TCNT1 + 24);
+    if ((int16_t)(next - soonest) < 0)
+        next = soonest;
+    OCR1A = next;
+}
+
 static inline void stop_stepping(void)
 {
     ax.stepping = 0;
@@ -102,13 +113,13 @@ ISR(TIMER1_COMPA_vect)
     if (((PORTD & DIR_BIT) != 0) != dir_high) {
         /* direction change: DIR first, the step 5 us later (driver set-up time) */
         if (dir_high) PORTD |= DIR_BIT; else PORTD &= (uint8_t)~DIR_BIT;
-        OCR1A += 10;
+        schedule(10);
         return;
     }
     PORTD |= STEP_BIT;
     ax.pos = p + d;
     ax.steps_total++;
-    OCR1A += ax.interval;
+    schedule(ax.interval);
     if (check_switches(d))
         stop_stepping();
     PORTD &= (uint8_t)~STEP_BIT;          /* pulse >= 2 us: the code above */

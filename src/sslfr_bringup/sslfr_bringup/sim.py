@@ -185,6 +185,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else a free id of 215..232 held for the run)')
     p.add_argument('--seed', type=int, default=1, help='random seed of the simulated boards')
+    p.add_argument('--boards', choices=('sim', 'firmware'), default='sim',
+                   help="'sim': the Python board simulators (fast); 'firmware': the boards' real firmware "
+                        "in simavr (fw_board, docs/firmware.md; the AVRs run in real time)")
     p.add_argument('--anchor-margin', type=float, default=None, metavar='S',
                    help=f'wall seconds the sensor simulators get to start before the simulated clock '
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
@@ -278,9 +281,19 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     links: dict[str, Path] = {}
     controls: dict[str, str] = {}
     missing: list[str] = []
+    if args.boards == 'firmware':
+        from sslfr_drivers.fw import prepare_backend
+        problem = prepare_backend()
+        if problem:
+            print(f'sslfr sim: --boards firmware: {problem}', file=sys.stderr)
+            return 2
     for bname in boards_needed:
         board = ns.boards[bname]
-        exe = find_executable(board.sim_package or '', board.sim_executable or '')
+        exe_name = board.sim_executable or ''
+        if args.boards == 'firmware':
+            from sslfr_drivers.fw import backend_executable
+            exe_name = backend_executable(exe_name) or exe_name
+        exe = find_executable(board.sim_package or '', exe_name)
         if exe is None:
             missing.append(f'simulated board {bname} ({board.sim_package}/{board.sim_executable})')
             continue
@@ -431,7 +444,7 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     ros.shutdown()
     log_stream.close()
     wall = time.monotonic() - t_wall0
-    summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
+    summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed, 'boards': args.boards,
                'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
                'startup_s': round(t_nodes - t_wall0, 2),
                'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,

@@ -116,3 +116,23 @@ def build(*targets: str) -> None:
         proc = subprocess.run(['make', '-s', '-C', str(fw), *targets], capture_output=True, text=True)
     if proc.returncode != 0:
         raise FirmwareError(f'make -C firmware {" ".join(targets)} failed:\n{proc.stdout}{proc.stderr}')
+
+
+#: ``sslfr sim --boards firmware``: the simulator executable replaced by the firmware one
+SIM_EXECUTABLES = {'sim_board': 'fw_board'}
+
+
+def backend_executable(sim_executable: str | None) -> str | None:
+    """The executable that runs a board's firmware in place of its simulator
+    ``sim_executable`` (same arguments); None when there is no firmware for it."""
+    return SIM_EXECUTABLES.get(sim_executable or '')
+
+
+def prepare_backend() -> str | None:
+    """Build the firmware and the harness for a firmware-in-the-loop run; the reason
+    when impossible (missing toolchain, build error), else None."""
+    try:
+        build('all', 'sim')
+    except FirmwareError as exc:
+        return str(exc)
+    return None

@@ -209,6 +209,10 @@ class FirmwareBoard:
             self._snap_t = t
         return self._snap
 
+    def extra_state(self) -> dict:
+        """The harness's whole state under 'firmware' (control socket ``status``)."""
+        return {'firmware': dict(self.snapshot(max_age=0.0))}
+
     def _get(self, key, default=0):
         return self.snapshot().get(key, default)
 

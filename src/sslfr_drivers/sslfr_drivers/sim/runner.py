@@ -387,6 +387,8 @@ def board_state(addr, board: SimBoard, faults: FaultInjector) -> dict:
         if hasattr(board, attr):
             v = getattr(board, attr)
             d[attr] = int(v) if attr == 'faults' else v
+    if hasattr(board, 'extra_state'):      # e.g. firmware boards: the harness's state
+        d.update(board.extra_state())
     return d
 
 
