@@ -10,7 +10,8 @@
  * Limit switches are sampled in the step interrupt before and after every step: a
  * switch closed in the direction of travel stops the motor there, whatever the host
  * says (fault LIMIT), except the switch a HOME is looking for, whose closing sets the
- * counter. Host silence for 1 s decelerates to a stop (fault WATCHDOG).
+ * counter. Host silence for 1 s decelerates to a stop within AXIS_WATCHDOG_STOP_S (fault
+ * WATCHDOG), faster than `accel` when needed.
  *
  * Pins (Arduino Pro Mini): D3 STEP, D4 DIR, D5 /ENABLE, D6 /DRIVER_FAULT (input,
  * pull-up), D7 LOW switch, D8 HIGH switch, D9 SLEEP switch (inputs, pull-ups, switch to
@@ -135,12 +136,13 @@ static void kick_stepping(void)
     }
 }
 
-/* Decelerate to a stop at the acceleration limit: the new target is the stopping point. */
-static void stop_motion(void)
+/* Decelerate to a stop at `decel` [steps/s^2]: the new target is the stopping point. */
+static void stop_motion(float decel)
 {
     ax.homing = 0;
+    ax.decel = decel > g_accel ? decel : 0.0f;
     float v = ax.v;
-    float d = v * v / (2.0f * g_accel);
+    float d = v * v / (2.0f * (decel > g_accel ? decel : g_accel));
     int32_t here = ax.pf_int + (ax.pf_frac >= 0.5f ? 1 : 0);
     ax.target = v > 0 ? here + (int32_t)ceilf(d) : (v < 0 ? here - (int32_t)ceilf(d) : here);
 }
@@ -172,7 +174,7 @@ static void profile_tick(void)
     }
     float err = (float)(ax.target - ax.pf_int) - ax.pf_frac;
     if (err != 0.0f || ax.v != 0.0f) {
-        float a = g_accel;
+        float a = ax.decel > g_accel ? ax.decel : g_accel;
         float d = fabsf(err);
         float vmax = ax.cmd_speed;
         float vb = sqrtf(2.0f * a * d);
@@ -194,6 +196,7 @@ static void profile_tick(void)
         if (move == err) {              /* arrived: exactly on the target */
             ax.pf_int = ax.target;
             ax.pf_frac = 0.0f;
+            ax.decel = 0.0f;
         }
     }
     int32_t goal = ax.pf_int + (ax.pf_frac >= 0.5f ? 1 : 0);
@@ -326,6 +329,7 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
         return session_nack(req, ans, ERR_LIMIT_ACTIVE);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         ax.target = m.steps;
+        ax.decel = 0.0f;
         ax.cmd_speed = m.speed < g_config.max_speed ? m.speed : g_config.max_speed;
         ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT);
     }
@@ -346,6 +350,7 @@ static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
         ax.home_switch = m.sw;
         ax.home_position = m.position;
         ax.homing = 1;
+        ax.decel = 0.0f;
         ax.cmd_speed = s < g_config.max_speed ? s : g_config.max_speed;
         ax.target = ax.pf_int + (m.speed > 0 ? 1000000000L : -1000000000L);
         ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT);
@@ -398,7 +403,7 @@ static uint8_t axis_handle(const proto_frame_t *req, proto_frame_t *ans)
     case MSG_STOP:
         if (req->len != 0)
             return session_nack(req, ans, ERR_BAD_PAYLOAD);
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { stop_motion(); }
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { stop_motion(0.0f); }
         return session_ack(req, ans);
     case MSG_HOME:
         return handle_home(req, ans);
@@ -427,7 +432,7 @@ static void axis_host_silent(void)
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (was_moving)
             ax.faults |= FAULT_WATCHDOG;
-        stop_motion();
+        stop_motion(fabsf(ax.v) / AXIS_WATCHDOG_STOP_S);
     }
 }
 

@@ -22,7 +22,12 @@ typedef struct __attribute__((packed)) {
     uint8_t events;         /* AX_EV_* raised by the step ISR, consumed by the profile */
     uint8_t limit_bits;     /* LIM_* closed switches (last sample) */
     uint32_t steps_total;   /* step pulses since boot */
+    float decel;            /* deceleration of the current stop [steps/s^2] (0: accel) */
 } axis_state_t;
+
+/* The host-silence watchdog stops within this time [s], decelerating faster than the
+ * configured acceleration when needed: 1 s of silence + this <= 1.2 s to standstill. */
+#define AXIS_WATCHDOG_STOP_S 0.15f
 
 #define AX_EV_LIMIT 0x01    /* a switch in the direction of travel stopped the motor */
 #define AX_EV_HOME 0x02     /* the home switch closed: counter set, homed */

@@ -51,9 +51,15 @@ static uint8_t handle(session_t *s, const proto_frame_t *req, proto_frame_t *ans
 
 static void reboot(void)
 {
-    Serial.flush();                 /* the ACK of RESET leaves first */
+    /* the ACK of RESET leaves first: wait (at most 20 ms) for the transmit buffer to
+     * drain, then one character time for the last byte in the shift register */
+    uint32_t t0 = millis();
+    while (Serial.availableForWrite() < SERIAL_TX_BUFFER_SIZE - 1 && (uint32_t)(millis() - t0) < 20) {
+    }
+    delayMicroseconds(200);
     cli();
     wdt_enable(WDTO_15MS);
+    wdt_reset();                    /* restart the count with the short time-out */
     for (;;) {
     }
 }

@@ -30,8 +30,8 @@
  *                                  watchdog must reset it)
  *   mark                           remember "now" for latency figures (first step after)
  *   quit
- *   model commands (models.c): stall 0|1, set_angle RAD, temps W W, switches B..., lux L,
- *                              nmea HEX
+ *   model commands (models.c): stall 0|1, set_angle RAD, driver_fault 0|1, temps W W,
+ *                              switches B..., lux L, nmea HEX
  * Events: "FWSIM pty PATH" when a pty is (re)created, "FWSIM reset N" after every reset.
  */
 #define _GNU_SOURCE
@@ -89,6 +89,8 @@ static size_t cmd_len;
 static int running = 1;
 static uint64_t last_rx_cycle, mark_cycle;
 static uint32_t sym_ax, sym_session, sym_stop;
+enum { PENDING_NONE, PENDING_RESET, PENDING_HANG };
+static int pending;                        /* CPU state changes asked for by a command */
 
 /* ---------------------------------------------------------------- time */
 static double wall_now(void)
@@ -300,8 +302,8 @@ static void status_json(void)
     if (sym_ax) {
         axis_state_t a;
         ram_read(sym_ax, 0, &a, sizeof a);
-        printf(",\"counter\":%d,\"target\":%d,\"speed\":%.3f,\"homed\":%s,\"homing\":%s,\"faults\":%u,"
-               "\"steps_total\":%u", a.pos, a.homing ? a.pos : a.target, a.v, a.homed ? "true" : "false",
+        printf(",\"goal\":%d,\"pf\":%.3f,\"counter\":%d,\"target\":%d,\"speed\":%.3f,\"homed\":%s,\"homing\":%s,\"faults\":%u,"
+               "\"steps_total\":%u", a.goal, a.pf_int + a.pf_frac, a.pos, a.homing ? a.pos : a.target, a.v, a.homed ? "true" : "false",
                a.homing ? "true" : "false", a.faults, a.steps_total);
     }
     model_status_json(model, stdout);
@@ -337,15 +339,12 @@ static void command(char *line)
             unplugged_until = now + atof(args);
         }
     } else if (!strcmp(word, "reset")) {
-        avr_reset(avr);                     /* external reset: EXTRF */
-        avr->data[0x54] |= 0x02;            /* MCUSR.EXTRF */
+        pending = PENDING_RESET;           /* done between two instructions (main loop) */
     } else if (!strcmp(word, "hang")) {
-        if (!sym_stop) {
-            snprintf(reply, sizeof reply, "hang: no __stop_program in the firmware");
-        } else {
-            avr->sreg[S_I] = 0;
-            avr->pc = sym_stop;
-        }
+        if (!sym_stop)
+            snprintf(reply, sizeof reply, "hang: no _exit in the firmware");
+        else
+            pending = PENDING_HANG;
     } else if (!strcmp(word, "mark")) {
         mark_cycle = model_total_cycles(avr);
         mech.first_step_after_rx = 0;
@@ -434,15 +433,15 @@ static avr_cycle_count_t after_reset(avr_t *a, avr_cycle_count_t when, void *par
     return 0;
 }
 
+static int rearm;
+
+/* Every reset cancels all cycle timers and restarts the cycle counter (after this hook
+ * returns): the main loop re-arms ours in the new time base. */
 static void on_reset(avr_t *a)
 {
-    /* every reset cancels all cycle timers: re-arm ours; the cycle counter restarts */
     g_cycle_offset += a->cycle;
     resets++;
-    avr_cycle_timer_register(a, TICK_CYCLES, tick, NULL);
-    avr_cycle_timer_register(a, 1, after_reset, NULL);
-    if (model)
-        model_after_reset(model);
+    rearm = 1;
     frame_n = 0;
     printf("FWSIM reset %llu\n", resets);
     fflush(stdout);
@@ -513,7 +512,7 @@ int main(int argc, char **argv)
         avr_load_firmware(avr, &f);
         sym_ax = symbol(&f, "ax");
         sym_session = symbol(&f, "g_session");
-        sym_stop = symbol(&f, "__stop_program");
+        sym_stop = symbol(&f, "_exit");        /* cli; rjmp . */
     }
     if (boot) {
         uint32_t base, size;
@@ -560,6 +559,25 @@ int main(int argc, char **argv)
     fflush(stdout);
     while (running) {
         int state = avr_run(avr);
+        if (pending) {
+            /* commands run inside a cycle timer, after which simavr restores the PC:
+             * CPU state changes are applied here, between two instructions */
+            if (pending == PENDING_RESET) {
+                avr_reset(avr);                 /* external reset */
+                avr->data[0x54] |= 0x02;        /* MCUSR.EXTRF */
+            } else {
+                avr->sreg[S_I] = 0;             /* hung with interrupts off */
+                avr->pc = sym_stop;
+                avr->state = cpu_Running;
+            }
+            pending = PENDING_NONE;
+        }
+        if (rearm) {
+            rearm = 0;
+            avr_cycle_timer_register(avr, TICK_CYCLES, tick, NULL);
+            avr_cycle_timer_register(avr, 1, after_reset, NULL);
+            model_after_reset(model);
+        }
         if (state == cpu_Done || state == cpu_Crashed) {
             printf("FWSIM error the AVR stopped (state %d, pc 0x%04x)\n", state, avr->pc);
             fflush(stdout);

@@ -1,6 +1,6 @@
 /* Models of what the SSLFR boards are wired to, on libsimavr IRQs:
  *
- * axis       stepper driver + mechanism: STEP rising edge with /ENABLE low turns the
+ * axis       stepper driver + mechanism (`driver_fault 1` pulls /DRIVER_FAULT low): STEP rising edge with /ENABLE low turns the
  *            joint by step_rad in the DIR direction (DIR high = increasing angle),
  *            hard stops `overtravel` beyond the end switches (steps lost), `stall`
  *            (pulses counted, joint still); LOW / HIGH / SLEEP switches close (pin low)
@@ -402,6 +402,10 @@ int model_command(model_t *m, const char *line, char *reply, size_t n)
     const char *args = line + used;
     if (!strcmp(word, "stall") && m->kind == B_AXIS) {
         m->mech->stalled = atoi(args);
+        return 0;
+    }
+    if (!strcmp(word, "driver_fault") && m->kind == B_AXIS) {
+        pin_drive(m, 'D', 6, !atoi(args));   /* /DRIVER_FAULT low = fault */
         return 0;
     }
     if (!strcmp(word, "set_angle") && m->kind == B_AXIS) {

@@ -35,6 +35,10 @@ from dataclasses import dataclass
 from .. import messages as m
 from .base import Refuse, SimBoard
 
+#: [s] a host-silence watchdog stop reaches standstill within this (firmware
+#: boards/axis_state.h AXIS_WATCHDOG_STOP_S): 1 s of silence + 0.15 s <= 1.2 s
+WATCHDOG_STOP_S = 0.15
+
 AXES = {
     # name: (lo, hi, sleep) joint limits [rad] (seed 000 section 4 and team conventions:
     # mirrors -pi/4..+pi/2, sleeping at +pi/2; structure and reflector tilts of
@@ -117,6 +121,7 @@ class AxisSim(SimBoard):
         self.cmd_speed = 0.0        # [steps/s] limit of the current move
         self.homed = False
         self.homing: tuple[int, int] | None = None   # (switch, position)
+        self.decel = 0.0            # [steps/s^2] of a watchdog stop (0: accel)
         self.faults = m.FaultBits.RESET
 
     def limit_bits(self) -> int:
@@ -175,6 +180,7 @@ class AxisSim(SimBoard):
             if self._blocking(direction):
                 raise Refuse(m.ErrorCode.LIMIT_ACTIVE)
             self.target = float(msg.steps)
+            self.decel = 0.0
             self.cmd_speed = min(msg.speed, self.cfg.max_speed)
             self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
             return m.Ack(msg.TYPE)
@@ -182,6 +188,7 @@ class AxisSim(SimBoard):
             if msg.switch not in (0, 1, 2) or msg.speed == 0:
                 raise Refuse(m.ErrorCode.OUT_OF_RANGE)
             self.homing = (msg.switch, msg.position)
+            self.decel = 0.0
             self.cmd_speed = min(abs(msg.speed), self.cfg.max_speed)
             self.target = self.counter + math.copysign(1e9, msg.speed)
             self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
@@ -207,14 +214,17 @@ class AxisSim(SimBoard):
         if self.speed != 0.0 or self.counter != self.target or self.homing is not None:
             self.faults |= m.FaultBits.WATCHDOG
         self.homing = None
-        self._stop()
+        # standstill within WATCHDOG_STOP_S, faster than accel when needed (the firmware's rule)
+        self._stop(abs(self.speed) / WATCHDOG_STOP_S)
 
-    def _stop(self) -> None:
-        """Decelerate to a stop: the new target is the stopping point."""
+    def _stop(self, decel: float = 0.0) -> None:
+        """Decelerate to a stop at max(``decel``, accel) [steps/s^2]: the new target is
+        the stopping point."""
         if self.homing is not None:
             self.homing = None
+        self.decel = decel if decel > self.cfg.accel else 0.0
         v = self.speed
-        d = v * v / (2 * self.cfg.accel)
+        d = v * v / (2 * max(decel, self.cfg.accel))
         self.target = self.counter + math.copysign(d, v) if v else self.counter
 
     def _blocking(self, direction: int) -> bool:
@@ -258,15 +268,17 @@ class AxisSim(SimBoard):
         for _ in range(n):
             err = self.target - self.counter
             if err == 0.0 and self.speed == 0.0:
+                self.decel = 0.0
                 break
+            accel = max(c.accel, self.decel)
             vmax = self.cmd_speed or c.max_speed
-            v_brake = math.sqrt(2 * c.accel * abs(err))
+            v_brake = math.sqrt(2 * accel * abs(err))
             v_des = math.copysign(min(vmax, v_brake), err)
-            dv = max(-c.accel * h, min(c.accel * h, v_des - self.speed))
+            dv = max(-accel * h, min(accel * h, v_des - self.speed))
             self.speed += dv
             move = self.speed * h
             if (err > 0 and move >= err) or (err < 0 and move <= err) or \
-                    (abs(err) < 0.5 and abs(self.speed) < c.accel * h * 2):
+                    (abs(err) < 0.5 and abs(self.speed) < accel * h * 2):
                 move = err
                 self.speed = 0.0
             self.counter += move
