@@ -256,11 +256,17 @@ def test_hung_firmware_reset_by_the_avr_watchdog(axis):
 
 
 def test_reset_request_reboots_with_boot(axis):
+    """RESET: ACK, then the firmware restarts (a software restart from the reset vector,
+    not the watchdog: see test_fw_flash) and sends BOOT; the position is lost."""
     h, host = axis
+    host.request(m.SetZero(15000))
+    n = len(host.received)
     assert host.request(m.Reset()) == m.Ack(m.Reset.TYPE)
-    boot = [f for f in host.poll(0.5) if f.type == m.Boot.TYPE]
+    host.poll(0.5)
+    boot = [f for f in host.received[n:] if f.type == m.Boot.TYPE]
     assert boot and boot[0].seq == 0
-    assert h.status()['resets'] == 1
+    st = host.request(m.GetStatus())
+    assert not st.homed and st.fault_bits & m.FaultBits.RESET and st.uptime_ms < 600
 
 
 def test_eeprom_configuration_procedure(axis):

@@ -49,6 +49,11 @@ static uint8_t handle(session_t *s, const proto_frame_t *req, proto_frame_t *ans
     return common_handle(&g_common, s, req, ans);
 }
 
+/* RESET request: restart the firmware from its reset vector after putting the
+ * peripherals it uses back to their reset state. Not through the watchdog: after a
+ * watchdog reset the chip starts in the bootloader with the watchdog still running at
+ * 16 ms, and the Pro Mini's stock bootloader (ATmegaBOOT) does not stop it, so the board
+ * would reset forever (docs/firmware.md "Watchdogs"). */
 static void reboot(void)
 {
     /* the ACK of RESET leaves first: wait (at most 20 ms) for the transmit buffer to
@@ -58,8 +63,14 @@ static void reboot(void)
     }
     delayMicroseconds(200);
     cli();
-    wdt_enable(WDTO_15MS);
-    wdt_reset();                    /* restart the count with the short time-out */
+    wdt_disable();
+    TIMSK0 = 0; TIMSK1 = 0; TIMSK2 = 0;
+    TCCR0A = 0; TCCR0B = 0; TCCR1A = 0; TCCR1B = 0; TCCR2A = 0; TCCR2B = 0;
+    UCSR0B = 0; SPCR = 0; TWCR = 0; ADCSRA = 0;
+    PCICR = 0; PCMSK0 = 0; PCMSK1 = 0; PCMSK2 = 0; EIMSK = 0;
+    TIFR0 = 0xFF; TIFR1 = 0xFF; TIFR2 = 0xFF; PCIFR = 0xFF; EIFR = 0xFF;
+    DDRB = 0; DDRC = 0; DDRD = 0; PORTB = 0; PORTC = 0; PORTD = 0;
+    asm volatile("jmp 0");
     for (;;) {
     }
 }

@@ -3,6 +3,7 @@
  *
  *   fwsim --board axis|absorber|irradiance|gps --elf FILE [--eeprom FILE]
  *         [--bootloader FILE.hex]      start in the bootloader (BOOTRST), app flash empty
+ *         [--symbols FILE.elf]         (with --bootloader) the application's symbols for status
  *         [--link PATH] [--path-file FILE]   UART on a new pty (default), symlink to it
  *         [--uart-fd N]                UART on an inherited descriptor (a socketpair)
  *         [--pace X]                   simulated seconds per wall second (0: free run)
@@ -60,7 +61,7 @@
 #define TXBUF_SIZE (1u << 20)
 #define RXBUF_SIZE 4096u
 
-uint64_t g_cycle_offset;                   /* cycles run before the last reset */
+uint64_t g_cycle_offset;                   /* 0: the cycle counter runs on across resets */
 
 static avr_t *avr;
 static model_t *model;
@@ -434,12 +435,15 @@ static avr_cycle_count_t after_reset(avr_t *a, avr_cycle_count_t when, void *par
 }
 
 static int rearm;
+static avr_cycle_count_t cycle_at_reset;
 
-/* Every reset cancels all cycle timers and restarts the cycle counter (after this hook
- * returns): the main loop re-arms ours in the new time base. */
+/* Every reset cancels all cycle timers, and avr_reset() zeroes the cycle counter after
+ * this hook while the peripherals' reset (the watchdog restarting at 16 ms after a
+ * watchdog reset) registered their timers in the old time base. The main loop puts the
+ * counter back (time runs on, and those timers fire when they should) and re-arms ours. */
 static void on_reset(avr_t *a)
 {
-    g_cycle_offset += a->cycle;
+    cycle_at_reset = a->cycle;
     resets++;
     rearm = 1;
     frame_n = 0;
@@ -459,7 +463,7 @@ static void usage(void)
 
 int main(int argc, char **argv)
 {
-    const char *elf = NULL, *eeprom = NULL, *boot = NULL;
+    const char *elf = NULL, *eeprom = NULL, *boot = NULL, *symbols = NULL;
     unsigned seed = 1;
     kind = B_AXIS;
     mech = (mech_t){.lo = -M_PI / 4, .hi = M_PI / 2, .sleep = M_PI / 2, .step_rad = 0.006 * M_PI / 180,
@@ -471,6 +475,7 @@ int main(int argc, char **argv)
                  : !strcmp(v, "irradiance") ? B_IRRADIANCE : !strcmp(v, "gps") ? B_GPS : (usage(), B_AXIS);
             i++;
         } else if (!strcmp(a, "--elf") && v) { elf = v; i++; }
+        else if (!strcmp(a, "--symbols") && v) { symbols = v; i++; }
         else if (!strcmp(a, "--eeprom") && v) { eeprom = v; i++; }
         else if (!strcmp(a, "--bootloader") && v) { boot = v; i++; }
         else if (!strcmp(a, "--link") && v) { link_path = v; i++; }
@@ -513,6 +518,15 @@ int main(int argc, char **argv)
         sym_ax = symbol(&f, "ax");
         sym_session = symbol(&f, "g_session");
         sym_stop = symbol(&f, "_exit");        /* cli; rjmp . */
+    }
+    if (symbols && !elf) {                 /* the application's symbols, its code not loaded */
+        if (elf_read_firmware(symbols, &f) != 0) {
+            fprintf(stderr, "fwsim: cannot read %s\n", symbols);
+            return 1;
+        }
+        sym_ax = symbol(&f, "ax");
+        sym_session = symbol(&f, "g_session");
+        sym_stop = symbol(&f, "_exit");
     }
     if (boot) {
         uint32_t base, size;
@@ -574,6 +588,7 @@ int main(int argc, char **argv)
         }
         if (rearm) {
             rearm = 0;
+            avr->cycle = cycle_at_reset;
             avr_cycle_timer_register(avr, TICK_CYCLES, tick, NULL);
             avr_cycle_timer_register(avr, 1, after_reset, NULL);
             model_after_reset(model);

@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'report': ('sslfr_bringup.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
     'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),
+    'flash': ('sslfr_drivers.fw.flash', 'build and flash a board\'s firmware (avrdude), read INFO back, set its EEPROM'),
 }
 
 

@@ -42,18 +42,20 @@ class Harness:
     sensor_zero : int, optional
         Fit the optional AS5048A encoder (count at joint angle 0).
     bootloader : str, optional
-        Start in this bootloader (.hex) with an empty application (flash tests).
+        Put this bootloader (.hex) in flash and start there (BOOTRST, as the Pro Mini's
+        fuses); ``app=False`` leaves the application flash empty (flash tests).
     """
 
     def __init__(self, board: str, *, eeprom: bytes | None = None, link: str | None = None,
                  path_file: str | None = None, uart_fd: int | None = None, pace: float = 1.0,
                  mech: tuple | None = None, sensor_zero: int | None = None, seed: int = 1,
-                 bootloader: str | None = None, elf_path: str | None = None, log=None):
+                 bootloader: str | None = None, app: bool = True, elf_path: str | None = None, log=None):
         self.board = board
         self.eeprom = eeprom
         self.link, self.path_file, self.uart_fd = link, path_file, uart_fd
         self.pace, self.mech, self.sensor_zero, self.seed = pace, mech, sensor_zero, seed
         self.bootloader = bootloader
+        self.app = app
         self.elf_path = elf_path
         self.log = log
         self.path = ''
@@ -70,8 +72,9 @@ class Harness:
         argv = [str(harness_path()), '--board', self.board, '--pace', f'{self.pace:g}', '--seed', str(self.seed)]
         if self.bootloader:
             argv += ['--bootloader', str(self.bootloader)]
-        if not self.bootloader or self.elf_path:
-            argv += ['--elf', str(self.elf_path or elf(self.board))]
+        # without the application in flash (it comes later, through the bootloader) only
+        # its symbols are read (status: the firmware's variables)
+        argv += ['--elf' if self.app else '--symbols', str(self.elf_path or elf(self.board))]
         if self.eeprom is not None:
             fd, self._tmp = tempfile.mkstemp(prefix='fwsim-ee', suffix='.bin')
             with os.fdopen(fd, 'wb') as fh:
