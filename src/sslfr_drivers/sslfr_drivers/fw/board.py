@@ -190,12 +190,6 @@ class FirmwareBoard:
     def busy(self) -> bool:
         return self._sock is not None       # the XBee path needs the 5 ms runner tick
 
-    def control(self, cmd: dict) -> dict:
-        """A model command (sim.sensors fault kinds) for the shadow world."""
-        if self.shadow is None:
-            return {'ok': False, 'error': f'{self.board} board: no model commands'}
-        return self.shadow.control(cmd)
-
     def reset(self) -> None:
         """Power-cycle (external reset): the firmware restarts, BOOT."""
         self.harness.cmd('reset')
@@ -230,6 +224,14 @@ class FirmwareBoard:
             self._sock.close()
 
 
+class FirmwareSensor(FirmwareBoard):
+    """A sensor board (GPS, absorber, irradiance): takes the simulators' model commands."""
+
+    def control(self, cmd: dict) -> dict:
+        """A model command (sim.sensors fault kinds) for the shadow world."""
+        return self.shadow.control(cmd)
+
+
 class FirmwareAxis(FirmwareBoard):
     """An axis board: joint state from the mechanism model and the firmware's RAM."""
 
@@ -260,7 +262,7 @@ class FirmwareAxis(FirmwareBoard):
 
 
 def make_firmware_board(kind: str, options: dict, rng: random.Random, board_id: int, **kw) -> FirmwareBoard:
-    cls = FirmwareAxis if kind == 'axis' else FirmwareBoard
+    cls = FirmwareAxis if kind == 'axis' else FirmwareSensor
     return cls(kind, options, rng, board_id, **kw).start()
 
 
@@ -396,7 +398,7 @@ def main(argv: list[str] | None = None) -> int:
             endpoint = PtyEndpoint(args.link, args.path_file, announce)
         else:
             opts.setdefault('axis', args.axis)
-            board = (FirmwareAxis if args.kind == 'axis' else FirmwareBoard)(
+            board = (FirmwareAxis if args.kind == 'axis' else FirmwareSensor)(
                 args.kind, opts, rng, 1, link=args.link, path_file=args.path_file, pace=args.pace)
             board.harness.on_pty = announce
             board.start()
