@@ -159,6 +159,8 @@ class FirmwareBoard:
         """Advance the shadow world to ``now`` [s, monotonic] and hand its values to
         the chip models."""
         self.now = now
+        if not self.harness.alive():
+            raise FirmwareError(f'the {self.board} harness (fwsim) exited with status {self.harness.proc.returncode}')
         sh = self.shadow
         if sh is None:
             return

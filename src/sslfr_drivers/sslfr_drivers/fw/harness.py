@@ -98,9 +98,12 @@ class Harness:
         if not harness_path().exists() or not elf(self.board).exists():
             build()
         pass_fds = (self.uart_fd,) if self.uart_fd is not None else ()
+        # its own session: a signal to the caller's process group (Ctrl-C, the supervisor's
+        # stop) reaches the caller, which quits the harness; it also quits when its stdin
+        # closes (the caller died)
         self.proc = subprocess.Popen(self.argv(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=self.log or subprocess.DEVNULL, text=True, bufsize=1,
-                                     pass_fds=pass_fds)
+                                     pass_fds=pass_fds, start_new_session=True)
         threading.Thread(target=self._read, name=f'fwsim-{self.board}', daemon=True).start()
         if not self._ready.wait(timeout) or (self.uart_fd is None and not self._pty_event.wait(timeout)):
             self.stop()
