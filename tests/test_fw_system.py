@@ -10,14 +10,11 @@ The host-silence watchdog (host killed -> motor stopped within 1.2 s) and the li
 switch stopping a move are board-level tests (tests/test_fw_boards.py)."""
 from __future__ import annotations
 
-import json
 import math
-import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
 from fw_support import require
 
 from sslfr_bringup import nodeset, scenario
@@ -46,25 +43,16 @@ def _config() -> str:
     return str(nodeset.resolve_config('almeria_sslfr.yaml'))
 
 
-def _run(ros, env, out, args, timeout=400.0):
-    cmd = [str(ROOT / 'sslfr'), 'sim', '--boards', 'firmware', '--date', DATE, '--config', _config(),
-           '--no-report', '--anchor-margin', str(ANCHOR_MARGIN), '--out', str(out), *args]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        ros.spin_until(lambda: proc.poll() is not None, timeout)
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-    text, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 0, text
-    assert 'MISSING' not in text, text
-    summary = json.loads((out / 'sim.json').read_text())
-    assert summary['boards'] == 'firmware'
-    bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
-    assert bags, text
+def _run(env, out, args, timeout=400.0):
+    proc, summary, bag = scenario.run_sim(['--boards', 'firmware', '--date', DATE, '--config', _config(),
+                                           '--no-report', '--anchor-margin', str(ANCHOR_MARGIN), *args],
+                                          env, out, timeout=timeout)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and 'MISSING' not in text, text
+    assert summary['boards'] == 'firmware' and bag is not None, text
     for log in (out / 'logs').glob('sim_*.log'):
         assert 'Traceback' not in log.read_text(), log.read_text()
-    return text, summary, scenario.read_day(bags[-1])
+    return text, summary, scenario.read_day(bag)
 
 
 def _ref(day):
@@ -73,9 +61,9 @@ def _ref(day):
                               float(np.median(day.phase['longitude'][k])), 22.0)
 
 
-def test_tracking_window_on_firmware_boards(ros, ros_env, tmp_path):
+def test_tracking_window_on_firmware_boards(ros_env, tmp_path):
     speed = 90.0
-    text, summary, day = _run(ros, ros_env, tmp_path / 'out',
+    text, summary, day = _run(ros_env, tmp_path / 'out',
                               ['--start', '09:45', '--end', '10:30', '--speed', str(speed)])
     print('wall time', summary['wall_time_s'], 's, start-up', summary['startup_s'], 's')
     ref = _ref(day)
@@ -93,7 +81,7 @@ def test_tracking_window_on_firmware_boards(ros, ros_env, tmp_path):
     print('tracking error on firmware boards, max [deg]:', report)
 
 
-def test_faulty_morning_on_firmware_boards(ros, ros_env, tmp_path):
+def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
     """link-drop -> recovery, board-reset -> re-home then tracking, overtemp -> STOW."""
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     speed = 120.0
@@ -101,7 +89,7 @@ def test_faulty_morning_on_firmware_boards(ros, ros_env, tmp_path):
     args = ['--start', '10:15', '--end', '11:15', '--speed', str(speed)]
     for f in faults:
         args += ['--fault', f]
-    text, summary, day = _run(ros, ros_env, tmp_path / 'out', args)
+    text, summary, day = _run(ros_env, tmp_path / 'out', args)
     for f in faults:
         rec = [r for r in summary['faults'] if r['spec'] == f and r['what'] == 'start']
         assert rec and 'FAILED' not in str(rec[0]['result']), (f, summary['faults'])

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from fw_support import require
+from fw_support import require, wait_for
 
 from sslfr_drivers import messages as m
 from sslfr_drivers import messages_sensors as ms
@@ -28,15 +28,6 @@ ADDR = {'mirrors': '0013A20040000001', 'absorber': '0013A20040000002', 'gps': '0
 @pytest.fixture(scope='module', autouse=True)
 def _built():
     require('firmware', 'sim')
-
-
-def wait_for(pred, timeout, step=0.02):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
 
 
 def _fw_board(tmp_path, *args):

@@ -306,26 +306,37 @@ CFG_HAS_SENSOR = 0x04      #: AS5048A absolute encoder on the joint
 CFG_SENSOR_INVERT = 0x08   #: encoder counts decrease with the joint angle
 
 
-@register
 @dataclass(frozen=True)
-class SetConfig(Message):
-    """Store a configuration record (ACK; used from the next start, i.e. after RESET).
-    NACK OUT_OF_RANGE for a record the board refuses, BUSY while the motor moves."""
+class _RecordMessage(Message):
+    """A message whose payload is one configuration record (ConfigRecord.SIZE bytes)."""
 
-    TYPE: ClassVar[int] = 0x06
-    RESPONSE: ClassVar[bool] = True
     record: bytes = b''
 
     def pack(self) -> bytes:
         if len(self.record) != ConfigRecord.SIZE:
-            raise PayloadError(f'SetConfig: {len(self.record)} bytes, not {ConfigRecord.SIZE}')
+            raise PayloadError(f'{type(self).__name__}: {len(self.record)} bytes, not {ConfigRecord.SIZE}')
         return bytes(self.record)
 
     @classmethod
     def unpack(cls, payload: bytes):
         if len(payload) != ConfigRecord.SIZE:
-            raise PayloadError(f'SetConfig: {len(payload)} bytes, not {ConfigRecord.SIZE}')
+            raise PayloadError(f'{cls.__name__}: {len(payload)} bytes, not {ConfigRecord.SIZE}')
         return cls(bytes(payload))
+
+    @property
+    def value(self) -> ConfigRecord:
+        """The decoded record."""
+        return ConfigRecord.unpack(self.record)
+
+
+@register
+@dataclass(frozen=True)
+class SetConfig(_RecordMessage):
+    """Store a configuration record (ACK; used from the next start, i.e. after RESET).
+    NACK OUT_OF_RANGE for a record the board refuses, BUSY while the motor moves."""
+
+    TYPE: ClassVar[int] = 0x06
+    RESPONSE: ClassVar[bool] = True
 
 
 # ------------------------------------------------------------------ axis requests
@@ -487,27 +498,10 @@ class Status(Message):
 
 @register
 @dataclass(frozen=True)
-class Config(Message):
+class Config(_RecordMessage):
     """The board's configuration record (answer to GET_CONFIG); :attr:`value` decodes it."""
 
     TYPE: ClassVar[int] = 0x85
-    record: bytes = b''
-
-    def pack(self) -> bytes:
-        if len(self.record) != ConfigRecord.SIZE:
-            raise PayloadError(f'Config: {len(self.record)} bytes, not {ConfigRecord.SIZE}')
-        return bytes(self.record)
-
-    @classmethod
-    def unpack(cls, payload: bytes):
-        if len(payload) != ConfigRecord.SIZE:
-            raise PayloadError(f'Config: {len(payload)} bytes, not {ConfigRecord.SIZE}')
-        return cls(bytes(payload))
-
-    @property
-    def value(self) -> ConfigRecord:
-        """The decoded record."""
-        return ConfigRecord.unpack(self.record)
 
 
 @register

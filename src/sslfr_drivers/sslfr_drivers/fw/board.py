@@ -31,7 +31,7 @@ from .. import messages as m
 from ..sim import board_class
 from ..sim.axis import AxisConfig
 from ..sim.base import FaultInjector, _split_frames
-from ..sim.runner import PtyEndpoint, Runner, _parse_board_spec, build_parser, serve_until_signalled
+from ..sim.runner import PtyEndpoint, Runner, build_parser, serve_until_signalled, xbee_host
 from . import KIND_TO_BOARD, FirmwareError
 from .harness import Harness, axis_mech, sensor_zero_for
 
@@ -382,21 +382,17 @@ def main(argv: list[str] | None = None) -> int:
     boards: list[FirmwareBoard] = []
     try:
         if args.xbee:
-            from ..sim.xbee import XBeeSimCoordinator
-            if not args.board:
-                print('fw_board: --xbee needs at least one --board KIND[:AXIS]@ADDR', file=sys.stderr)
-                return 2
-            host = XBeeSimCoordinator()
-            for i, spec in enumerate(args.board):
-                kind, bopts, addr = _parse_board_spec(spec)
-                if addr is None:
-                    print(f'fw_board: --board {spec!r} needs @ADDR', file=sys.stderr)
-                    return 2
-                board = make_firmware_board(kind, {**opts, **bopts}, rng, i + 1, pace=args.pace)
+            def make(kind, options, board_id):
+                board = make_firmware_board(kind, options, rng, board_id, pace=args.pace)
                 boards.append(board)
-                host.add_board(bytes.fromhex(addr), board,
-                               FaultInjector(drop=args.drop, corrupt=args.corrupt,
-                                             corrupt_frames=args.corrupt_frames, rng=random.Random(rng.random())))
+                return board
+
+            def injector():
+                return FaultInjector(drop=args.drop, corrupt=args.corrupt, corrupt_frames=args.corrupt_frames,
+                                     rng=random.Random(rng.random()))
+            host = xbee_host(args.board, opts, make, injector, 'fw_board')
+            if host is None:
+                return 2
             endpoint = PtyEndpoint(args.link, args.path_file, announce)
         else:
             opts.setdefault('axis', args.axis)
