@@ -101,6 +101,15 @@ static double wall_now(void)
     return (double)(t.tv_sec - t0.tv_sec) + (t.tv_nsec - t0.tv_nsec) * 1e-9;
 }
 
+/* absolute steady time [s]: deadlines (disconnect, unplug) must not move when the
+ * pacing anchor t0 does */
+static double mono_now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + t.tv_nsec * 1e-9;
+}
+
 static double sim_now(void) { return model_total_cycles(avr) / (double)F_CPU_HZ; }
 
 static uint32_t rnd32(void) { return (uint32_t)random(); }
@@ -196,7 +205,7 @@ static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     (void)irq; (void)param;
     uint8_t b = (uint8_t)value;
     tx_bytes++;
-    if (uart_fd < 0 || wall_now() < silent_until) {
+    if (uart_fd < 0 || mono_now() < silent_until) {
         silenced_bytes++;
         frame_n = 0;
         return;
@@ -229,7 +238,7 @@ static void pump(void)
         ssize_t n = read(uart_fd, tmp, RXBUF_SIZE - rx_len);
         if (n > 0) {
             last_rx_cycle = model_total_cycles(avr);
-            int silent = wall_now() < silent_until;
+            int silent = mono_now() < silent_until;
             for (ssize_t i = 0; i < n; i++) {
                 uint8_t b = tmp[i];
                 if (silent) { silenced_bytes++; continue; }
@@ -319,7 +328,7 @@ static void command(char *line)
     if (sscanf(line, "%31s %n", word, &used) != 1)
         return;
     const char *args = line + used;
-    double now = wall_now();
+    double now = mono_now();
     if (!strcmp(word, "status")) {
         status_json();
         fflush(stdout);
@@ -393,7 +402,7 @@ static avr_cycle_count_t tick(avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param;
     double now = wall_now();
-    if (uart_fd < 0 && !external_fd && now >= unplugged_until)
+    if (uart_fd < 0 && !external_fd && mono_now() >= unplugged_until)
         pty_open();
     read_commands();
     pump();
@@ -416,7 +425,7 @@ static avr_cycle_count_t tick(avr_t *a, avr_cycle_count_t when, void *param)
                 read_commands();
                 pump();
             }
-            if (!external_fd && uart_fd < 0 && wall_now() >= unplugged_until)
+            if (!external_fd && uart_fd < 0 && mono_now() >= unplugged_until)
                 pty_open();
             ahead = sim - wall_now() * pace;
         }

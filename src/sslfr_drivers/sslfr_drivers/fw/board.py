@@ -20,6 +20,7 @@ firmware board's UART on a socketpair behind it; faults as in ``sim_board``).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import random
@@ -221,6 +222,13 @@ class FirmwareBoard:
     watchdog_tripped = property(lambda self: self._get('watchdog_tripped', False))
 
     def stop(self) -> None:
+        """Quit the harness; its last state goes to stderr (the board's log in sslfr sim)."""
+        if self.harness.alive():
+            try:
+                print(f'fw_board: {self.name} final state {json.dumps(self.harness.status())}',
+                      file=sys.stderr, flush=True)
+            except RuntimeError:
+                pass
         self.harness.stop()
         if self._sock is not None:
             self._sock.close()
