@@ -102,9 +102,12 @@ class RawHost:
         import threading
         from sslfr_drivers import messages as m
         self._beat = threading.Event()
+        self.beat_paused = threading.Event()
 
         def run():
             while not self._beat.wait(period):
+                if self.beat_paused.is_set():
+                    continue
                 try:
                     self.send(m.Ping(0))
                 except OSError:

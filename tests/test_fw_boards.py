@@ -31,8 +31,12 @@ def _built():
 
 
 def _harness(board, tmp, record=None, **kw):
+    """The board's harness. Paced at half real time unless a test needs real time: on a
+    loaded machine the test process may stall for a moment, which must not look like a
+    silent host to the firmware (the timing assertions use simulated time)."""
     from sslfr_drivers.fw.board import config_record
     from sslfr_drivers.fw.harness import Harness, axis_mech
+    kw.setdefault('pace', 0.5 if board == 'axis' else 1.0)
     if board == 'axis':
         kw.setdefault('mech', axis_mech('mirrors'))
     rec = record or config_record(board, {'axis': 'mirrors'}, 7)
@@ -64,7 +68,11 @@ def test_sizes_within_the_pro_mini():
 
 def test_boot_info_and_not_homed(axis):
     h, host = axis
-    boot = [f for f in host.poll(0.3) if f.type == m.Boot.TYPE]
+    boot = []
+    for _ in range(30):
+        boot += [f for f in host.poll(0.1) if f.type == m.Boot.TYPE]
+        if boot:
+            break
     assert boot and boot[0].seq == 0 and m.decode(boot[0]) == m.Boot(m.BoardKind.AXIS_STEPPER, 1)
     info = host.request(m.GetInfo())
     assert (info.board_kind, info.firmware, info.protocol, info.board_id, info.name_str) == \
@@ -145,7 +153,7 @@ def test_trapezoidal_profile_at_20000_steps_per_s(tmp_path):
         host.request(m.SetZero(0))
         assert host.request(m.MoveTo(-16000, 30000.0)) == m.Ack(m.MoveTo.TYPE)
         prof = _profile(h, 1.6)
-        st = h.wait(lambda s: s['speed'] == 0.0, 3)
+        st = h.wait(lambda s: s['speed'] == 0.0, 6)
         assert st['counter'] == -16000 and st['model_steps'] == -16000 and st['target'] == -16000
         # the joint never went past the target
         assert min(p[1] for p in prof) >= -16000
@@ -168,7 +176,7 @@ def test_limit_switch_stops_the_motor_at_the_switch(axis):
     h, host = axis
     host.request(m.SetZero(15000))                       # 90 deg
     assert host.request(m.MoveTo(-9000, 3000)) == m.Ack(m.MoveTo.TYPE)   # -54 deg: beyond the switch
-    st = h.wait(lambda s: s['speed'] == 0.0 and s['counter'] < 0, 15)
+    st = h.wait(lambda s: s['speed'] == 0.0 and s['counter'] < 0, 40)
     lo = math.radians(-45)
     assert lo - STEP <= st['angle'] <= lo + 1e-9, math.degrees(st['angle'])
     assert st['faults'] & m.FaultBits.LIMIT and st['limit_bits'] & 1
@@ -215,7 +223,7 @@ def test_host_killed_motor_stopped_within_1_2_s(tmp_path):
     from sslfr_drivers.fw.board import config_record
     from sslfr_drivers.fw.harness import axis_mech
     rec = config_record('axis', {'axis': 'mobile_structure'}, 1)
-    h = _harness('axis', tmp_path, rec, mech=axis_mech('mobile_structure', 0.0))
+    h = _harness('axis', tmp_path, rec, mech=axis_mech('mobile_structure', 0.0), pace=1.0)
     proc = subprocess.Popen([sys.executable, '-c', HOST_SCRIPT, h.path], stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == 'moving'
@@ -323,23 +331,24 @@ def test_absorber_thermocouples_and_switches(tmp_path):
     try:
         h.cmd(f'temps {max6675.encode(31.5, False)} {max6675.encode(148.25, False)}')
         h.cmd('switches 5')
-        s = _samples(host, ms.ThermocoupleSample, 1.1)
-        assert 3 <= len(s) <= 5                                            # 4 Hz
+        s = _samples(host, ms.ThermocoupleSample, 2.2)
+        assert len(s) >= 3 and all(b.board_ms - a.board_ms == 250 for a, b in zip(s, s[1:]))   # 4 Hz
         last = s[-1]
         assert max6675.decode(last.inlet).temperature == 31.5
         assert max6675.decode(last.outlet).temperature == 148.25
         h.cmd(f'temps {max6675.encode(30, True)} {max6675.encode(150, False)}')  # inlet open
-        time.sleep(0.6)
-        s = _samples(host, ms.ThermocoupleSample, 0.3)
+        time.sleep(1.0)
+        s = _samples(host, ms.ThermocoupleSample, 0.6)
         assert max6675.decode(s[-1].inlet).fault == max6675.FAULT_OPEN
         sw = [x for x in host.received if x.type == ms.SwitchSample.TYPE]
         assert m.decode(sw[-1]).bits == 5
         host.poll(0.2)
         h.cmd('switches 4 5 4 5 4')                                      # a bouncing contact
-        bits = [x.bits for x in _samples(host, ms.SwitchSample, 0.3)]
+        bits = [x.bits for x in _samples(host, ms.SwitchSample, 0.6)]
         assert bits[-1] == 4 and bits.count(5) >= 1, bits                 # raw: the chatter shows
-        n = len(_samples(host, ms.SwitchSample, 1.0))
-        assert 17 <= n <= 23, n                                           # 20 Hz when steady
+        steady = _samples(host, ms.SwitchSample, 1.0)
+        gaps = {b.board_ms - a.board_ms for a, b in zip(steady, steady[1:])}
+        assert len(steady) >= 5 and gaps <= {50, 51}, gaps                # 20 Hz when steady
     finally:
         host.close()
         h.stop()

@@ -57,12 +57,14 @@ def session(host) -> list[tuple[str, object]]:
     step('further into the high switch', m.MoveTo(15100, 1000.0))
     step('bad home switch', m.Home(5, 1000.0, 0))
     step('zero speed', m.MoveTo(10, 0.0))
+    host.beat_paused.set()                 # the retry must follow its request directly
     seq = host.send(m.MoveTo(12000, 3000.0))
     out.append(('move down', host.answer(seq)))
     host.send(m.MoveTo(12000, 3000.0), seq=seq)
     out.append(('retry of the move (duplicate)', host.answer(seq)))
     stale = host.send(m.Stop(), seq=seq - 3)
     out.append(('stale stop (ignored)', host.answer(stale, timeout=0.4)))
+    host.beat_paused.clear()
     out.append(('arrived', _settle(host)))
     step('past the low switch', m.MoveTo(-9000, 3000.0))
     out.append(('stopped by the switch', _settle(host)))
@@ -103,14 +105,14 @@ def test_python_simulator_answers_like_the_firmware(tmp_path):
 
     rec = config_record('axis', {'axis': 'mirrors'}, 1)
     with Harness('axis', eeprom=rec.eeprom_image(), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:
-        host = RawHost(h.path)
+        host = RawHost(h.path).heartbeat()
         try:
             fw = session(host)
         finally:
             host.close()
     sim = AxisSim(AxisConfig.for_axis('mirrors', has_sensor=False, initial_angle=math.pi / 2), board_id=1)
     with SimThread.plain(sim) as thread:
-        host = RawHost(thread.path)
+        host = RawHost(thread.path).heartbeat()
         try:
             py = session(host)
         finally:
