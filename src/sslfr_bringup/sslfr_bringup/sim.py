@@ -119,6 +119,9 @@ DOMAIN_LOCK_DIR = Path('/tmp/sslfr-ros-domains')
 #: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
 #: absorber). Override with nodeset.yaml sim.anchor_margin.
 ANCHOR_MARGIN = 10.0
+#: [s] the same with --boards firmware: the firmware boards start in 15-30 s on a loaded
+#: 2-core machine (each sensor world tabulates the sun, then its harness starts)
+FIRMWARE_ANCHOR_MARGIN = 25.0
 
 
 def parse_set(text: str, nodes) -> tuple[str, str, object]:
@@ -370,6 +373,8 @@ def main(argv: list[str]) -> int:  # noqa: C901 - the sequence of a simulated da
     anchor = None
     margin = float(args.anchor_margin if args.anchor_margin is not None
                    else simcfg.get('anchor_margin', ANCHOR_MARGIN))
+    if args.boards == 'firmware' and args.anchor_margin is None:
+        margin = max(margin, FIRMWARE_ANCHOR_MARGIN)
     try:
         # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
         anchor = time.monotonic() + margin
