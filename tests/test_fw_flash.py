@@ -74,7 +74,12 @@ def test_watchdog_reset_needs_a_watchdog_aware_bootloader(tmp_path, bootloader, 
                 link=str(tmp_path / 'b'), mech=axis_mech('mirrors')).start()
     host = RawHost(h.path)
     try:
-        assert any(f.type == m.Boot.TYPE for f in host.poll(2.5)), 'the firmware starts after power-up'
+        info = None                 # the firmware runs after power-up (after the bootloader's wait)
+        for _ in range(10):
+            info = host.answer(host.send(m.GetInfo()), timeout=0.5)
+            if info is not None:
+                break
+        assert info is not None and info.name_str == 'sslfr-axis'
         assert host.request(m.SetZero(15000)) == m.Ack(m.SetZero.TYPE)
         h.cmd('hang')
         frames = host.poll(2.5)
