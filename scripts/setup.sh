@@ -51,6 +51,31 @@ if ! cc -o /tmp/sslfr-cc-test.$$ /tmp/sslfr-cc-test.$$.c >/dev/null 2>&1; then
 fi
 rm -f /tmp/sslfr-cc-test.$$*
 
+# --- 2b. the board firmware toolchain (Debian packages; docs/firmware.md) ----------
+# gcc-avr/avr-libc/arduino-core-avr build firmware/, simavr + libsimavr-dev run it in the
+# firmware-in-the-loop tests, avrdude flashes it. As root on Debian/Ubuntu they are
+# installed here; otherwise the exact command is printed (the firmware tests then skip
+# with that reason, or fail under CI=true).
+FW_PKGS="gcc-avr binutils-avr avr-libc arduino-core-avr simavr libsimavr2 libsimavrparts1 libsimavr-dev libelf-dev pkg-config avrdude"
+fw_missing() {
+  command -v avr-g++ >/dev/null 2>&1 && command -v avrdude >/dev/null 2>&1 \
+    && [ -f /usr/share/arduino/hardware/arduino/avr/cores/arduino/Arduino.h ] \
+    && [ -f /usr/include/simavr/sim_avr.h ] && [ -f /usr/include/libelf.h ] && return 1
+  return 0
+}
+if [ -z "${SSLFR_SKIP_FIRMWARE_TOOLS:-}" ] && fw_missing; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing the firmware toolchain (apt-get: $FW_PKGS)"
+    if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $FW_PKGS; } \
+        > "$ROOT/.setup-apt.log" 2>&1; then
+      tail -5 "$ROOT/.setup-apt.log" >&2
+      say "WARNING: apt-get failed (log: .setup-apt.log): the firmware tests will skip (fail under CI=true)"
+    fi
+  else
+    say "firmware toolchain missing: sudo apt-get install --no-install-recommends $FW_PKGS"
+  fi
+fi
+
 # --- 3. the virtual environment ----------------------------------------------------
 if [ -d "$VENV" ]; then
   if ! "$VENV/bin/python" -c 'import sys' >/dev/null 2>&1; then

@@ -26,6 +26,7 @@ setup(
             'gps = sslfr_drivers.sensors.gps_node:main',
             'absorber_board = sslfr_drivers.sensors.absorber_board_node:main',
             'irradiance = sslfr_drivers.sensors.irradiance_node:main',
+            'fw_board = sslfr_drivers.sim.fw_board:main',
         ],
     },
 )

@@ -120,6 +120,9 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
 #: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
 #: absorber). Override with nodeset.yaml sim.anchor_margin.
 ANCHOR_MARGIN = 10.0
+#: [s] the same with --boards firmware: the firmware boards start in 15-30 s on a loaded
+#: 2-core machine (each sensor world tabulates the sun, then its harness starts)
+FIRMWARE_ANCHOR_MARGIN = 25.0
 
 
 def parse_set(text: str, nodes) -> tuple[str, str, object]:
@@ -186,6 +189,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else a free id of 215..232 held for the run)')
     p.add_argument('--seed', type=bounded_int(0, 2**31 - 1), default=1, help='random seed of the simulated boards')
+    p.add_argument('--boards', choices=('sim', 'firmware'), default='sim',
+                   help="'sim': the Python board simulators (fast); 'firmware': the boards' real firmware "
+                        "in simavr (fw_board, docs/firmware.md; the AVRs run in real time)")
     p.add_argument('--anchor-margin', type=ranged_float(0.0, 120.0, unit='s'), default=None, metavar='S',
                    help=f'wall seconds the sensor simulators get to start before the simulated clock '
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
@@ -298,9 +304,19 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     links: dict[str, Path] = {}
     controls: dict[str, str] = {}
     missing: list[str] = []
+    if args.boards == 'firmware':
+        from sslfr_drivers.firmware import prepare_backend
+        problem = prepare_backend()
+        if problem:
+            print(f'sslfr sim: --boards firmware: {problem}', file=sys.stderr)
+            return 2
     for bname in boards_needed:
         board = ns.boards[bname]
-        exe = find_executable(board.sim_package or '', board.sim_executable or '')
+        exe_name = board.sim_executable or ''
+        if args.boards == 'firmware':
+            from sslfr_drivers.firmware import backend_executable
+            exe_name = backend_executable(exe_name) or exe_name
+        exe = find_executable(board.sim_package or '', exe_name)
         if exe is None:
             missing.append(f'simulated board {bname} ({board.sim_package}/{board.sim_executable})')
             continue
@@ -383,6 +399,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         anchor = None
         margin = float(args.anchor_margin if args.anchor_margin is not None
                        else simcfg.get('anchor_margin', ANCHOR_MARGIN))
+        if args.boards == 'firmware' and args.anchor_margin is None:
+            margin = max(margin, FIRMWARE_ANCHOR_MARGIN)
         try:
             # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
             anchor = time.monotonic() + margin
@@ -458,7 +476,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ros.shutdown()
         log_stream.close()
         wall = time.monotonic() - t_wall0
-        summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed,
+        summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed, 'boards': args.boards,
                    'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
                    'startup_s': round(t_nodes - t_wall0, 2),
                    'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,

@@ -8,11 +8,11 @@ fields are little-endian.
 Type code ranges (documented in docs/protocol.md; never reuse a code):
 
 =============  ==============================================================
-0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET)
+0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET, GET_CONFIG, SET_CONFIG)
 0x10 - 0x3F    axis-board requests (MOVE_TO, STOP, HOME, SET_ZERO)
 0x40 - 0x5F    RESERVED for sensor-board requests (sensor_messages module)
 0x60 - 0x7F    reserved (future)
-0x80 - 0x8F    common board -> host frames (ACK, NACK, INFO, STATUS, BOOT)
+0x80 - 0x8F    common board -> host frames (ACK, NACK, INFO, STATUS, BOOT, CONFIG)
 0x90 - 0xBF    axis-board unsolicited frames (none yet)
 0xC0 - 0xDF    RESERVED for sensor-board frames (samples, NMEA passthrough)
 0xE0 - 0xFF    reserved (future; 0xFF never used)
@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
-from sslfr_common.contract import STEP_ANGLE
+from sslfr_common.contract import JOINTS, STEP_ANGLE
 from sslfr_drivers.link.protocol import FLAG_RESPONSE, Frame, PayloadError
 
 DEFAULT_STEP_RAD = STEP_ANGLE      # [rad/step] seed 000: 0.006 deg
@@ -217,6 +217,130 @@ class Reset(Message):
     RESPONSE: ClassVar[bool] = True
 
 
+@register
+@dataclass(frozen=True)
+class GetConfig(Message):
+    """Ask for the board's configuration record (answered with CONFIG)."""
+
+    TYPE: ClassVar[int] = 0x05
+    RESPONSE: ClassVar[bool] = True
+
+
+@dataclass(frozen=True)
+class ConfigRecord:
+    """The board configuration record (EEPROM address 0; docs/firmware.md "EEPROM
+    configuration"). Units: baud [bit/s], max_speed [steps/s], accel [steps/s^2],
+    min_steps / max_steps [steps] (the MOVE_TO range), sensor_zero [encoder counts].
+
+    ``axis``: 0 mirrors, 1 mobile structure, 2 secondary reflector, 0xFF none;
+    ``flags``: :data:`CFG_INVERT_DIR`, :data:`CFG_SWITCH_NC`, :data:`CFG_HAS_SENSOR`,
+    :data:`CFG_SENSOR_INVERT`."""
+
+    layout: int = 1
+    kind: int = 0
+    board_id: int = 0
+    baud: int = 115200
+    axis: int = 0xFF
+    flags: int = 0
+    max_speed: float = 0.0
+    accel: float = 0.0
+    min_steps: int = 0
+    max_steps: int = 0
+    sensor_zero: int = 0
+
+    FORMAT: ClassVar[str] = '<BBIIBBffiiH'
+    SIZE: ClassVar[int] = 30
+    #: the ``axis`` byte indexes the contract's joints (0 mirrors, 1 mobile_structure, ...)
+    AXES: ClassVar[tuple[str, ...]] = JOINTS
+
+    def pack(self) -> bytes:
+        """The 30-byte record (SET_CONFIG / CONFIG payload)."""
+        try:
+            return struct.pack(self.FORMAT, *(getattr(self, f.name) for f in fields(self)))
+        except struct.error as exc:
+            raise PayloadError(f'ConfigRecord: {exc}') from None
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> 'ConfigRecord':
+        """Record from its 30 bytes; PayloadError for another size."""
+        if len(payload) != cls.SIZE:
+            raise PayloadError(f'ConfigRecord: {len(payload)} bytes, not {cls.SIZE}')
+        return cls(*struct.unpack(cls.FORMAT, payload))
+
+    def eeprom_image(self) -> bytes:
+        """What the firmware stores at EEPROM address 0: the record + its CRC-16."""
+        from .protocol import crc16
+        raw = self.pack()
+        return raw + struct.pack('<H', crc16(raw))
+
+    def check(self, kind: int) -> int:
+        """0 when a board of ``kind`` accepts this record, else the NACK code
+        (OUT_OF_RANGE): the firmware's rule (firmware/lib/msgs.c config_check)."""
+        bad = ErrorCode.OUT_OF_RANGE
+        if self.layout != 1 or self.kind != kind or self.baud not in (9600, 19200, 38400, 57600, 115200):
+            return bad
+        if kind != BoardKind.AXIS_STEPPER:
+            return 0
+        if self.axis > 2 or self.flags & ~0x0F:
+            return bad
+        f32 = struct.unpack('<ff', struct.pack('<ff', self.max_speed, self.accel))
+        if not (1.0 <= f32[0] <= AXIS_MAX_STEP_RATE) or not (1.0 <= f32[1] <= 1.0e7):
+            return bad
+        if self.min_steps >= self.max_steps:
+            return bad
+        if self.flags & CFG_HAS_SENSOR and self.sensor_zero > 0x3FFF:
+            return bad
+        return 0
+
+    @classmethod
+    def defaults(cls, kind: int) -> 'ConfigRecord':
+        """The firmware's defaults for a board of ``kind`` (blank EEPROM)."""
+        if kind == BoardKind.AXIS_STEPPER:
+            return cls(kind=kind, axis=0, max_speed=3000.0, accel=6000.0, min_steps=-(1 << 30),
+                       max_steps=1 << 30)
+        return cls(kind=kind)
+
+
+CFG_INVERT_DIR = 0x01      #: DIR low for increasing steps
+AXIS_MAX_STEP_RATE = 25000.0   #: [steps/s] highest max_speed an axis board accepts
+CFG_SWITCH_NC = 0x02       #: normally-closed limit switches
+CFG_HAS_SENSOR = 0x04      #: AS5048A absolute encoder on the joint
+CFG_SENSOR_INVERT = 0x08   #: encoder counts decrease with the joint angle
+
+
+@dataclass(frozen=True)
+class _RecordMessage(Message):
+    """A message whose payload is one configuration record (ConfigRecord.SIZE bytes)."""
+
+    record: bytes = b''
+
+    def pack(self) -> bytes:
+        if len(self.record) != ConfigRecord.SIZE:
+            raise PayloadError(f'{type(self).__name__}: {len(self.record)} bytes, not {ConfigRecord.SIZE}')
+        return bytes(self.record)
+
+    @classmethod
+    def unpack(cls, payload: bytes):
+        if len(payload) != ConfigRecord.SIZE:
+            raise PayloadError(f'{cls.__name__}: {len(payload)} bytes, not {ConfigRecord.SIZE}')
+        return cls(bytes(payload))
+
+    @property
+    def value(self) -> ConfigRecord:
+        """The decoded record."""
+        return ConfigRecord.unpack(self.record)
+
+
+@register
+@dataclass(frozen=True)
+class SetConfig(_RecordMessage):
+    """Store a configuration record (ACK; used from the next start, i.e. after RESET).
+    NACK OUT_OF_RANGE for a record the board refuses, BUSY while the motor moves."""
+
+    TYPE: ClassVar[int] = 0x06
+    RESPONSE: ClassVar[bool] = True
+
+
 # ------------------------------------------------------------------ axis requests
 @register
 @dataclass(frozen=True)
@@ -372,6 +496,14 @@ class Status(Message):
     def homing(self) -> bool:
         """HOMING flag: a HOME request is running."""
         return bool(self.flags & StatusFlags.HOMING)
+
+
+@register
+@dataclass(frozen=True)
+class Config(_RecordMessage):
+    """The board's configuration record (answer to GET_CONFIG); :attr:`value` decodes it."""
+
+    TYPE: ClassVar[int] = 0x85
 
 
 @register

@@ -27,6 +27,7 @@ Model
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 from dataclasses import dataclass
@@ -34,6 +35,10 @@ from dataclasses import dataclass
 from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.sim.base import Refuse, SimBoard
+
+#: [s] a host-silence watchdog stop reaches standstill within this (firmware
+#: boards/axis_state.h AXIS_WATCHDOG_STOP_S): 1 s of silence + 0.15 s <= 1.2 s
+WATCHDOG_STOP_S = 0.15
 
 
 
@@ -68,6 +73,7 @@ class AxisSim(SimBoard):
     kind = m.BoardKind.AXIS_STEPPER
     name = 'sim-axis'
     firmware = (1, 0, 0)
+    REQUESTS = SimBoard.REQUESTS | {m.GetStatus.TYPE, m.MoveTo.TYPE, m.Stop.TYPE, m.Home.TYPE, m.SetZero.TYPE}
 
     def __init__(self, config: AxisConfig | None = None, board_id: int = 1,
                  rng: random.Random | None = None, **kw):
@@ -76,6 +82,8 @@ class AxisSim(SimBoard):
         self.angle = c.sleep if c.initial_angle is None else c.initial_angle
         self.stalled = False
         super().__init__(board_id=board_id, rng=rng, **kw)
+        axis = m.ConfigRecord.AXES.index(c.axis) if c.axis in m.ConfigRecord.AXES else 0
+        self.config = dataclasses.replace(self.config, axis=axis, max_speed=c.max_speed, accel=c.accel)
 
     @classmethod
     def from_options(cls, options: dict, rng: random.Random, board_id: int = 1) -> 'AxisSim':
@@ -97,6 +105,9 @@ class AxisSim(SimBoard):
 
     # ------------------------------------------------------------------ state
     def boot_state(self) -> None:
+        stored = getattr(self, 'stored_config', None)
+        if stored is not None:        # a SET_CONFIG record takes effect at boot
+            self.cfg.max_speed, self.cfg.accel = stored.max_speed, stored.accel
         self.counter = 0.0
         self.target = 0.0
         self.speed = 0.0            # [steps/s] signed
@@ -104,6 +115,7 @@ class AxisSim(SimBoard):
         self.homed = False
         self.homing: tuple[int, int] | None = None   # (switch, position)
         self.home_angle: float | None = None         # joint angle [rad] where HOME ended
+        self.decel = 0.0            # [steps/s^2] of a watchdog stop (0: accel)
         self.faults = m.FaultBits.RESET
 
     def limit_bits(self) -> int:
@@ -162,6 +174,7 @@ class AxisSim(SimBoard):
             if self._blocking(direction):
                 raise Refuse(m.ErrorCode.LIMIT_ACTIVE)
             self.target = float(msg.steps)
+            self.decel = 0.0
             self.cmd_speed = min(msg.speed, self.cfg.max_speed)
             self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
             return m.Ack(msg.TYPE)
@@ -169,6 +182,7 @@ class AxisSim(SimBoard):
             if msg.switch not in (0, 1, 2) or msg.speed == 0:
                 raise Refuse(m.ErrorCode.OUT_OF_RANGE)
             self.homing = (msg.switch, msg.position)
+            self.decel = 0.0
             self.cmd_speed = min(abs(msg.speed), self.cfg.max_speed)
             self.target = self.counter + math.copysign(1e9, msg.speed)
             self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
@@ -183,6 +197,9 @@ class AxisSim(SimBoard):
             return m.Ack(msg.TYPE)
         return super().handle(msg, frame)
 
+    def busy_for_config(self) -> bool:
+        return self.busy()
+
     # ---------------------------------------------------------------- dynamics
     def busy(self) -> bool:
         return self.speed != 0.0 or self.counter != self.target or self.homing is not None
@@ -191,14 +208,17 @@ class AxisSim(SimBoard):
         if self.speed != 0.0 or self.counter != self.target or self.homing is not None:
             self.faults |= m.FaultBits.WATCHDOG
         self.homing = None
-        self._stop()
+        # standstill within WATCHDOG_STOP_S, faster than accel when needed (the firmware's rule)
+        self._stop(abs(self.speed) / WATCHDOG_STOP_S)
 
-    def _stop(self) -> None:
-        """Decelerate to a stop: the new target is the stopping point."""
+    def _stop(self, decel: float = 0.0) -> None:
+        """Decelerate to a stop at max(``decel``, accel) [steps/s^2]: the new target is
+        the stopping point."""
         if self.homing is not None:
             self.homing = None
+        self.decel = decel if decel > self.cfg.accel else 0.0
         v = self.speed
-        d = v * v / (2 * self.cfg.accel)
+        d = v * v / (2 * max(decel, self.cfg.accel))
         self.target = self.counter + math.copysign(d, v) if v else self.counter
 
     def _blocking(self, direction: int) -> bool:
@@ -243,15 +263,17 @@ class AxisSim(SimBoard):
         for _ in range(n):
             err = self.target - self.counter
             if err == 0.0 and self.speed == 0.0:
+                self.decel = 0.0
                 break
+            accel = max(c.accel, self.decel)
             vmax = self.cmd_speed or c.max_speed
-            v_brake = math.sqrt(2 * c.accel * abs(err))
+            v_brake = math.sqrt(2 * accel * abs(err))
             v_des = math.copysign(min(vmax, v_brake), err)
-            dv = max(-c.accel * h, min(c.accel * h, v_des - self.speed))
+            dv = max(-accel * h, min(accel * h, v_des - self.speed))
             self.speed += dv
             move = self.speed * h
             if (err > 0 and move >= err) or (err < 0 and move <= err) or \
-                    (abs(err) < 0.5 and abs(self.speed) < c.accel * h * 2):
+                    (abs(err) < 0.5 and abs(self.speed) < accel * h * 2):
                 move = err
                 self.speed = 0.0
             self.counter += move

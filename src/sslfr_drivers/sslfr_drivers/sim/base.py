@@ -26,6 +26,7 @@ message or :class:`Refuse`) and optionally :meth:`SimBoard.update` (called from
 """
 from __future__ import annotations
 
+import dataclasses
 import random
 from dataclasses import dataclass
 
@@ -59,6 +60,9 @@ class SimBoard:
     kind: m.BoardKind = m.BoardKind.UNKNOWN
     name = 'sim-board'
     firmware = (1, 0, 0)
+    #: request types this board implements; any other type is NACKed UNKNOWN_TYPE
+    #: whatever its payload (the firmware's rule: BAD_PAYLOAD only for own requests)
+    REQUESTS = frozenset({m.Ping.TYPE, m.GetInfo.TYPE, m.Reset.TYPE, m.GetConfig.TYPE, m.SetConfig.TYPE})
 
     def __init__(self, board_id: int = 1, rng: random.Random | None = None,
                  protocol_version: int = PROTOCOL_VERSION):
@@ -75,6 +79,7 @@ class SimBoard:
         self.requests_stale = 0
         self.requests_duplicate = 0
         self.watchdog_trips = 0
+        self.config = dataclasses.replace(m.ConfigRecord.defaults(int(self.kind)), board_id=board_id)
         self._boot(0.0)
 
     # ------------------------------------------------------------ runner side
@@ -138,11 +143,26 @@ class SimBoard:
         if isinstance(msg, m.Reset):
             self._reset_pending = True
             return m.Ack(msg.TYPE)
+        if isinstance(msg, m.GetConfig):
+            return m.Config(self.config.pack())
+        if isinstance(msg, m.SetConfig):
+            rec = m.ConfigRecord.unpack(msg.record)
+            code = rec.check(int(self.kind))
+            if code:
+                raise Refuse(m.ErrorCode(code))
+            if self.busy_for_config():
+                raise Refuse(m.ErrorCode.BUSY)
+            self.stored_config = rec          # used from the next boot, as in EEPROM
+            return m.Ack(msg.TYPE)
         raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
+
+    def busy_for_config(self) -> bool:
+        """True while SET_CONFIG must be refused (axis: the motor moves)."""
+        return False
 
     def info(self) -> m.Info:
         """The INFO answer: board kind, firmware and protocol versions, id, name."""
-        return m.Info(int(self.kind), *self.firmware, self.protocol_version, self.board_id,
+        return m.Info(int(self.kind), *self.firmware, self.protocol_version, self.config.board_id,
                       self.name.encode('ascii')[:16])
 
     def send(self, msg: m.Message, ref: int | None = None) -> None:
@@ -161,6 +181,9 @@ class SimBoard:
 
     # ------------------------------------------------------------ internals
     def _boot(self, now: float) -> None:
+        stored = getattr(self, 'stored_config', None)
+        if stored is not None:
+            self.config = stored
         self._framer = Framer()
         self._seq = SequenceCounter()
         self._host = SequenceTracker()
@@ -196,11 +219,13 @@ class SimBoard:
             self._host.accept(frame.seq)
         self._stale_run = 0
         try:
+            if frame.type not in self.REQUESTS:
+                raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
             msg = m.decode(frame)
+        except Refuse as r:
+            answer: m.Message | None = m.Nack(frame.type, r.code)
         except PayloadError:
-            code = (m.ErrorCode.UNKNOWN_TYPE if frame.type not in m.registry()
-                    else m.ErrorCode.BAD_PAYLOAD)
-            answer: m.Message | None = m.Nack(frame.type, code)
+            answer = m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD)
         else:
             try:
                 answer = self.handle(msg, frame)

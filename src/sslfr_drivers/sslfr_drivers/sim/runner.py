@@ -260,6 +260,8 @@ def board_state(addr, board: SimBoard, faults: FaultInjector) -> dict:
         if hasattr(board, attr):
             v = getattr(board, attr)
             d[attr] = int(v) if attr == 'faults' else v
+    if hasattr(board, 'extra_state'):      # e.g. firmware boards: the harness's state
+        d.update(board.extra_state())
     return d
 
 
@@ -331,6 +333,24 @@ def make_board(kind: str, options: dict, rng: random.Random, board_id: int,
     return board
 
 
+def xbee_host(specs: list[str], opts: dict, make, injector, prog: str):
+    """The simulated XBee coordinator with a board per ``--board KIND[:AXIS][,k=v]@ADDR``
+    spec: ``make(kind, options, board_id)`` builds each board, ``injector()`` its fault
+    injector. None (the reason printed) when a spec is incomplete."""
+    from .xbee import XBeeSimCoordinator
+    if not specs:
+        print(f'{prog}: --xbee needs at least one --board KIND[:AXIS]@ADDR', file=sys.stderr)
+        return None
+    host = XBeeSimCoordinator()
+    for i, spec in enumerate(specs):
+        kind, bopts, addr = _parse_board_spec(spec)
+        if addr is None:
+            print(f'{prog}: --board {spec!r} needs @ADDR', file=sys.stderr)
+            return None
+        host.add_board(bytes.fromhex(addr), make(kind, {**opts, **bopts}, i + 1), injector())
+    return host
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``sim_board``; exit status 0, 2 on a bad ``--board``."""
     args = build_parser().parse_args(argv)
@@ -346,19 +366,10 @@ def main(argv: list[str] | None = None) -> int:
 
     opts = dict(o.split('=', 1) for o in args.opt)
     if args.xbee:
-        from sslfr_drivers.sim.xbee import XBeeSimCoordinator
-        if not args.board:
-            print('sim_board: --xbee needs at least one --board KIND[:AXIS]@ADDR', file=sys.stderr)
+        host = xbee_host(args.board, opts, lambda kind, o, board_id: make_board(
+            kind, o, rng, board_id, args.protocol_version), injector, 'sim_board')
+        if host is None:
             return 2
-        host = XBeeSimCoordinator()
-        for i, spec in enumerate(args.board):
-            kind, bopts, addr = _parse_board_spec(spec)
-            if addr is None:
-                print(f'sim_board: --board {spec!r} needs @ADDR', file=sys.stderr)
-                return 2
-            host.add_board(bytes.fromhex(addr),
-                           make_board(kind, {**opts, **bopts}, rng, i + 1, args.protocol_version),
-                           injector())
     else:
         opts.setdefault('axis', args.axis)
         host = PlainHost(make_board(args.kind, opts, rng, 1, args.protocol_version), injector())

@@ -1,0 +1,36 @@
+/* fwsim: the SSLFR boards' exact firmware (.elf) on libsimavr, with models of what each
+ * board is wired to. See fwsim.c (harness: UART bridge, pacing, faults, control) and
+ * models.c (stepper + mechanism, AS5048A, MAX6675, VEML7700, NEO-6, switches). */
+#ifndef FWSIM_H
+#define FWSIM_H
+
+#include <stdint.h>
+#include <stdio.h>
+#include "sim_avr.h"
+
+#define F_CPU_HZ 16000000u
+
+enum board_kind { B_AXIS, B_ABSORBER, B_IRRADIANCE, B_GPS, B_BOOTLOADER };
+
+/* mechanism of an axis (SI units, radians), as sim/axis.py AxisConfig */
+typedef struct {
+    double lo, hi, sleep, step_rad, switch_width, overtravel;
+    double angle;              /* the joint angle (truth) */
+    int stalled;
+    int has_sensor;            /* AS5048A on the joint */
+    uint16_t sensor_zero;      /* encoder count at joint angle 0 */
+    int64_t steps;             /* STEP pulses seen by the model (signed) */
+    uint64_t last_step_cycle;  /* total cycles at the last pulse */
+    uint64_t first_step_after_rx; /* set by the harness: cycle of the first step after a mark */
+} mech_t;
+
+typedef struct model model_t;
+
+/* models.c */
+model_t *model_create(avr_t *avr, enum board_kind kind, mech_t *mech);
+void model_after_reset(model_t *m);              /* re-apply pin levels, timers */
+int model_command(model_t *m, const char *cmd, char *reply, size_t n);  /* 0 = handled */
+void model_status_json(model_t *m, FILE *out);   /* ,"key":value... */
+uint64_t model_total_cycles(avr_t *avr);         /* cycles since the harness started */
+
+#endif

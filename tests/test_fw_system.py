@@ -1,0 +1,123 @@
+"""System scenarios on firmware boards: the whole node set (real processes) through
+``./sslfr sim --boards firmware``: every board is its exact firmware in simavr (fw_board),
+paced to the wall clock; the sensor worlds are those of the Python simulators.
+
+- a tracking window: every axis within one motor step (+ the quantisation allowance of
+  sslfr_bringup.scenario) of the ephemeris core's ideal angle;
+- one faulty morning: link drop -> recovery, board reset -> re-home, over-temperature
+  -> STOW with the mirrors asleep.
+The host-silence watchdog (host killed -> motor stopped within 1.2 s) and the limit
+switch stopping a move are board-level tests (tests/test_fw_boards.py)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fw_support import require
+
+from sslfr_bringup import nodeset, scenario
+from sslfr_bringup.sim import day_epoch, parse_hhmm
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(420)]
+DATE = '2026-06-21'
+DAY0 = day_epoch(DATE)
+STEP = math.radians(0.006)
+TOL = STEP + 4 * math.radians(0.003)      # the tracking test's bound (tests/test_system_tracking.py)
+#: [s wall] the firmware boards start slower than the Python ones (the sensor worlds
+#: tabulate the sun, then the harness starts): the simulated clock waits for them
+ANCHOR_MARGIN = 25
+
+
+@pytest.fixture(scope='module', autouse=True)
+def _built():
+    require('firmware', 'sim')
+
+
+def T(hhmm: str) -> float:
+    return DAY0 + parse_hhmm(hhmm)
+
+
+def _config() -> str:
+    return str(nodeset.resolve_config('almeria_sslfr.yaml'))
+
+
+def _run(env, out, args, timeout=400.0):
+    proc, summary, bag = scenario.run_sim(['--boards', 'firmware', '--date', DATE, '--config', _config(),
+                                           '--no-report', '--anchor-margin', str(ANCHOR_MARGIN), *args],
+                                          env, out, timeout=timeout)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and 'MISSING' not in text, text
+    assert summary['boards'] == 'firmware' and bag is not None, text
+    for log in (out / 'logs').glob('sim_*.log'):
+        assert 'Traceback' not in log.read_text(), log.read_text()
+    return text, summary, scenario.read_day(bag)
+
+
+def _ref(day):
+    k = np.asarray(day.phase['site_source']) != ''
+    return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+                              float(np.median(day.phase['longitude'][k])), 22.0)
+
+
+def test_tracking_window_on_firmware_boards(ros_env, tmp_path):
+    speed = 90.0
+    text, summary, day = _run(ros_env, tmp_path / 'out',
+                              ['--start', '09:45', '--end', '10:30', '--speed', str(speed)])
+    print('wall time', summary['wall_time_s'], 's, start-up', summary['startup_s'], 's')
+    ref = _ref(day)
+    t0, t1 = T('10:00'), T('10:30')
+    assert np.all(day.phase.between(t0, t1)['phase'] == 2), 'TRACKING all through the window'
+    report = {}
+    for axis in scenario.JOINTS:
+        s = day.axes[axis].between(t0, t1)
+        assert len(s) > 30, (axis, len(s))
+        assert np.all(s['link_state'] == s['link_state'][0]) and np.all(s['homed'])
+        # lag allowance: 0.5 s wall (test_system_faults' figure for a loaded 2-core machine;
+        # the Python-simulator test allows 0.25 s): six simavr harnesses share the cores
+        err = scenario.tracking_error(s.t, s['measured'], lambda t, a=axis: getattr(ref(t), a),
+                                      lag=speed * 0.5)
+        report[axis] = (float(np.degrees(np.percentile(err, 95))), float(np.degrees(np.max(err))))
+        # within one step (+ sensor allowance) 95 % of the time; a loaded machine may delay
+        # a harness for a moment (it then re-anchors its pacing): no sample beyond 3 TOL
+        assert np.percentile(err, 95) <= TOL and np.max(err) <= 3 * TOL, (axis, report)
+    print('tracking error on firmware boards, (p95, max) [deg]:', report)
+
+
+def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
+    """link-drop -> recovery, board-reset -> re-home then tracking, overtemp -> STOW."""
+    from sslfr_interfaces.msg import AxisStatus, SafetyState
+    speed = 120.0
+    faults = ['link-drop:mirrors@10:30+600', 'board-reset:mobile_structure@10:45', 'overtemp@11:05']
+    args = ['--start', '10:15', '--end', '11:15', '--speed', str(speed)]
+    for f in faults:
+        args += ['--fault', f]
+    text, summary, day = _run(ros_env, tmp_path / 'out', args)
+    for f in faults:
+        rec = [r for r in summary['faults'] if r['spec'] == f and r['what'] == 'start']
+        assert rec and 'FAILED' not in str(rec[0]['result']), (f, summary['faults'])
+    ref = _ref(day)
+    lag = speed * 0.5
+    track = 3 * TOL
+    # link drop: seen, then UP and tracking again
+    s = day.axes['mirrors'].between(T('10:30'), T('10:43'))
+    assert np.any(s['link_state'] != AxisStatus.LINK_UP), 'the drop was seen'
+    after = day.axes['mirrors'].between(T('10:43'), T('10:47'))     # reconnect back-off: <= 5 s wall
+    assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP)
+    err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=lag)
+    assert np.max(err) <= track, np.degrees(np.max(err))
+    # board reset: the driver saw it, re-homed (HOME: no position sensor on these boards)
+    resets = day.counter('mobile_structure_driver', 'board_resets')
+    assert np.all(resets.between(T('10:55'), T('11:04'))['value'] >= 1), 'the driver saw the reset'
+    back = day.axes['mobile_structure'].between(T('10:58'), T('11:04'))
+    assert len(back) and np.all(back['homed'])
+    err = scenario.tracking_error(back.t, back['measured'], lambda t: ref(t).mobile_structure, lag=lag)
+    assert np.max(err) <= track, np.degrees(np.max(err))
+    # over-temperature: STOW latched, mirrors asleep (+pi/2)
+    sf = day.safety.between(T('11:05'), T('11:15'))
+    hot = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
+                    for lvl, rs in zip(sf['level'], sf['reasons'])])
+    assert np.any(hot) and np.all(hot[np.argmax(hot):])
+    end = day.axes['mirrors'].between(T('11:11'), T('11:15'))
+    assert len(end) and np.all(np.abs(end['measured'] - math.pi / 2) < 0.01), 'mirrors asleep'
