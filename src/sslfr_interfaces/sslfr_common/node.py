@@ -31,6 +31,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from typing import Callable
 
 import rclpy
@@ -186,6 +187,31 @@ def spin_until_stopped(node, executor, stop: _StopRequest | None = None,
     return stats
 
 
+def drain_callbacks(executor, stats: SpinStats | None = None, timeout_s: float = 2.0) -> int:
+    """Wait (at most ``timeout_s`` [s], steady clock) for the callbacks a
+    MultiThreadedExecutor's pool is still running when spinning ends, and fetch their
+    outcome: a failure is counted in ``stats`` instead of being printed by rclpy's
+    ``Task.__del__`` ("The following exception was never retrieved") after the node is
+    gone. A SingleThreadedExecutor has nothing in flight. Returns the callbacks still
+    running at the deadline."""
+    pending = list(getattr(executor, '_futures', ()))     # rclpy Jazzy: handlers submitted to the pool
+    deadline = time.monotonic() + timeout_s
+    left = 0
+    for task in pending:
+        while not task.done() and time.monotonic() < deadline:
+            time.sleep(0.005)
+        if not task.done():
+            left += 1
+            continue
+        exc = task.exception()                             # marks it retrieved
+        if exc is not None and stats is not None:
+            stats.errors += 1
+            stats.last = str(exc)
+    if pending and hasattr(executor, '_futures'):
+        executor._futures[:] = [t for t in executor._futures if not t.done()]
+    return left
+
+
 def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | None = None,
              executor: Callable[[object], object] | None = None,
              config_errors: tuple[type[BaseException], ...] = CONFIG_ERRORS,
@@ -226,7 +252,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _StopRequest()
     built: list = []
-    ex = bridge = None
+    ex = bridge = stats = None
     code = 0
     try:
         for name, make_node in nodes:
@@ -251,6 +277,8 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
         pass
     finally:
         stop.ignore_further()
+        if ex is not None:
+            drain_callbacks(ex, stats)      # nothing runs in the pool while on_exit() does
         for node in built:
             on_exit = getattr(node, 'on_exit', None)
             if on_exit is not None:

@@ -18,11 +18,14 @@ from sslfr_common.node import SpinStats, spin_until_stopped
 
 NODE = textwrap.dedent('''
     import logging, os, sys, time
+    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
+    from std_msgs.msg import String
     from sslfr_common.node import run_node
 
     BUILD_S = float(os.environ.get('BUILD_S', '0'))
     EXIT_S = float(os.environ.get('EXIT_S', '0'))
+    SLOW_CB_S = float(os.environ.get('SLOW_CB_S', '0'))
     lib = logging.getLogger('sslfr_testlib')
 
     class Demo(Node):
@@ -32,8 +35,16 @@ NODE = textwrap.dedent('''
                 raise ValueError('parameter x = -1 is outside [0, 1]')
             print('building', flush=True)
             time.sleep(BUILD_S)
-            self.create_timer(0.05, lambda: None)
+            self.pub = self.create_publisher(String, 'plumbing_demo_out', 1)
+            self.create_timer(0.05, self._tick)
             print('ready', flush=True)
+
+        def _tick(self):
+            if SLOW_CB_S:                         # a callback still running at the stop
+                print('cb start', flush=True)
+                time.sleep(SLOW_CB_S)
+                self.pub.publish(String(data='late'))
+                print('cb end', flush=True)
 
         def on_exit(self):
             print('on_exit start', flush=True)
@@ -42,7 +53,8 @@ NODE = textwrap.dedent('''
             self.get_logger().info('stopped cleanly')
             print('on_exit done', flush=True)
 
-    sys.exit(run_node('plumbing_demo', Demo, log_bridge=('sslfr_testlib',)))
+    mt = (lambda ctx: MultiThreadedExecutor(num_threads=4, context=ctx)) if os.environ.get('MT') else None
+    sys.exit(run_node('plumbing_demo', Demo, log_bridge=('sslfr_testlib',), executor=mt))
 ''')
 
 
@@ -74,6 +86,7 @@ def _clean(out):
     assert 'Failed to publish log message to rosout' not in out, out
     assert 'context is invalid' not in out, out
     assert 'on_exit done' in out, out
+    assert 'never retrieved' not in out, out
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
@@ -112,6 +125,19 @@ def test_two_sigints_50ms_apart_right_after_start(ros_env):
     code, out = _finish(proc)
     assert code == 0, out
     _clean(out)
+
+
+def test_callbacks_in_flight_in_a_thread_pool_finish_before_on_exit(ros_env):
+    """MultiThreadedExecutor (the axis driver's): a callback still running when the
+    stop begins ends before on_exit() and before the node is destroyed; nothing is
+    printed about an exception never retrieved (rclpy's Task.__del__)."""
+    proc = _start(ros_env, MT='1', SLOW_CB_S='0.4')
+    _wait_line(proc, 'cb start')
+    proc.send_signal(signal.SIGINT)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+    assert out.rindex('cb end') < out.index('on_exit start'), out
 
 
 def test_signal_while_the_node_is_being_built(ros_env):
