@@ -368,6 +368,8 @@ def test_modes_safety_stow_and_parameter_refusal(launch, ros, tmp_path):
     assert not r.successful and 'collector.law' in r.reason
     r = set_param('site.latitude_deg', ParameterType.PARAMETER_DOUBLE, double_value=float('nan'))
     assert not r.successful
+    r = set_param('state_dir', ParameterType.PARAMETER_STRING, string_value='/proc/sslfr_state')
+    assert not r.successful and 'state_dir' in r.reason and '/proc' in r.reason, r.reason
     got = ros.call(GetParameters, 'planner/get_parameters',
                    GetParameters.Request(names=['horizon', 'collector.law']))
     assert got.values[0].double_value == 120.0 and got.values[1].string_value == 'continuous'

@@ -238,3 +238,37 @@ def _strict_type(spec: ParamSpec, value: Any) -> str | None:
         if any(isinstance(v, int) and not isinstance(v, bool) for v in value):
             return f'{spec.name}: write every element as a floating-point number (e.g. 1.0, not 1)'
     return None
+
+
+def writable_directory(value: str, *, empty_ok: bool = True) -> str | None:
+    """A :class:`ParamSpec` validator for a directory the node writes into (``~``
+    expanded): None when it is a directory this process can create a file in, or
+    does not exist yet and can be created (its nearest existing ancestor accepts a new
+    directory); else the reason. The check is a real attempt (a temporary file or
+    directory, removed at once), so pseudo file systems (``/proc/x``), read-only
+    mounts and permissions are judged as the node would meet them; nothing is left
+    behind. ``''`` means "disabled" when ``empty_ok``."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    if value == '':
+        return None if empty_ok else 'an empty path is not a directory'
+    path = Path(os.path.expanduser(value))
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        return f'{value!r}: {probe} is not a directory'
+    try:
+        if probe == path:
+            with tempfile.TemporaryFile(dir=path):
+                pass
+        else:
+            os.rmdir(tempfile.mkdtemp(dir=probe))
+    except OSError as exc:
+        what = 'cannot write in' if probe == path else 'cannot create directories in'
+        return f'{value!r}: {what} {probe} ({exc.strerror or exc})'
+    return None

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sslfr_common.params import ParamSpec, ParamTable
+from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 from sslfr_common.timeconv import duration, split_seconds, stamp, stamp_from_ns, to_sec
 
 
@@ -27,6 +27,18 @@ def _table(**kw) -> ParamTable:
 
 
 # ----------------------------------------------------------------- tables (pure)
+def test_writable_directory_is_judged_by_a_real_attempt_leaving_nothing(tmp_path):
+    assert writable_directory(str(tmp_path)) is None
+    assert writable_directory(str(tmp_path / 'new' / 'deeper')) is None      # creatable
+    assert writable_directory('') is None and writable_directory('', empty_ok=False)
+    assert 'cannot create directories in /proc' in writable_directory('/proc/sslfr_state')
+    blocker = tmp_path / 'file'
+    blocker.write_text('x')
+    assert 'is not a directory' in writable_directory(str(blocker / 'sub'))
+    assert 'is not a directory' in writable_directory(str(blocker))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['file']             # nothing left behind
+
+
 def test_checks_types_ranges_validators_and_cross_rules():
     t = _table()
     assert t.validate(t.defaults()) == []

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from sslfr_common.params import ParamSpec, ParamTable
+from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 from .collector import LAWS
 
@@ -55,7 +55,8 @@ _SPECS = (
               'A valid fix is written to the state file when it moved more than this [m]',
               'm', 0.0, 1.0e6),
     ParamSpec('state_dir', '~/.local/state/sslfr',
-              'Directory of the persisted site file planner_site.json ("" disables persistence)'),
+              'Directory of the persisted site file planner_site.json ("" disables persistence); '
+              'must be a directory the planner can write in, or create', validator=writable_directory),
     # --- collector (see sslfr_planner.collector.Collector)
     ParamSpec('collector.law', 'continuous',
               'Longitudinal law of mobile structure and secondary reflector: continuous '

@@ -9,10 +9,12 @@
 """
 from __future__ import annotations
 
+import functools
+
 import os
 from typing import Any, Iterable
 
-from sslfr_common.params import ParamSpec, ParamTable
+from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 from .policy import DiskGuard, SplitPolicy
 from .qos import duration_dict
@@ -39,7 +41,9 @@ def _cross_check(v: dict[str, Any]) -> list[str]:
 
 
 TABLE = ParamTable((
-    ParamSpec('output_dir', '~/sslfr_bags', 'directory where bag directories are created'),
+    ParamSpec('output_dir', '~/sslfr_bags', 'directory where bag directories are created '
+              '(must be writable, or creatable)',
+              validator=functools.partial(writable_directory, empty_ok=False)),
     ParamSpec('prefix', 'sslfr', 'bag directory name prefix: <prefix>_YYYY-MM-DD'),
     ParamSpec('topics', [''], 'topics to record (relative names are resolved in the node '
                               'namespace); empty = every topic with a publisher'),

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import ipaddress
 
-from sslfr_common.params import ParamSpec, ParamTable
+from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 #: The password file `./sslfr web-password` writes and the node reads.
 DEFAULT_PASSWORD_FILE = '~/.config/sslfr/web_password'
@@ -60,7 +60,8 @@ WEB_PARAMS = ParamTable((
               "Directory of the recorded bags ('' = ask the recorder node for its output_dir)",
               read_only=True),
     ParamSpec('report_dir', '~/.cache/sslfr/web_reports',
-              'Where day reports made for the page are kept [directory]', read_only=True),
+              'Where day reports made for the page are kept [directory]', read_only=True,
+              validator=writable_directory),
     ParamSpec('audit_file', '~/.local/state/sslfr/web_commands.jsonl',
               "Every command (and every refusal) is appended here as a JSON line with its origin "
               "('' = only the node's log)", read_only=True),
