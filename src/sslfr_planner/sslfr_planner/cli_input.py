@@ -5,6 +5,8 @@ import argparse
 import math
 import sys
 
+from sslfr_common.files import atomic_write
+
 
 class CliError(Exception):
     """A user input error: printed as one line, exit status 2."""
@@ -208,26 +210,9 @@ def output_file(text: str) -> str:
 
 
 def write_atomically(path: str, write) -> None:
-    """Write a file through ``write(tmp_path)`` then rename it into place (nothing half-written).
-
-    The temporary file sits beside ``path`` and is removed if ``write`` fails.
-    """
-    import os
-    import tempfile
-
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix='.' + os.path.basename(path) + '.', suffix='.tmp', dir=directory)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
+    """Write a file through ``write(tmp_path)`` then rename it into place (nothing
+    half-written; :func:`sslfr_common.files.atomic_write`)."""
+    atomic_write(path, write=write)
 
 def load_yaml_file(path: str, what: str = 'config'):
     """Read a YAML file whose top level must be a mapping; CliError naming the file otherwise.

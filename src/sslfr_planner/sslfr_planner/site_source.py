@@ -19,9 +19,10 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+
+from sslfr_common.files import atomic_write
 
 #: sensor_msgs/NavSatStatus.STATUS_FIX and NavSatFix covariance types.
 STATUS_FIX = 0
@@ -157,28 +158,7 @@ def save_persisted(state_dir: str | os.PathLike, fix: SiteFix) -> Path:
         'longitude_deg': fix.longitude_deg, 'elevation': fix.elevation,
         'stamp': fix.stamp, 'source': fix.source,
     }, indent=1)
-    fd, tmp = tempfile.mkstemp(prefix='.planner_site.', dir=directory)
-    try:
-        with os.fdopen(fd, 'w') as fh:
-            fh.write(payload + '\n')
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    try:  # make the rename durable
-        dfd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-    return path
+    return atomic_write(path, payload + '\n')
 
 
 class SiteSelector:

@@ -43,6 +43,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from sslfr_common.files import atomic_write
+
 from . import yamlcpp
 from .qos import decode_profiles, load_profiles, to_yaml_list
 
@@ -179,16 +181,7 @@ class BagMetadata:
 
 def write_metadata(directory: str | os.PathLike, meta: BagMetadata, fsync: bool = True) -> Path:
     """Write ``metadata.yaml`` atomically (temp file + rename) and return its path."""
-    directory = Path(directory)
-    path = directory / METADATA_FILENAME
-    tmp = directory / (METADATA_FILENAME + '.tmp')
-    with open(tmp, 'w', encoding='utf-8') as fh:
-        fh.write(meta.dumps())
-        fh.flush()
-        if fsync:
-            os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    return path
+    return atomic_write(Path(directory) / METADATA_FILENAME, meta.dumps(), fsync=fsync)
 
 
 def _time_ns(node: yamlcpp.Node, key: str) -> int:

@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from sslfr_common.files import atomic_write
+
 SCRYPT_N, SCRYPT_R, SCRYPT_P, KEY_LEN, SALT_LEN = 2 ** 14, 8, 1, 32, 16
 MIN_PASSWORD_LEN = 8
 
@@ -94,15 +96,7 @@ def write_password_file(path: str | os.PathLike, password: str) -> Path:
     line = hash_password(password)
     p = Path(path).expanduser()
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + '.tmp')
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, 'w') as fh:
-        fh.write(line + '\n')
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.chmod(tmp, 0o600)
-    os.replace(tmp, p)
-    return p
+    return atomic_write(p, line + '\n', mode=0o600)
 
 
 class PasswordFile:

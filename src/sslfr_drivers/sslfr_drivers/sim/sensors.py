@@ -52,10 +52,10 @@ import json
 import math
 import os
 import random
-import tempfile
 import time
 
 from sslfr_common.contract import JOINT_RANGE, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
+from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
 from sslfr_drivers.sensors import max6675
@@ -89,11 +89,7 @@ def write_axis_angle(path: str, axis: str, angle: float) -> None:
     except (OSError, ValueError):
         world = {}
     world.setdefault('axes', {})[axis] = {'angle': float(angle)}
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=d, prefix='.world')
-    with os.fdopen(fd, 'w') as fh:
-        json.dump(world, fh)
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(world), fsync=False)
 
 
 class WorldPublisher:
