@@ -132,5 +132,6 @@ def test_xbee_hub_with_several_firmware_boards(tmp_path):
             lk.stop()
         hub.running = False
         t.join(3)
+        hub.close()
         ctl.cmd('quit')
         assert proc.wait(10) == 0

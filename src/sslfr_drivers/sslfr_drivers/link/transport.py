@@ -150,6 +150,42 @@ class SerialTransport(Transport):
 
 
 # --------------------------------------------------------------------------- XBee
+class _DigiLogForward(logging.Handler):
+    """digi-xbee's own log records, as one line each (no traceback) on this module's
+    logger (which the nodes forward to theirs): without a handler of its own,
+    Python's last-resort handler would print them, tracebacks included, on stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.levelno >= logging.WARNING:
+            _log.log(record.levelno, 'XBee library: %s', record.getMessage())
+
+
+_digi_log = logging.getLogger('digi')
+if not any(isinstance(h, _DigiLogForward) for h in _digi_log.handlers):
+    _digi_log.addHandler(_DigiLogForward())
+    _digi_log.propagate = False       # only the one-line forward, whatever the root logger does
+
+
+def _port_loss_aware_serial(port: str, baudrate: int, timeout: float):
+    """digi-xbee's serial interface, except that a port which reports data but returns
+    none (a USB coordinator unplugged, the far end of a pty closed) ends the library's
+    reader thread instead of making it retry forever (a busy loop and a warning per
+    retry): the reader then closes the port, :attr:`XBeeCoordinator.is_open` turns
+    False, and the owner reopens it with back-off."""
+    from digi.xbee.serial import XBeeSerialPort
+
+    class PortLossAwareSerialPort(XBeeSerialPort):
+        def wait_for_frame(self, operating_mode):
+            try:
+                return super().wait_for_frame(operating_mode)
+            except serial.SerialException as exc:
+                if 'returned no data' in str(exc):
+                    raise serial.SerialException(f'XBee coordinator port {port} lost') from None
+                raise
+
+    return PortLossAwareSerialPort(baudrate, port, timeout=timeout)
+
+
 class XBeeCoordinator:
     """The one owner of a local XBee (802.15.4, API mode AP=2) on a serial port.
 
@@ -201,7 +237,7 @@ class XBeeCoordinator:
             if self.is_open:
                 return
             self.close()
-            dev = Raw802Device(self.port, self.baudrate)
+            dev = Raw802Device(comm_iface=_port_loss_aware_serial(self.port, self.baudrate, self.sync_timeout))
             dev.set_sync_ops_timeout(self.sync_timeout)
             try:
                 dev.open()
