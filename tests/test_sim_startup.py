@@ -43,6 +43,7 @@ def test_sim_ends_every_child_on_sigterm_at_any_moment(moment, ros_env, tmp_path
     marker = {'immediately': None, 'boards starting': 'sslfr sim: 2026-06-21',
               'nodes started': 'nodes started at', 'running': 'sensors flowing at'}[moment]
     seen = _wait_for(proc, marker) if marker else []
+    assert marker is None or marker in seen[-1], ''.join(seen)    # signalled at that moment
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=60)

@@ -365,7 +365,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
         sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
                          stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
-                         ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('started ', 'lifecycle active')))
+                         ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('[sslfr up] started ', ': lifecycle active')))
         schedule = faults_mod.Schedule(faults)
         fired: list[dict] = []
         end_epoch = day0 + end_s
