@@ -51,6 +51,22 @@ def axis_reasons(core, axis='mobile_structure'):
 
 
 # ------------------------------------------------------------------ issue 21: idle drivers
+def test_no_ok_at_start_up_before_every_watched_driver_reports_ready():
+    """Drivers starting (under ros2 launch: safety up 1.4 s before the first driver
+    status) are not OK: a watched driver never heard keeps its axis not ready; an
+    unwatched one (a bench with fewer axes) is not judged."""
+    core, clock = make()
+    feed(core, clock, steps=5, report=False)
+    assert core.state.level == Level.STOW
+    assert sorted(r for r in core.state.reasons if 'no status from its driver yet' in r) == \
+        [f'{a} axis not ready: no status from its driver yet' for a in sorted(JOINTS)]
+    assert feed(core, clock, steps=5).level == Level.OK          # all three report ready
+    bench, clock = make(watchdogs={'planner': (5.0, 'STOW'), 'mirrors_driver': (2.0, 'STOW')})
+    feed(bench, clock, steps=5, report=False)
+    assert [r for r in bench.state.reasons if 'axis not ready' in r] == \
+        ['mirrors axis not ready: no status from its driver yet']
+
+
 @pytest.mark.parametrize('state', ['unconfigured', 'inactive', 'finalized'])
 def test_an_idle_driver_stows_naming_its_axis_until_active_and_referenced(state):
     core, clock = make()
@@ -103,15 +119,18 @@ def test_after_a_silence_the_restarted_driver_must_be_referenced_again():
     assert core.state.level == Level.OK
 
 
-def test_never_reported_axes_are_left_to_their_watchdog():
+def test_never_reported_watched_axes_are_not_ready_then_judged_by_their_reports():
     clock = FakeClock()
     core = SafetyCore(with_changes(SafetyConfig(), require_site_and_time=False), clock)
     clock.advance(11.0)
-    assert core.evaluate().level == Level.OK
+    state = core.evaluate()
+    assert state.level == Level.STOW
+    assert [r for r in state.reasons if 'axis not ready' in r] == \
+        [f'{a} axis not ready: no status from its driver yet' for a in JOINTS]
     core.on_driver_state('mirrors', 'unconfigured', DOWN, False)
     state = core.evaluate()
-    assert state.level == Level.STOW and state.reasons == ('mirrors axis not ready: its driver is '
-                                                           'unconfigured, not active',)
+    assert state.level == Level.STOW and 'mirrors axis not ready: its driver is unconfigured, not active' \
+        in state.reasons and 'mirrors axis not ready: no status from its driver yet' not in state.reasons
 
 
 # ------------------------------------------------------------------ rules as data

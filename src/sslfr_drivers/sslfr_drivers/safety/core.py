@@ -67,8 +67,9 @@ The rules (keys ``kind:name``; texts and clearing in rules.py)
     state of IDLE_DRIVER_STATES (unconfigured, inactive, finalized) or a board link
     that is not up. Self-clearing once the driver reports active, link up and the axis
     referenced (``homed``). After a silence > ``status_max_age`` the first report must
-    show that again (a restarted driver still homing is not ready). An axis never
-    reported is left to its watchdog (never heard after ``startup_grace``).
+    show that again (a restarted driver still homing is not ready). An axis whose
+    driver is watched and has never reported is not ready either (no OK at start-up
+    before the drivers say they drive their axes).
 ``estop``  ESTOP of every axis, latched until :meth:`SafetyCore.estop` ``(False)``;
     the release leaves ``post_estop`` (STOW) until :meth:`SafetyCore.reset`, so a
     released e-stop never resumes tracking by itself.

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, THERMOCOUPLES, Level,
-                                   LinkState)
+                                   LinkState, driver_node)
 
 
 class Clear(enum.Enum):
@@ -204,10 +204,16 @@ def link_name(link_state: int) -> str:
 
 
 def _axis_not_ready(core, axis: str, _now: float):
-    """The axis' driver said it is not active (a lifecycle label of
-    IDLE_DRIVER_STATES), or its board link is not up, and has not reported active,
-    link up and referenced since (``core.axes[axis].ready``, set by its status)."""
+    """The axis' driver has not reported yet (when it is watched), or said it is not
+    active (a lifecycle label of IDLE_DRIVER_STATES), or its board link is not up, and
+    has not reported active, link up and referenced since (``core.axes[axis].ready``,
+    set by its status)."""
     ax = core.axes[axis]
+    if ax.ready is None:
+        # never reported: not known to be driving its axis. A watched driver keeps the
+        # tracker stowed until its first ready report (no OK while drivers start); an
+        # unwatched one (a test bench with fewer axes) is not judged.
+        return ('unreported', {'axis': axis}) if driver_node(axis) in core.config.watchdogs else None
     if ax.ready is not False:
         return None
     if ax.driver_state in IDLE_DRIVER_STATES:
@@ -320,7 +326,8 @@ RULES: tuple[Rule, ...] = (
          'Wait for a GPS fix (a trusted time); check the GPS antenna.',
          condition=_no_time),
     Rule('axis', Level.STOW, Clear.SELF,
-         {'idle': '{axis} axis not ready: its driver is {state}, not active',
+         {'unreported': '{axis} axis not ready: no status from its driver yet',
+          'idle': '{axis} axis not ready: its driver is {state}, not active',
           'link': '{axis} axis not ready: board link {link}',
           'unreferenced': '{axis} axis not ready: driver active, axis not referenced yet (state {state})'},
          'That axis driver is not driving its axis: check that it runs and is active (its '
