@@ -107,6 +107,17 @@ def _fired(morning, spec):
     return rec[0]
 
 
+def _applied(morning, spec) -> tuple[float, float]:
+    """Sim times [s] at which ``sslfr sim`` actually started and ended the fault (its
+    summary): on a loaded machine at 200x a tick of the fault schedule may come a
+    wall second (200 sim s) after the nominal time, so the windows the tests look at
+    follow the injection, not the nominal clock time."""
+    start = _fired(morning, spec)['sim_time']
+    end = [f for f in morning['summary']['faults'] if f['spec'] == spec and f['what'] == 'end']
+    assert end and 'FAILED' not in str(end[0]['result']), (spec, morning['summary']['faults'])
+    return start, end[0]['sim_time']
+
+
 def _ref(day):
     k = np.asarray(day.phase['site_source']) != ''
     return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
@@ -115,29 +126,29 @@ def _ref(day):
 
 def test_gps_loss_planner_keeps_the_site_and_tracks(morning):
     from sensor_msgs.msg import NavSatStatus
-    _fired(morning, 'gps-loss@10:05+900')
+    t0, t1 = _applied(morning, 'gps-loss@10:05+900')
     day = morning['day']
     # the receiver's loss shows within a few wall seconds (the node publishes at 1 Hz wall)
-    lost = day.fix.between(T('10:05'), T('10:21'))
+    lost = day.fix.between(t0, t1 + 60)
     assert np.any(lost['status'] == NavSatStatus.STATUS_NO_FIX), lost['status']
-    back = day.fix.between(T('10:22'), T('10:45'))
+    back = day.fix.between(t1 + 120, t1 + 1500)
     assert np.any(back['status'] >= NavSatStatus.STATUS_FIX), 'the fix comes back'
-    ph = day.phase.between(T('10:05'), T('10:24'))
+    ph = day.phase.between(t0, t1 + 240)
     assert len(ph) and set(ph['name']) == {'TRACKING'}
     assert set(ph['site_source']) <= {'gps', 'persisted'}, set(ph['site_source'])
     assert np.ptp(ph['latitude']) < 1e-3 and np.ptp(ph['longitude']) < 1e-3
-    s = day.axes['mirrors'].between(T('10:08'), T('10:19'))
+    s = day.axes['mirrors'].between(t0 + 180, t1 - 60)
     ref = _ref(day)
     assert np.max(scenario.tracking_error(s.t, s['measured'], lambda t: ref(t).mirrors, lag=LAG)) <= TRACK
 
 
 def test_link_drop_then_recovery(morning):
-    _fired(morning, 'link-drop:mirrors@10:25+600')
+    t0, t1 = _applied(morning, 'link-drop:mirrors@10:25+600')
     day = morning['day']
-    s = day.axes['mirrors'].between(T('10:25'), T('10:45'))
+    s = day.axes['mirrors'].between(t0, t1 + 600)
     from sslfr_interfaces.msg import AxisStatus
     assert np.any(s['link_state'] != AxisStatus.LINK_UP), 'the drop was seen'
-    after = day.axes['mirrors'].between(T('10:40'), T('10:48'))
+    after = day.axes['mirrors'].between(t1 + 300, t1 + 780)
     assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP), 'recovered'
     ref = _ref(day)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=LAG)
@@ -145,12 +156,12 @@ def test_link_drop_then_recovery(morning):
 
 
 def test_board_reset_rehomes_then_tracks(morning):
-    _fired(morning, 'board-reset:mobile_structure@10:50')
+    t0 = _fired(morning, 'board-reset:mobile_structure@10:50')['sim_time']
     day = morning['day']
     resets = day.counter('mobile_structure_driver', 'board_resets')
-    assert len(resets) and np.all(resets.between(0, T('10:49'))['value'] == 0)
-    assert np.all(resets.between(T('10:56'), T('11:04'))['value'] >= 1), 'the driver saw the reset'
-    after = day.axes['mobile_structure'].between(T('10:58'), T('11:04'))
+    assert len(resets) and np.all(resets.between(0, t0 - 60)['value'] == 0)
+    assert np.all(resets.between(t0 + 360, t0 + 840)['value'] >= 1), 'the driver saw the reset'
+    after = day.axes['mobile_structure'].between(t0 + 480, t0 + 840)
     assert len(after) and np.all(after['homed'])
     ref = _ref(day)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mobile_structure, lag=LAG)
@@ -158,26 +169,26 @@ def test_board_reset_rehomes_then_tracks(morning):
 
 
 def test_thermocouple_open_is_reported(morning):
-    _fired(morning, 'thermocouple-open@11:05+600')
+    t0, t1 = _applied(morning, 'thermocouple-open@11:05+600')
     day = morning['day']
-    o = day.outlet.between(T('11:05'), T('11:15'))
+    o = day.outlet.between(t0, t1)
     assert np.any(np.isnan(o['value'])), o['value']
-    assert np.all(np.isnan(day.outlet.between(T('11:10'), T('11:14'))['value'])), 'open until the end'
-    back = day.outlet.between(T('11:18'), T('11:24'))
+    assert np.all(np.isnan(day.outlet.between(t0 + 300, t1 - 60)['value'])), 'open until the end'
+    back = day.outlet.between(t1 + 180, t1 + 540)
     assert len(back) and np.all(np.isfinite(back['value'])), 'closed again: readings back'
     assert any(math.isnan(m.temperature) for m in morning['live']['outlet'])
-    s = day.safety.between(T('11:08'), T('11:15'))
+    s = day.safety.between(t0 + 180, t1)
     assert any(any('thermocouple' in r for r in rs) for rs in s['reasons']), s['reasons'][:3]
     assert np.all(s['level'] >= 1)
 
 
 def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
-    _fired(morning, 'kill:planner@11:25+500')
+    t0, t1 = _applied(morning, 'kill:planner@11:25+500')
     day = morning['day']
-    traj = day.trajectory.between(T('11:27'), T('11:33'))
+    traj = day.trajectory.between(t0 + 120, t1 - 20)
     assert len(traj) == 0, 'no trajectory while the planner is down'
     horizon = scenario.planner_config(_config())['horizon']
-    hold = day.axes['mirrors'].between(T('11:25') + horizon + 2 * LAG, T('11:33:20'))
+    hold = day.axes['mirrors'].between(t0 + horizon + 2 * LAG, t1)
     assert len(hold) >= 3, len(hold)
     assert np.ptp(hold['measured']) < 4 * TOL, 'holding position'
     ref = _ref(day)
@@ -190,14 +201,14 @@ def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
 
 def test_overtemp_stows(morning):
     from sslfr_interfaces.msg import SafetyState
-    _fired(morning, 'overtemp@12:00')
+    t0 = _fired(morning, 'overtemp@12:00')['sim_time']
     day = morning['day']
-    s = day.safety.between(T('12:00'), T('12:12'))
+    s = day.safety.between(t0, T('12:12'))
     hot = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
                     for lvl, rs in zip(s['level'], s['reasons'])])
     assert np.any(hot), 'over-temperature STOW'
     t_stow = s.t[np.argmax(hot)]
-    assert t_stow - T('12:00') <= SPEED * 1.5, 'STOW within 1.5 wall seconds (sensor at 4 Hz, loaded machine)'
+    assert t_stow - t0 <= SPEED * 1.5, 'STOW within 1.5 wall seconds (sensor at 4 Hz, loaded machine)'
     assert np.all(hot[np.argmax(hot):]), 'latched until the end'
     assert any(m.level >= SafetyState.STOW and any('over-temperature' in r for r in m.reasons)
                for m in morning['live']['safety'])
