@@ -119,6 +119,26 @@ def test_after_a_silence_the_restarted_driver_must_be_referenced_again():
     assert core.state.level == Level.OK
 
 
+def test_a_stow_watched_node_not_heard_yet_keeps_the_start_up_stowed_without_alarm():
+    """Within the start-up grace a node whose watchdog action is STOW (the absorber
+    board: over-temperature would be unknown) keeps the tracker stowed, named, before
+    the never-heard alarm; a WARN node (gps, irradiance) is not judged yet."""
+    core, clock = make()
+    clock.advance(1.0)
+    core.on_phase(NIGHT, 'parameters')
+    core.on_gps_fix(True)
+    for axis in JOINTS:
+        core.on_axis_status(axis, False, 0.3)
+        core.on_driver_state(axis, 'following', UP, True)
+    state = core.evaluate()
+    assert state.level == Level.STOW and 'absorber_board not heard yet (start-up)' in state.reasons
+    assert not [r for r in state.reasons if 'irradiance' in r or 'never heard' in r], state.reasons
+    core.on_limit_switches(OPEN)
+    for name in ('inlet', 'outlet'):
+        core.on_temperature(name, 60.0)
+    assert core.evaluate().level == Level.OK, core.state.reasons
+
+
 def test_never_reported_watched_axes_are_not_ready_then_judged_by_their_reports():
     clock = FakeClock()
     core = SafetyCore(with_changes(SafetyConfig(), require_site_and_time=False), clock)

@@ -172,11 +172,15 @@ def _thermocouple_detect(core, name: str, now: float):
 
 
 def _watchdog(core, node: str, now: float):
-    timeout, _action = core.config.watchdogs[node]
+    timeout, action = core.config.watchdogs[node]
     last = core.heard.get(node)
     ref = last if last is not None else core.start + core.config.startup_grace
     if now - ref > timeout:
         return ('silent' if last is not None else 'never_heard'), {'node': node, 'timeout': timeout}
+    if last is None and action == 'STOW':
+        # within the start-up grace: not an alarm yet, but a node the tracker needs
+        # (the absorber's temperatures, a driver) is not known to work: no OK before it speaks
+        return 'waiting', {'node': node}
     return None
 
 
@@ -310,7 +314,8 @@ RULES: tuple[Rule, ...] = (
          {'released': 'e-stop released: stowing until safety/reset'},
          'Press Safety reset: the tracker stays stowed until then.'),
     Rule('watchdog', lambda core, node: Level[core.config.watchdogs[node][1]], Clear.SELF,
-         {'silent': '{node} silent > {timeout:.1f} s (heartbeat watchdog)',
+         {'waiting': '{node} not heard yet (start-up)',
+          'silent': '{node} silent > {timeout:.1f} s (heartbeat watchdog)',
           'never_heard': '{node} never heard > {timeout:.1f} s (heartbeat watchdog)'},
          'That node is not publishing: check that it runs (./sslfr up restarts it) and its board '
          'link; clears by itself when it is heard again.',
