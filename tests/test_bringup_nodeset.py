@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from conftest import ROOT
 
@@ -27,7 +29,7 @@ def site(tmp_path):
     p.write_text(yaml.safe_dump({
         '/**': {'ros__parameters': {'site': {'latitude_deg': 36.835, 'longitude_deg': -2.402, 'elevation': 22.0}}},
         'gps': {'ros__parameters': {'port': '/dev/ttyAMA0', 'baudrate': 9600}},
-        'planner': {'ros__parameters': {'longitudinal_law': 'continuous'}},
+        'planner': {'ros__parameters': {'collector': {'law': 'continuous'}}},
     }))
     return p
 
@@ -136,7 +138,7 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     assert all(e['namespace'] == '/sslfr1' for e in entries)
     # the node sections reach the namespaced nodes (rcl: a bare `planner:` is the root's only)
     doc = nodeset.read_params(moved)
-    assert nodeset.node_params(doc, 'planner', '/sslfr1')['longitudinal_law'] == 'continuous'
+    assert nodeset.node_params(doc, 'planner', '/sslfr1')['collector.law'] == 'continuous'
     assert nodeset.node_params(doc, 'gps', '/sslfr1')['port'] == '/dev/ttyAMA0'
     assert nodeset.node_params(doc, 'gps', '/sslfr1')['site.latitude_deg'] == 36.835
     root = {e['name']: e for e in mod._entries(str(site), '', None, True)}
@@ -242,3 +244,75 @@ def test_install_service_dry_run_prints_and_writes_unit(tmp_path, site):
                          capture_output=True, text=True, timeout=60, env=env)
     assert res.returncode == 0, res.stderr
     assert (tmp_path / service.UNIT_NAME).read_text().startswith('# sslfr-tracker.service')
+
+
+# ------------------------------------------------------------- site configs checked
+BAD_CONFIGS = {   # config text -> words the one refusal line must hold
+    '/**:\n  ros__parameters:\n    site:\n      latitude_deg: north\n': ['planner', 'site.latitude_deg', "'north'"],
+    '/**:\n  ros__parameters:\n    site:\n      latitude_deg: 95.0\n': ['site.latitude_deg', '95.0', '[-90.0, 90.0]'],
+    '/**:\n  ros__parameters:\n    site:\n      latitude_deg: .nan\n': ['site.latitude_deg', 'not a finite'],
+    'planner:\n  ros__parameters:\n    horizon: abc\n': ['horizon', "'abc'"],
+    'planner:\n  ros__parameters:\n    horizon: -5.0\n': ['horizon', '-5.0'],
+    'planner:\n  ros__parameters:\n    horizonn: 60.0\n': ['horizonn', 'did you mean horizon'],
+    'planer:\n  ros__parameters:\n    horizon: 60.0\n': ['planer', 'applies to no node', 'did you mean planner'],
+    'planner:\n  ros__parameters:\n    collector:\n      n_per_side: 12.5\n': ['collector.n_per_side', '12.5'],
+    'safety:\n  ros__parameters:\n    publish_rate: 5\n': ['safety', 'publish_rate', 'write 5.0'],
+    'safety:\n  ros__parameters:\n    temperature:\n      limit: hot\n': ['temperature.limit', "'hot'"],
+    'irradiance:\n  ros__parameters:\n    luminous_efficacy: 1000.0\n': ['luminous_efficacy', '[50.0, 250.0]'],
+    'mirrors_driver:\n  ros__parameters:\n    lower_limit: 1.6\n': ['mirrors_driver', 'lower_limit'],
+    'recorder:\n  ros__parameters:\n    compression: gzip\n': ['recorder', 'compression', 'zstd'],
+    'web:\n  ros__parameters:\n    port: 99999\n': ['web', 'port'],
+    'planner:\n  ros__parameters: [1, 2]\n': ['ros__parameters must be a mapping'],
+    'planner: 3\n': ['no ros__parameters'],
+    '[1, 2]\n': ['mapping of node names'],
+    'a: [\n': ['invalid YAML', 'line'],
+}
+
+
+@pytest.mark.parametrize('shipped', sorted(p.name for p in nodeset.config_dir().glob('*.yaml')
+                                           if p.name != nodeset.NODESET_FILE))
+def test_shipped_site_configs_pass_the_nodes_tables(shipped):
+    ns = nodeset.load()
+    assert nodeset.check_config(ns, nodeset.read_params(nodeset.config_dir() / shipped)) == []
+
+
+@pytest.mark.parametrize('text', list(BAD_CONFIGS), ids=range(len(BAD_CONFIGS)))
+def test_bad_site_configs_are_refused_naming_the_key(text, tmp_path):
+    path = tmp_path / 'site.yaml'
+    path.write_text(text)
+    ns = nodeset.load()
+    try:
+        problems = nodeset.check_config(ns, nodeset.read_params(path), where=str(path))
+    except nodeset.NodeSetError as exc:
+        problems = [str(exc)]
+    assert problems, text
+    joined = '\n'.join(problems)
+    for word in BAD_CONFIGS[text]:
+        assert word in joined, (word, joined)
+
+
+@pytest.mark.parametrize('cmd', [['up'], ['sim', '--no-report'], ['doctor']])
+def test_up_sim_doctor_refuse_a_bad_config_and_start_nothing(cmd, tmp_path, ros_env):
+    path = tmp_path / 'site.yaml'
+    path.write_text('planner:\n  ros__parameters:\n    horizonn: 60.0\n    horizon: -5.0\n')
+    args = [str(ROOT / 'sslfr'), *cmd, '--config', str(path)] + (['--out', str(tmp_path / 'o')] if 'sim' in cmd else [])
+    out = subprocess.run(args, env=ros_env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert 'horizonn' in out.stderr and 'did you mean horizon' in out.stderr and 'horizon: -5.0' in out.stderr
+    assert 'Traceback' not in out.stderr
+    assert not any(line.startswith('started ') for line in out.stderr.splitlines()), out.stderr
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.one_of(st.binary(max_size=300), st.text(max_size=300).map(str.encode),
+                      st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=8),
+                                   lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=8), c, max_size=3),
+                                   max_leaves=12).map(lambda v: yaml.safe_dump(v).encode())))
+def test_config_loader_never_raises_anything_but_a_refusal(data, tmp_path):
+    path = tmp_path / 'random.yaml'
+    path.write_bytes(data)
+    ns = nodeset.load()
+    try:
+        nodeset.check_config(ns, nodeset.read_params(path))
+    except nodeset.NodeSetError:
+        pass

@@ -20,9 +20,32 @@ EXECUTABLES: dict[str, dict[str, str]] = {
 }
 
 
+def check_site_config(config: str | None, nodeset_path: str | None = None) -> int:
+    """``sslfr doctor --config FILE``: the site config checked against the node set's
+    parameter tables (what `sslfr up`, `sslfr sim` and the launch file refuse); exit 0
+    when valid, 2 with every problem listed otherwise."""
+    from . import nodeset
+    try:
+        ns = nodeset.load(nodeset_path)
+        path = nodeset.resolve_config(config, default=ns.config)
+        problems = nodeset.check_config(ns, nodeset.read_params(path), where=str(path))
+    except nodeset.NodeSetError as exc:
+        print(f'sslfr doctor: {exc}', file=sys.stderr)
+        return 2
+    for line in problems:
+        print(line, file=sys.stderr)
+    print(f'config        {path}: ' + ('ok' if not problems else f'{len(problems)} problem(s), see above'))
+    return 0 if not problems else 2
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog='sslfr doctor', description=__doc__)
-    parser.parse_args(argv)
+    parser.add_argument('--config', default=None,
+                        help='also check this site config (path or name in sslfr_bringup/config) '
+                             'against the parameter tables of the nodes')
+    args = parser.parse_args(argv)
+    if args.config is not None:
+        return check_site_config(args.config)
     ok = True
     print(f'python        {sys.version.split()[0]} ({sys.executable})')
     print(f'ROS underlay  {os.environ.get("SSLFR_ROS_SOURCE", "?")} (ROS_DISTRO={os.environ.get("ROS_DISTRO", "?")})')

@@ -57,6 +57,7 @@ class NodeSpec:
     board: str | None = None
     parameters: Mapping[str, Any] = field(default_factory=dict)
     remaps: Mapping[str, str] = field(default_factory=dict)
+    params: str | None = None      # 'module:attribute' of its parameter table (see node_table)
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,9 @@ class NodeSet:
     stable_after: float = 60.0
     stop_timeout: float = 5.0
     sim: Mapping[str, Any] = field(default_factory=dict)
+    #: the whole description's nodes when this is a selection (``only``/``without``):
+    #: a site config is judged against all of them, not the selection
+    all_nodes: tuple[NodeSpec, ...] = ()
     path: Path | None = None
 
     def node(self, name: str) -> NodeSpec:
@@ -101,11 +105,13 @@ class NodeSet:
         keep = set(names)
         for name in keep:
             self.node(name)
-        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name in keep)})
+        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name in keep),
+                          'all_nodes': self.all_nodes or self.nodes})
 
     def without(self, names: Iterable[str]) -> 'NodeSet':
         drop = set(names)
-        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name not in drop)})
+        return NodeSet(**{**self.__dict__, 'nodes': tuple(n for n in self.nodes if n.name not in drop),
+                          'all_nodes': self.all_nodes or self.nodes})
 
 
 # ---------------------------------------------------------------------------------
@@ -187,7 +193,8 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
         nodes.append(NodeSpec(name=name, package=str(n['package']), executable=str(n['executable']),
                               lifecycle=bool(n.get('lifecycle', False)),
                               critical=bool(n.get('critical', False)), start=start, stop=stop,
-                              board=board, parameters=params, remaps=remaps))
+                              board=board, parameters=params, remaps=remaps,
+                              params=str(n['params']) if n.get('params') else None))
     if not nodes:
         raise NodeSetError('node set: no nodes')
     d = data.get('defaults') or {}
@@ -218,18 +225,26 @@ def load(path: str | os.PathLike | None = None) -> NodeSet:
 
 
 def read_params(path: str | os.PathLike) -> dict:
-    """Read a ROS params file; raise :class:`NodeSetError` with the reason if invalid."""
+    """Read a ROS params file; raise :class:`NodeSetError` with the reason if it is not
+    one (not UTF-8 text, not YAML, not a mapping of sections with ``ros__parameters``
+    mappings): the line names the file and, where there is one, the YAML line."""
+    from sslfr_planner.cli_input import CliError, read_text_file
     try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
-    except OSError as exc:
-        raise NodeSetError(f'cannot read config {path}: {exc}') from exc
+        text = read_text_file(path, 'config')
+    except CliError as exc:
+        raise NodeSetError(str(exc)) from None
+    try:
+        data = yaml.safe_load(text) or {}
     except yaml.YAMLError as exc:
-        raise NodeSetError(f'{path}: invalid YAML: {exc}') from exc
+        mark = getattr(exc, 'problem_mark', None)
+        raise NodeSetError(f'{path}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
     if not isinstance(data, dict):
         raise NodeSetError(f'{path}: a params file is a mapping of node names')
     for key, section in data.items():
         if not isinstance(section, dict) or 'ros__parameters' not in section:
             raise NodeSetError(f'{path}: section {key!r} has no ros__parameters')
+        if not isinstance(section['ros__parameters'], dict):
+            raise NodeSetError(f'{path}: section {key!r}: ros__parameters must be a mapping of parameters')
     return data
 
 
@@ -280,6 +295,75 @@ def for_namespace(params: Mapping[str, Any], namespace: str) -> dict:
     return out
 
 
+#: Parameters every ROS 2 node has (rcl/rclpy): never refused in a site config.
+ROS_PARAMETERS = ('use_sim_time', 'start_type_description_service')
+ROS_PARAMETER_PREFIXES = ('qos_overrides.',)
+
+
+def node_table(node: NodeSpec):
+    """The node's parameter table (:class:`sslfr_common.params.ParamTable`), the one its
+    node declares: ``params: module:attribute`` in the node set, the attribute a table or
+    a function of the node's role parameters (e.g. the axis). None when not given."""
+    if not node.params:
+        return None
+    import importlib
+    from sslfr_common.params import ParamTable
+    module, _, attr = node.params.partition(':')
+    try:
+        obj = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise NodeSetError(f'node {node.name}: params {node.params!r}: {exc}') from exc
+    return obj if isinstance(obj, ParamTable) else obj(**node.parameters)
+
+
+def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None = None,
+                 where: str = 'config') -> list[str]:
+    """Every problem of a site config for the node set, checked with the parameter
+    tables the nodes declare (one source), before anything starts: sections that apply
+    to no node (a misspelt node name), keys no node it applies to declares (a misspelt
+    key, with the closest names), values of the wrong YAML type or out of range, and
+    the nodes' own cross-checks on what they would receive. Each line names the file,
+    the section or node, the key, its value and what is allowed."""
+    import difflib
+    nsp = ns.namespace if namespace is None else namespace
+    doc = for_namespace(params, nsp)
+    nodes = ns.all_nodes or ns.nodes
+    fqn = {n.name: fully_qualified_name(n, nsp) for n in nodes}
+    tables = {n.name: node_table(n) for n in nodes}
+    errors: list[str] = []
+    for key, section in doc.items():
+        matched = [n for n in nodes if section_matches(str(key), fqn[n.name])]
+        if not matched:
+            close = difflib.get_close_matches(str(key).strip('/'), [n.name for n in nodes], n=2)
+            hint = f' (did you mean {" or ".join(close)}?)' if close else ''
+            errors.append(f'{where}: section {key!r} applies to no node of the node set{hint}; '
+                          f'nodes: {", ".join(n.name for n in nodes)}')
+            continue
+        known = [tables[n.name] for n in matched]
+        if any(t is None for t in known):
+            continue                  # a node without a table: cannot judge its keys
+        for name in _flatten(section.get('ros__parameters') or {}):
+            if name in ROS_PARAMETERS or name.startswith(ROS_PARAMETER_PREFIXES) or any(name in t for t in known):
+                continue
+            names = sorted({k for t in known for k in t.names})
+            close = difflib.get_close_matches(name, names, n=2)
+            hint = f' (did you mean {" or ".join(close)}?)' if close else ''
+            errors.append(f'{where}: section {key!r}: {name}: not a parameter of '
+                          f'{" / ".join(n.name for n in matched)}{hint}')
+    seen = set()
+    for n in nodes:
+        table = tables[n.name]
+        if table is None:
+            continue
+        values = {k: v for k, v in {**node_params(doc, n.name, nsp), **n.parameters}.items() if k in table}
+        for err in table.check_overrides(values):
+            line = f'{where}: {n.name}: {err}'
+            if err not in seen:
+                errors.append(line)
+                seen.add(err)
+    return errors
+
+
 def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
     out = {}
     for k, v in d.items():
@@ -305,11 +389,17 @@ def format_param(value: Any) -> str:
     return str(value)
 
 
-def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike) -> tuple[Path, dict]:
+def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike,
+                ns: NodeSet | None = None) -> tuple[Path, dict]:
     """The params file to hand the nodes and its parsed content: ``config`` itself
     in the root namespace; under a namespace, a copy moved there
-    (:func:`for_namespace`) written to ``write_dir/site.params.yaml``."""
+    (:func:`for_namespace`) written to ``write_dir/site.params.yaml``. With ``ns`` the
+    config is checked first (:func:`check_config`): NodeSetError listing every problem."""
     params = read_params(config)
+    if ns is not None:
+        problems = check_config(ns, params, namespace, where=str(config))
+        if problems:
+            raise NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
     if not namespace.strip('/'):
         return Path(config), params
     params = for_namespace(params, namespace)
@@ -401,7 +491,7 @@ def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | N
     nsp = ns.namespace if namespace is None else namespace
     if nsp.strip('/') and write_dir is None:
         raise NodeSetError('launch_entries: a namespace needs write_dir for the moved site config')
-    config, params = site_config(config, nsp, write_dir or '.')
+    config, params = site_config(config, nsp, write_dir or '.', ns)
     out = []
     for node in ns.start_order():
         overrides = node_overrides(ns, node, params, use_sim_time=use_sim_time, namespace=nsp)

@@ -251,6 +251,9 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
         params = nodeset_mod.read_params(config)
+        problems = nodeset_mod.check_config(ns, params, where=str(config))
+        if problems:
+            raise nodeset_mod.NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
         simcfg = ns.sim
         date = args.date or str(simcfg.get('date', '2026-06-21'))
         start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))

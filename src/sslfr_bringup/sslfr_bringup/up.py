@@ -44,7 +44,7 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     namespace = ns.namespace if namespace is None else namespace
-    config, params = nodeset_mod.site_config(config, namespace, run_dir)
+    config, params = nodeset_mod.site_config(config, namespace, run_dir, ns)
     programs, missing = [], []
     for node in ns.start_order():
         exe = finder(node.package, node.executable)

@@ -83,7 +83,7 @@ def cross_check(p: dict) -> list[str]:
     max_speed."""
     axis = p['axis']
     if not p['lower_limit'] < p['upper_limit']:
-        return [f"soft limits need lower < upper, got {p['lower_limit']!r}..{p['upper_limit']!r}"]
+        return [f"soft limits need lower_limit < upper_limit, got {p['lower_limit']!r}..{p['upper_limit']!r} rad"]
     mech = JOINT_RANGE[axis]
     errors = []
     if p['lower_limit'] < mech[0] - 1e-9 or p['upper_limit'] > mech[1] + 1e-9:
