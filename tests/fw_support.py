@@ -17,6 +17,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'sslfr_driv
 from drivers_testutil import RawHost, wait_for  # noqa: E402,F401
 
 
+#: the installation key of the firmware tests (fresh for every run: nothing depends on a
+#: key file in $HOME); the harnesses start with it in EEPROM (a provisioned board)
+KEY = os.urandom(16)
+
+
+def provisioned(record, key: bytes | None = KEY, boot_count: int | None = None) -> bytes:
+    """The EEPROM image of a board configured with ``record`` and provisioned with ``key``."""
+    from sslfr_drivers.firmware import eeprom_image
+    return eeprom_image(record, key, boot_count)
+
+
+def fw_host(path: str, key: bytes | None = KEY) -> RawHost:
+    """A byte-level host with the tests' key that opens a session before its first request
+    (what the board sent before, its BOOT, stays readable)."""
+    return RawHost(path, key=key, auto_session=True, flush=False)
+
+
 def require(*parts: str) -> None:
     """Build ``parts`` ('firmware', 'sim', 'host'); skip / fail (CI) when impossible."""
     from sslfr_drivers import firmware as fw

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from fw_support import RawHost, require
+from fw_support import RawHost, fw_host, provisioned, require  # noqa: F401
 
 from sslfr_drivers.link import messages as m
 
@@ -104,15 +104,15 @@ def test_python_simulator_answers_like_the_firmware(tmp_path):
     from sslfr_drivers.sim.runner import SimThread
 
     rec = config_record('axis', {'axis': 'mirrors'}, 1)
-    with Harness('axis', eeprom=rec.eeprom_image(), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:
-        host = RawHost(h.path).heartbeat()
+    with Harness('axis', eeprom=provisioned(rec), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:
+        host = fw_host(h.path).heartbeat()
         try:
             fw = session(host)
         finally:
             host.close()
     sim = AxisSim(AxisConfig.for_axis('mirrors', has_sensor=False, initial_angle=math.pi / 2), board_id=1)
     with SimThread.plain(sim) as thread:
-        host = RawHost(thread.path).heartbeat()
+        host = fw_host(thread.path).heartbeat()
         try:
             py = session(host)
         finally:

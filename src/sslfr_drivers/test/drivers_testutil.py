@@ -30,9 +30,13 @@ class RawHost:
         The board's pty.
     key : bytes or None
         The key the host uses (None: the null key of unprovisioned boards).
+    auto_session : bool
+        Open a session (:meth:`hello`) before the first request sent without one.
+    flush : bool
+        Discard what the board sent before the port was opened (False: keep its BOOT).
     """
 
-    def __init__(self, path: str, key: bytes | None = None):
+    def __init__(self, path: str, key: bytes | None = None, auto_session: bool = False, flush: bool = True):
         import os
         import termios
         import threading
@@ -41,7 +45,7 @@ class RawHost:
         from sslfr_drivers.link.protocol import Framer, SequenceCounter, SequenceTracker
         self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         tty.setraw(self.fd)
-        termios.tcflush(self.fd, termios.TCIOFLUSH)
+        termios.tcflush(self.fd, termios.TCIOFLUSH if flush else termios.TCOFLUSH)
         self.key = key if key is not None else NULL_KEY
         self.null = Session(self.key)
         self.session = None
@@ -53,6 +57,7 @@ class RawHost:
         self.received = []           # verified frames
         self.unverified = 0
         self.boot_count = None
+        self.auto_session = auto_session
         self._lock = threading.Lock()
 
     # ---------------------------------------------------------------- sending
@@ -88,6 +93,11 @@ class RawHost:
         given: in that one; none yet: the null session), sequence number ``seq``
         (default: the next one), ``tag`` replacing the computed tag (a forgery),
         ``version`` 1 for an untagged version-1 frame. Returns the sequence number."""
+        from sslfr_drivers.link import messages as m
+        if self.auto_session and self.session is None and session is None and mtype is None \
+                and not isinstance(msg, (m.Hello, m.Provision)):
+            if self.hello() is None:
+                raise AssertionError('the board does not answer HELLO')
         with self._lock:
             data, seq = self.frame(msg, seq, version, payload, mtype, session, tag)
             self.send_raw(data)
@@ -142,6 +152,8 @@ class RawHost:
             return True
         if self.null.verify(BOARD_TO_HOST, f.seq, f):
             self.received.append(f)
+            if f.type == 0x84 and self.auto_session:    # BOOT: the board lost the session
+                self.session = None
             return True
         self.unverified += 1
         return False

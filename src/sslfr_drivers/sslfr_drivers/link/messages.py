@@ -8,7 +8,7 @@ fields are little-endian.
 Type code ranges (documented in docs/protocol.md; never reuse a code):
 
 =============  ==============================================================
-0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET, GET_CONFIG, SET_CONFIG, HELLO)
+0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET, GET_CONFIG, SET_CONFIG, HELLO, PROVISION)
 0x10 - 0x3F    axis-board requests (MOVE_TO, STOP, HOME, SET_ZERO)
 0x40 - 0x5F    RESERVED for sensor-board requests (sensor_messages module)
 0x60 - 0x7F    reserved (future)
@@ -65,6 +65,7 @@ class ErrorCode(IntEnum):
     AUTH = 10             # the frame's tag does not verify (forged, other key, old session)
     REPLAY = 11           # authenticated but stale in the session (a replayed or late frame)
     NO_SESSION = 12       # the board has no session (it rebooted): send HELLO
+    LOCKED = 13           # PROVISION outside the provisioning window (only after an external reset)
 
 
 class LimitBits(IntFlag):
@@ -354,6 +355,20 @@ class Hello(Message):
     FORMAT: ClassVar[str] = '8s'
     RESPONSE: ClassVar[bool] = True
     nonce: bytes = bytes(8)
+
+
+@register
+@dataclass(frozen=True)
+class Provision(Message):
+    """Set the board's installation key (docs/deploy.md "Board keys"): tagged under the
+    null key in the null session, accepted only during the provisioning window that an
+    external reset opens (the USB adapter's DTR: never from the radio; else NACK
+    LOCKED); answered ACK in the null session of the new key."""
+
+    TYPE: ClassVar[int] = 0x08
+    FORMAT: ClassVar[str] = '16s'
+    RESPONSE: ClassVar[bool] = True
+    key: bytes = bytes(16)
 
 
 # ------------------------------------------------------------------ axis requests

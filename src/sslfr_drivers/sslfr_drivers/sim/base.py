@@ -49,6 +49,8 @@ from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, Payloa
 #: [ms] least time between two refusal NACKs (AUTH, REPLAY, NO_SESSION, VERSION) of
 #: a board: a flood of forged frames is counted, not echoed (firmware: lib/session.c)
 REFUSAL_INTERVAL_MS = 50
+#: [ms] the provisioning window after an external reset (firmware: SESSION_PROVISION_MS)
+PROVISION_WINDOW_MS = 10000
 
 
 class Refuse(Exception):
@@ -107,6 +109,7 @@ class SimBoard:
         self.no_session = 0
         self.version_errors = 0
         self.sessions = 0
+        self.provision_refused = 0
         self._out = bytearray()
         self._ticked = False
         self.now = 0.0
@@ -150,10 +153,18 @@ class SimBoard:
         self._out.clear()
         return out
 
-    def reset(self) -> None:
-        """Reboot: volatile state is lost, BOOT is sent (sequence 0)."""
+    def reset(self, external: bool = False) -> None:
+        """Reboot: volatile state is lost, BOOT is sent (sequence 0). ``external``: a
+        reset through the RESET pin (the USB adapter's DTR, the reset button), which
+        opens the provisioning window for PROVISION_WINDOW_S."""
         self.resets += 1
         self._boot(self.now)
+        if external:
+            self.open_provisioning()
+
+    def open_provisioning(self) -> None:
+        """Open the provisioning window now (firmware: after an external reset)."""
+        self._provision_from = self.now
 
     def provision(self, key: bytes | None, protocol_version: int | None = None) -> None:
         """Give the board ``key`` (None: unprovisioned) and/or another protocol version,
@@ -267,6 +278,7 @@ class SimBoard:
         self._pend: _BoardSession | None = None
         self._session_count = 0
         self._last_refusal_ms: int | None = None
+        self._provision_from: float | None = None
         self.boot_time = now
         self.last_heard: float | None = None
         self.watchdog_tripped = False
@@ -287,6 +299,9 @@ class SimBoard:
             return
         if frame.type == m.Hello.TYPE:
             self._hello(frame)
+            return
+        if frame.type == m.Provision.TYPE:
+            self._provision(frame)
             return
         bs = None
         if self._cur is not None and self._cur.auth.verify(HOST_TO_BOARD, self._cur.rx.expand(frame.seq), frame):
@@ -349,6 +364,28 @@ class SimBoard:
         self._pend = bs
         self._out += bs.reply
         self.frames_out += 1
+
+    def _provision(self, frame: Frame) -> None:
+        """PROVISION (tagged under the null key): the new key, only inside the
+        provisioning window; ACK in the null session of the new key."""
+        if not Session(NULL_KEY).verify(HOST_TO_BOARD, frame.seq, frame):
+            self.auth_failures += 1
+            self._refuse(frame, m.ErrorCode.AUTH, self._cur)
+            return
+        if self._provision_from is None or int(self.now * 1000) - int(self._provision_from * 1000) \
+                >= PROVISION_WINDOW_MS:
+            self.provision_refused += 1
+            self._refuse(frame, m.ErrorCode.LOCKED, None)
+            return
+        try:
+            msg = m.decode(frame)
+        except PayloadError:
+            self._send_in(None, m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD), frame.seq)
+            return
+        self.key = bytes(msg.key)
+        self._null = Session(self.key)
+        self._cur = self._pend = None
+        self._send_in(None, m.Ack(frame.type), frame.seq)
 
     def _answer(self, frame: Frame) -> m.Message | None:
         """The answer to one accepted request (a NACK for a refused one)."""
