@@ -80,15 +80,17 @@ class AxisBoardSession:
         Silence after which the link is declared silent and re-read [s].
     heartbeat : float
         PING when nothing was sent for this long [s] (< the board's 1 s watchdog).
+    key : bytes or None
+        The installation key (link/keys.py); None: unprovisioned boards only.
     """
 
     def __init__(self, port: str, baudrate: int = 115200, request_timeout: float = 0.25,
-                 link_timeout: float = 1.0, heartbeat: float = 0.25):
+                 link_timeout: float = 1.0, heartbeat: float = 0.25, key: bytes | None = None):
         self.port = port
         self.request_timeout = request_timeout
         self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
-                              backoff_min=0.1, backoff_max=2.0)
+                              backoff_min=0.1, backoff_max=2.0, key=key)
         self.board_info = ''
         self.last_status: m.Status | None = None
         self.poll_failures = 0

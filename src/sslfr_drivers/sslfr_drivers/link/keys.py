@@ -20,11 +20,19 @@ import stat
 import tempfile
 from pathlib import Path
 
+from sslfr_common.params import ParamSpec
 from sslfr_drivers.link.auth import NULL_KEY, key_id
 from sslfr_drivers.link.siphash import KEY_SIZE
 
 #: environment variable naming the key file of ``sslfr keys`` / ``sslfr flash``
 KEY_FILE_ENV = 'SSLFR_KEY_FILE'
+
+
+#: the node parameter naming the installation key file (every node with a board link)
+KEY_FILE_PARAM = ParamSpec(
+    'key_file', '', "installation key file of the board links (sslfr keys new; owner-only, mode 0600; "
+    "docs/deploy.md 'Board keys'); '' = no key: only unprovisioned boards answer, nothing is "
+    "authenticated [-]", read_only=True)
 
 
 class KeyFileError(ValueError):
@@ -116,6 +124,13 @@ def load_key(path: str | os.PathLike) -> bytes:
         if fd >= 0:
             os.close(fd)
     return parse_key_file(text, f'key file {path}')
+
+
+def link_key(key_file: str) -> bytes | None:
+    """The key a board link uses, from the ``key_file`` parameter: None for '' (no
+    key: unprovisioned boards only), else :func:`load_key` (KeyFileError: the link must
+    not start)."""
+    return load_key(key_file) if key_file else None
 
 
 def write_key_file(path: str | os.PathLike, key: bytes, force: bool = False) -> Path:
