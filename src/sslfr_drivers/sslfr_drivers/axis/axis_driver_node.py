@@ -255,10 +255,11 @@ class AxisDriver(ManagedNode):
             m.limit_bits, m.fault_bits = int(b.limit_bits) & 0xFF, int(b.fault_bits) & 0xFFFF
         if session is None:
             m.link_state = int(LinkState.LINK_FAULT if self.refused else LinkState.LINK_DOWN)
+            m.board_info = f'refused: {self.last_error}' if self.refused else ''   # e.g. a wrong key
         else:
             m.link_state = int(session.link_state())
             m.frames_lost, m.frames_bad = session.frames_lost() & 0xFFFFFFFF, session.frames_bad() & 0xFFFFFFFF
-            m.board_info = session.board_info
+            m.board_info = session.refusal() or session.board_info
         self.pub_status.publish(m)
 
     def _publish_diagnostics(self) -> None:

@@ -204,6 +204,11 @@ class AxisBoardSession:
             return Link.LINK_CONNECTING
         return Link.LINK_DOWN
 
+    def refusal(self) -> str:
+        """'refused: <why>' while the link refuses the board (another protocol version, a
+        key it does not accept), else ''."""
+        return f'refused: {self.link.last_error}' if self.link.state == LinkState.REFUSED else ''
+
     def frames_lost(self) -> int:
         """Board frames lost so far (sequence-number gaps)."""
         return int(self.link.frames_lost)
