@@ -21,6 +21,9 @@ message or :class:`Refuse`) and optionally :meth:`SimBoard.update` (called from
 * refuses (never executes) an unauthenticated request (NACK AUTH, or NO_SESSION when
   it has no session) and a stale one (NACK REPLAY), counting each; refusals are
   answered at most once per ``REFUSAL_INTERVAL_MS`` (a flood is not echoed);
+* takes a new installation key (PROVISION, tagged under the null key) only in the
+  provisioning window an external reset opens (:meth:`reset` with ``external=True``,
+  :meth:`open_provisioning`), else NACK LOCKED (counted ``provision_refused``);
 * answers every request whose type has ``RESPONSE`` with exactly one frame whose
   ``ref`` is the request's sequence number;
 * answers a *duplicated* request (same sequence number and type as the previous
