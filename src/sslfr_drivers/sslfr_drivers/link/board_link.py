@@ -558,8 +558,10 @@ class BoardLink(Protocol):
     def _adopt(self, session: Session, reply: m.HelloReply, frame: Frame) -> None:
         """Use ``session`` from now on (reader thread). Requests still waiting for an
         answer in the previous session are sent again in the new one (new sequence
-        numbers: the board cannot answer them otherwise), except RESET (never twice);
-        a changed boot count is a board reset."""
+        numbers: the board cannot answer them otherwise), except RESET (never twice) and
+        except after a board reset (a changed boot count: the board lost its position,
+        its owner must re-reference it before moving: they end with NoSession)."""
+        rebooted = self.boot_count is not None and reply.boot_count != self.boot_count
         with self._tx_lock:
             with self._lock:
                 self._session = session
@@ -571,7 +573,7 @@ class BoardLink(Protocol):
                     del self._pending[p.key]
                 moved = []
                 for p in old:
-                    if isinstance(p.msg, m.Reset):
+                    if isinstance(p.msg, m.Reset) or rebooted:
                         continue
                     full = self._seq.next_full()
                     p.key = full & 0xFFFF
@@ -581,21 +583,24 @@ class BoardLink(Protocol):
                     moved.append(p)
             for p in moved:
                 self._write(p.data, p)
+        kept = {id(p) for p in moved}
         for p in old:
-            if isinstance(p.msg, m.Reset) and not p.future.done():
-                p.future.set_exception(NoSession(f'{self.name}: new session with the board'))
+            if id(p) not in kept and not p.future.done():
+                p.future.set_exception(NoSession(f'{self.name}: new session with the board'
+                                                 + (' (it was reset)' if rebooted else '')))
         self.sessions += 1
         self.auth_error = ''
         self.version_error = None
         self._last_rx = self.clock()
-        self._new_boot_count(reply.boot_count)
+        self._new_boot_count(reply.boot_count, in_session=True)
 
-    def _new_boot_count(self, count: int) -> None:
-        """The board's boot count from an authenticated HELLO_REPLY: a change is a reset."""
+    def _new_boot_count(self, count: int, in_session: bool = False) -> None:
+        """The board's boot count from an authenticated HELLO_REPLY: a change is a reset
+        (``in_session``: the reply opened the session now in use, which stays)."""
         old, self.boot_count = self.boot_count, count
         if old is not None and count != old:
             self.last_status = None           # its uptime restarted: not a second reset
-            self._board_reset(f'boot count {old} -> {count}')
+            self._board_reset(f'boot count {old} -> {count}', end_session=not in_session)
 
     def _out_of_session(self, frame: Frame, hello: _Pending | None, now: float) -> None:
         """A frame of the board's own key but of no session (BOOT after a reboot, NACK
@@ -658,9 +663,17 @@ class BoardLink(Protocol):
         if self._state in (BoardLinkState.SILENT, BoardLinkState.CONNECTING) and not self._refreshing:
             self._schedule_refresh()
 
-    def _board_reset(self, why: str) -> None:
+    def _board_reset(self, why: str, end_session: bool = True) -> None:
+        """The board rebooted: its session is gone (``end_session``: nothing more is sent
+        in it, requests waiting in it end with NoSession, never re-sent to a board that
+        lost its position); a new session and the re-read follow."""
         _log.warning('%s: board reset detected (%s): position lost until re-homed',
                      self.name, why)
+        if end_session:
+            with self._tx_lock:
+                with self._lock:
+                    self._session = None
+            self._fail_all(NoSession(f'{self.name}: the board was reset ({why})'), session_only=True)
         if self._state == BoardLinkState.UP:
             self._set_state(BoardLinkState.CONNECTING, f'board reset ({why})')
         self.resets += 1    # counted once the link no longer shows UP
