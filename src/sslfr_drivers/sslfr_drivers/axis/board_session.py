@@ -214,9 +214,10 @@ class AxisBoardSession:
         return int(self.link.frames_lost)
 
     def frames_bad(self) -> int:
-        """Frames dropped as corrupt: CRC, length and decode errors."""
+        """Frames dropped as corrupt or not authentic: CRC, length and decode errors and
+        frames whose tag does not verify (forged, damaged, another key or session)."""
         fr = self.link.framer
-        return int(fr.crc_errors + fr.length_errors + self.link.decode_errors)
+        return int(fr.crc_errors + fr.length_errors + self.link.decode_errors + self.link.auth_failures)
 
     def counters(self) -> dict[str, int]:
         """Link counters plus STATUS poll failures and reuses, for diagnostics."""
