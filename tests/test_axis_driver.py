@@ -473,7 +473,7 @@ def test_lifecycle_transitions_stall_fault_and_old_protocol(rig, ros):
     assert ros.spin_until(lambda: r.status[-1].state == 'unconfigured' and r.status[-1].link_state == 0, 3)
 
     out = old.driver.output()
-    assert 'configure refused: board speaks protocol version 0, this host speaks version 1' in out, out
+    assert 'configure refused: board speaks protocol version 0, this host speaks version 2' in out, out
     assert out.count('configure refused') == 1          # autostart keeps retrying, logs once
     assert old.driver.running() and old.status
     assert old.status[-1].state == 'unconfigured' and old.status[-1].link_state == 3   # LINK_FAULT

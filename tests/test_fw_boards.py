@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from fw_support import RawHost, require
+from fw_support import KEY, RawHost, fw_host, provisioned, require  # noqa: F401
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link import sensor_messages as ms
@@ -40,13 +40,13 @@ def _harness(board, tmp, record=None, **kw):
     if board == 'axis':
         kw.setdefault('mech', axis_mech('mirrors'))
     rec = record or config_record(board, {'axis': 'mirrors'}, 7)
-    return Harness(board, eeprom=rec.eeprom_image(), link=str(tmp / board), **kw).start()
+    return Harness(board, eeprom=provisioned(rec), link=str(tmp / board), **kw).start()
 
 
 @pytest.fixture
 def axis(tmp_path):
     h = _harness('axis', tmp_path)
-    host = RawHost(h.path).heartbeat()
+    host = fw_host(h.path).heartbeat()
     yield h, host
     host.close()
     h.stop()
@@ -73,10 +73,10 @@ def test_boot_info_and_not_homed(axis):
         boot += [f for f in host.poll(0.1) if f.type == m.Boot.TYPE]
         if boot:
             break
-    assert boot and boot[0].seq == 0 and m.decode(boot[0]) == m.Boot(m.BoardKind.AXIS_STEPPER, 1)
+    assert boot and boot[0].seq == 0 and m.decode(boot[0]) == m.Boot(m.BoardKind.AXIS_STEPPER, 2)
     info = host.request(m.GetInfo())
     assert (info.board_kind, info.firmware, info.protocol, info.board_id, info.name_str) == \
-        (1, '1.0.0', 1, 7, 'sslfr-axis')
+        (1, '1.0.0', 2, 7, 'sslfr-axis')
     st = host.request(m.GetStatus())
     assert not st.homed and st.fault_bits & m.FaultBits.RESET and math.isnan(st.sensor_angle)
     assert st.limit_bits == m.LimitBits.HIGH | m.LimitBits.SLEEP      # the mirrors rest at +90 deg
@@ -92,7 +92,7 @@ def test_every_nack_code(axis):
     import struct
     nan = struct.pack('<if', 5, math.nan)
     assert host.request(None, mtype=m.MoveTo.TYPE, payload=nan) == m.Nack(m.MoveTo.TYPE, E.BAD_PAYLOAD)
-    assert host.request(m.Ping(1), version=2) == m.Nack(m.Ping.TYPE, E.VERSION)
+    assert host.request(m.Ping(1), version=1) == m.Nack(m.Ping.TYPE, E.VERSION)
     assert host.request(m.SetZero(15000)) == m.Ack(m.SetZero.TYPE)
     assert host.request(m.MoveTo(100, 0.0)) == m.Nack(m.MoveTo.TYPE, E.OUT_OF_RANGE)
     assert host.request(m.MoveTo(2**30 + 1, 10.0)) == m.Nack(m.MoveTo.TYPE, E.OUT_OF_RANGE)
@@ -127,9 +127,9 @@ def test_duplicate_answered_from_cache_and_stale_ignored(axis):
     assert first == again == m.Ack(m.MoveTo.TYPE)
     assert h.status()['requests_duplicate'] == 1
     stale = host.send(m.Stop(), seq=seq - 5)
-    assert host.answer(stale, timeout=0.5) is None     # ignored: still moving
+    # refused REPLAY, not executed: still moving (a restarted host opens a new session)
+    assert host.answer(stale, timeout=0.5) == m.Nack(m.Stop.TYPE, m.ErrorCode.REPLAY)
     assert h.status()['counter'] < pos1 and h.status()['requests_stale'] == 1
-    assert host.request(m.Ping(2), seq=seq - 4) == m.Ack(m.Ping.TYPE)   # PING resynchronises
 
 
 def _profile(h, seconds, period=0.02):
@@ -148,7 +148,7 @@ def test_trapezoidal_profile_at_20000_steps_per_s(tmp_path):
     from sslfr_drivers.sim.fw_board import config_record
     rec = config_record('axis', {'axis': 'mirrors', 'max_speed': 20000, 'accel': 40000}, 1)
     h = _harness('axis', tmp_path, rec)
-    host = RawHost(h.path).heartbeat()
+    host = fw_host(h.path).heartbeat()
     try:
         host.request(m.SetZero(0))
         assert host.request(m.MoveTo(-16000, 30000.0)) == m.Ack(m.MoveTo.TYPE)
@@ -205,7 +205,7 @@ import sys, time
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.board_link import BoardLink
 from sslfr_drivers.link.transport import SerialTransport
-link = BoardLink(SerialTransport(sys.argv[1]), heartbeat=0.25).start()
+link = BoardLink(SerialTransport(sys.argv[1]), heartbeat=0.25, key=bytes.fromhex(sys.argv[2])).start()
 assert link.wait_up(5)
 link.request(m.SetZero(0))
 link.request(m.MoveTo(-1000000, 3000.0))
@@ -224,7 +224,7 @@ def test_host_killed_motor_stopped_within_1_2_s(tmp_path):
     from sslfr_drivers.sim.fw_harness import axis_mech
     rec = config_record('axis', {'axis': 'mobile_structure'}, 1)
     h = _harness('axis', tmp_path, rec, mech=axis_mech('mobile_structure', 0.0), pace=1.0)
-    proc = subprocess.Popen([sys.executable, '-c', HOST_SCRIPT, h.path], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, '-c', HOST_SCRIPT, h.path, KEY.hex()], stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == 'moving'
         time.sleep(1.0)
@@ -306,7 +306,7 @@ def test_position_sensor_as5048a(tmp_path):
     from sslfr_drivers.sim.fw_board import config_record
     rec = config_record('axis', {'axis': 'mirrors', 'sensor': 1}, 1)
     h = _harness('axis', tmp_path, rec, sensor_zero=rec.sensor_zero)
-    host = RawHost(h.path)
+    host = fw_host(h.path)
     try:
         for deg in (90.0, 12.345, -30.0):
             h.cmd(f'set_angle {math.radians(deg)}')
@@ -320,14 +320,24 @@ def test_position_sensor_as5048a(tmp_path):
 
 
 # ------------------------------------------------------------------ sensor boards
+def _in_session(path):
+    """A host whose session is current (a board sends samples only in a session)."""
+    host = fw_host(path)
+    assert host.request(m.Ping(0)) == m.Ack(m.Ping.TYPE)
+    return host
+
+
 def _samples(host, cls, seconds):
+    """Samples of ``cls`` for ``seconds`` (a board sends samples only in a session)."""
+    if host.session is None:
+        assert host.request(m.Ping(0)) == m.Ack(m.Ping.TYPE)   # opens it (HELLO) and makes it current
     return [m.decode(f) for f in host.poll(seconds) if f.type == cls.TYPE]
 
 
 def test_absorber_thermocouples_and_switches(tmp_path):
     from sslfr_drivers.sensors import max6675
     h = _harness('absorber', tmp_path)
-    host = RawHost(h.path)
+    host = _in_session(h.path)
     try:
         h.cmd(f'temps {max6675.encode(31.5, False)} {max6675.encode(148.25, False)}')
         h.cmd('switches 5')
@@ -357,7 +367,7 @@ def test_absorber_thermocouples_and_switches(tmp_path):
 def test_irradiance_auto_range_covers_0_to_120_klx(tmp_path):
     from sslfr_drivers.sensors import veml7700
     h = _harness('irradiance', tmp_path)
-    host = RawHost(h.path)
+    host = _in_session(h.path)
     try:
         for lux in (2.0, 800.0, 30000.0, 118000.0):
             h.cmd(f'lux {lux}')
@@ -385,7 +395,7 @@ def test_irradiance_auto_range_covers_0_to_120_klx(tmp_path):
 def test_gps_nmea_forwarded_byte_exact(tmp_path):
     from sslfr_drivers.sim.world import GpsReceiver
     h = _harness('gps', tmp_path)
-    host = RawHost(h.path)
+    host = _in_session(h.path)
     try:
         rx = GpsReceiver(36.8, -2.4, altitude=10.0, geoid_separation=50.0, noise=2.0, satellites=8,
                          hdop=1.1, ttff=0.0, seed=1)
@@ -409,7 +419,7 @@ def test_uart_bridge_loses_no_byte_when_the_host_stalls(tmp_path):
     everything: every frame arrives (no sequence gap)."""
     from sslfr_drivers.link.protocol import SequenceTracker
     h = _harness('absorber', tmp_path)
-    host = RawHost(h.path)
+    host = _in_session(h.path)
     try:
         host.poll(0.3)
         time.sleep(3.0)

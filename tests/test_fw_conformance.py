@@ -12,9 +12,10 @@ import time
 
 import pytest
 
-from fw_support import RawHost, require
+from fw_support import KEY, RawHost, fw_host, provisioned, require  # noqa: F401
 
 from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.auth import NULL_KEY, Session
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -50,7 +51,12 @@ def session(host) -> list[tuple[str, object]]:
     step('unknown type', None, mtype=0x42, payload=b'\x01')
     step('bad payload', None, mtype=m.MoveTo.TYPE, payload=b'\x01\x02\x03')
     step('nan speed', None, mtype=m.MoveTo.TYPE, payload=struct.pack('<if', 10, math.nan))
-    step('foreign version', m.Ping(1), version=2)
+    step('foreign version', m.Ping(1), version=1)
+    time.sleep(0.06)                       # refusals are answered at most once per 50 ms
+    step('forged tag', m.Ping(2), tag=bytes(8))
+    time.sleep(0.06)
+    step('provisioning without the window', m.Provision(bytes(range(16))), session=Session(NULL_KEY))
+    time.sleep(0.06)
     step('status request with payload', None, mtype=m.GetStatus.TYPE, payload=b'\x00')
     step('home on the closed sleep switch', m.Home(m.Switch.SLEEP, 2000.0, 15000))
     out.append(('homed', _settle(host)))
@@ -63,7 +69,7 @@ def session(host) -> list[tuple[str, object]]:
     host.send(m.MoveTo(12000, 3000.0), seq=seq)
     out.append(('retry of the move (duplicate)', host.answer(seq)))
     stale = host.send(m.Stop(), seq=seq - 3)
-    out.append(('stale stop (ignored)', host.answer(stale, timeout=0.4)))
+    out.append(('stale stop (refused)', host.answer(stale, timeout=0.4)))
     host.beat_paused.clear()
     out.append(('arrived', _settle(host)))
     step('past the low switch', m.MoveTo(-9000, 3000.0))
@@ -104,15 +110,16 @@ def test_python_simulator_answers_like_the_firmware(tmp_path):
     from sslfr_drivers.sim.runner import SimThread
 
     rec = config_record('axis', {'axis': 'mirrors'}, 1)
-    with Harness('axis', eeprom=rec.eeprom_image(), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:
-        host = RawHost(h.path).heartbeat()
+    with Harness('axis', eeprom=provisioned(rec), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:
+        host = fw_host(h.path).heartbeat()
         try:
             fw = session(host)
         finally:
             host.close()
-    sim = AxisSim(AxisConfig.for_axis('mirrors', has_sensor=False, initial_angle=math.pi / 2), board_id=1)
+    sim = AxisSim(AxisConfig.for_axis('mirrors', has_sensor=False, initial_angle=math.pi / 2), board_id=1,
+                  key=KEY)
     with SimThread.plain(sim) as thread:
-        host = RawHost(thread.path).heartbeat()
+        host = fw_host(thread.path).heartbeat()
         try:
             py = session(host)
         finally:

@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from conftest import ROOT
-from fw_support import RawHost, require
+from fw_support import RawHost, fw_host, provisioned, require  # noqa: F401
 
 from sslfr_drivers.link import messages as m
 
@@ -43,10 +43,10 @@ def test_sslfr_flash_through_the_debian_bootloader(tmp_path):
         print(proc.stdout, proc.stderr[-2000:])
         assert proc.returncode == 0, proc.stderr
         assert 'bytes of flash verified' in proc.stdout
-        assert 'board: sslfr-axis firmware 1.0.0 protocol 1 id 0' in proc.stdout
+        assert 'board: sslfr-axis firmware 1.0.0 protocol 2 id 0' in proc.stdout
         assert 'config: ConfigRecord(layout=1, kind=1, board_id=42, baud=115200, axis=2, flags=0, ' \
                'max_speed=2500.0' in proc.stdout
-        host = RawHost(h.path)
+        host = fw_host(h.path, key=None)          # freshly flashed: not provisioned
         info = host.request(m.GetInfo())
         assert (info.name_str, info.firmware, info.board_id) == ('sslfr-axis', '1.0.0', 42)
         host.close()
@@ -72,10 +72,12 @@ def test_watchdog_reset_needs_a_watchdog_aware_bootloader(tmp_path, bootloader, 
     from sslfr_drivers.sim.fw_harness import Harness, axis_mech
     h = Harness('axis', bootloader=str(fw.ARDUINO / 'bootloaders' / bootloader), app=True,
                 link=str(tmp_path / 'b'), mech=axis_mech('mirrors')).start()
-    host = RawHost(h.path)
+    host = fw_host(h.path, key=None)              # a blank EEPROM: not provisioned
     try:
         info = None                 # the firmware runs after power-up (after the bootloader's wait)
         for _ in range(10):
+            if host.hello(timeout=0.5) is None:
+                continue
             info = host.answer(host.send(m.GetInfo()), timeout=0.5)
             if info is not None:
                 break

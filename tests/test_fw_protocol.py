@@ -17,8 +17,11 @@ from fw_support import require
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link import sensor_messages as ms
-from sslfr_drivers.link.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, SEQ_MOD, Frame, FrameError, Framer,
-                                    SequenceTracker, crc16, decode_frame, encode_frame)
+from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, board_nonce
+from sslfr_drivers.link.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, PROTOCOL_V1, PROTOCOL_VERSION, SEQ_MOD,
+                                         Frame, FrameError, Framer, SequenceTracker, crc16, decode_frame,
+                                         encode_frame)
+from sslfr_drivers.link.siphash import siphash24_bytes
 
 
 @pytest.fixture(scope='module', autouse=True)
@@ -31,18 +34,26 @@ def native():
     return n
 
 
-frames = st.builds(Frame, type=st.integers(0, 255), seq=st.integers(0, SEQ_MOD - 1),
+def _frame(type, seq, payload, ref, flags, version, tag):
+    return Frame(type, seq, payload, ref, flags, version, tag if version == PROTOCOL_VERSION else b'')
+
+
+frames = st.builds(_frame, type=st.integers(0, 255), seq=st.integers(0, SEQ_MOD - 1),
                    payload=st.binary(max_size=MAX_PAYLOAD), ref=st.integers(0, SEQ_MOD - 1),
-                   flags=st.sampled_from([0, FLAG_RESPONSE]), version=st.sampled_from([1, 1, 1, 2]))
+                   flags=st.sampled_from([0, FLAG_RESPONSE]), version=st.sampled_from([2, 2, 2, 1, 3]),
+                   tag=st.binary(min_size=8, max_size=8))
 
 
 def test_crc16_check_value_and_doc_example():
     n = native()
     assert n.crc16(b'123456789') == 0x29B1 == crc16(b'123456789')
     assert n.crc16(b'') == 0xFFFF
-    raw = n.encode_frame(m.encode(m.Ping(100), 1))
-    assert raw == encode_frame(m.encode(m.Ping(100), 1))
-    assert raw.hex(' ').startswith('a5 5a 01 04 00 01 00 00 00 01 64 00 00 00')
+    key, nh, nb = bytes(range(16)), bytes(range(1, 9)), bytes(range(0x11, 0x19))
+    sealed = Session(key, nh, nb).seal(HOST_TO_BOARD, 1, m.encode(m.Ping(100), 0))
+    raw = n.encode_frame(sealed)
+    assert raw == encode_frame(sealed)
+    assert raw.hex(' ').startswith('a5 5a 02 0c 00 01 00 00 00 01 64 00 00 00 ' + sealed.tag.hex(' '))
+    assert n.auth_tag(key, nh, nb, HOST_TO_BOARD, 1, sealed) == sealed.tag
 
 
 @settings(deadline=None, max_examples=300)
@@ -63,6 +74,7 @@ def test_payload_too_long_refused_by_both():
     with pytest.raises(FrameError):
         native().encode_frame(Frame(1, 0, bytes(MAX_PAYLOAD + 1)))
     assert len(native().encode_frame(Frame(1, 0, bytes(MAX_PAYLOAD)))) == 100
+    assert len(native().encode_frame(Frame(1, 0, bytes(88), version=PROTOCOL_V1))) == 100
 
 
 @settings(deadline=None, max_examples=300)
@@ -144,7 +156,8 @@ def test_one_percent_corrupted_frames():
     wire = bytearray()
     for i in range(10_000):
         raw = bytearray(encode_frame(Frame(rng.choice([0x01, 0x10, 0x83, 0xC1]), i % SEQ_MOD,
-                                           bytes(rng.randrange(256) for _ in range(rng.randrange(0, 40))))))
+                                           bytes(rng.randrange(256) for _ in range(rng.randrange(0, 40))),
+                                           tag=rng.randbytes(8))))
         if rng.random() < 0.01:
             for _ in range(rng.randint(1, 3)):
                 raw[rng.randrange(len(raw))] ^= rng.randrange(1, 256)
@@ -182,7 +195,8 @@ def test_tracker_random(seqs, start):
 # ---------------------------------------------------------------- payload codecs
 REQUESTS = {m.Ping.TYPE: m.Ping, m.GetInfo.TYPE: m.GetInfo, m.GetStatus.TYPE: m.GetStatus,
             m.Reset.TYPE: m.Reset, m.GetConfig.TYPE: m.GetConfig, m.SetConfig.TYPE: m.SetConfig,
-            m.MoveTo.TYPE: m.MoveTo, m.Stop.TYPE: m.Stop, m.Home.TYPE: m.Home, m.SetZero.TYPE: m.SetZero}
+            m.MoveTo.TYPE: m.MoveTo, m.Stop.TYPE: m.Stop, m.Home.TYPE: m.Home, m.SetZero.TYPE: m.SetZero,
+            m.Hello.TYPE: m.Hello, m.Provision.TYPE: m.Provision}
 
 
 def test_request_registry_equal():
@@ -233,7 +247,7 @@ def test_status_payload_equal(status):
 
 
 @settings(deadline=None)
-@given(st.builds(m.Info, u8, u8, u8, u8, st.just(1), u32,
+@given(st.builds(m.Info, u8, u8, u8, u8, st.just(PROTOCOL_VERSION), u32,
                  st.text('abcdefghijklmnopqrstuvwxyz-0123456789', max_size=16).map(
                      lambda t: t.encode().ljust(16, b'\0'))))
 def test_info_payload_equal(info):
@@ -265,57 +279,274 @@ def test_config_record_layout_and_defaults(rec):
     assert n.config_load(b'\xff' * 32, 1) == (False, m.ConfigRecord.defaults(1).pack())
 
 
+# ---------------------------------------------------------------- authentication
+def test_siphash_reference_vectors():
+    """The SipHash paper's vectors (key 00..0f, messages 00, 00 01, ...: the first, the
+    8-byte one and the 15-byte one of its appendix)."""
+    n, key = native(), bytes(range(16))
+    assert n.siphash24(key, b'') == bytes.fromhex('310e0edd47db6f72')
+    assert n.siphash24(key, bytes(range(8))) == bytes.fromhex('6224939a79f5f593')
+    assert n.siphash24(key, bytes(range(15))) == bytes.fromhex('e545be4961ca29a1')
+    for k in range(64):
+        assert n.siphash24(key, bytes(range(k))) == siphash24_bytes(key, bytes(range(k)))
+
+
+@settings(deadline=None, max_examples=300)
+@given(st.binary(min_size=16, max_size=16), st.binary(max_size=255))
+def test_siphash_equal(key, data):
+    assert native().siphash24(key, data) == siphash24_bytes(key, data)
+
+
+nonces = st.binary(min_size=8, max_size=8)
+
+
+@settings(deadline=None, max_examples=300)
+@given(st.binary(min_size=16, max_size=16), nonces, nonces, st.sampled_from([HOST_TO_BOARD, BOARD_TO_HOST]),
+       st.integers(0, 2**32 - 1), frames)
+def test_tags_equal(key, nh, nb, direction, full, frame):
+    """The firmware's tag of any frame, session, direction and frame number (the epoch
+    included) is the Python one; both verify each other's frames."""
+    frame = Frame(frame.type, full & 0xFFFF, frame.payload, frame.ref, frame.flags)
+    sealed = Session(key, nh, nb).seal(direction, full, frame)
+    assert native().auth_tag(key, nh, nb, direction, full, frame) == sealed.tag
+    assert native().encode_frame(sealed) == encode_frame(sealed)
+
+
+@settings(deadline=None)
+@given(st.binary(min_size=16, max_size=16), st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1))
+def test_board_nonce_and_eeprom_images_equal(key, boot, count):
+    from sslfr_drivers.firmware import key_eeprom_image
+    n = native()
+    assert n.board_nonce(key, boot, count) == board_nonce(key, boot, count)
+    assert n.key_image(key) == key_eeprom_image(key)
+    assert n.key_load(key_eeprom_image(key)) == (True, key)
+    assert n.key_load(b'\xff' * 18) == (False, NULL_KEY)
+    assert n.boot_count_next(0xFFFFFFFF) == 1 and n.boot_count_next(boot % 0xFFFFFFFF) == boot % 0xFFFFFFFF + 1
+
+
 # ---------------------------------------------------------------- board sessions
-def _session_frames(draw_ops, rnd):
-    """A scripted host: new requests, retries (same seq), stale seqs, foreign versions,
-    bad payloads, unknown types, garbage; returns wire chunks."""
-    out, seq = [], 0
-    last = None
-    for op in draw_ops:
-        if op == 'retry' and last is not None:
-            out.append(last)
-            continue
-        if op == 'stale':
-            s = (seq - rnd.randint(2, 30)) % SEQ_MOD
-        elif op == 'jump':
-            seq = (seq + rnd.randint(2, 40000)) % SEQ_MOD
-            s = seq
-        else:
-            seq = (seq + 1) % SEQ_MOD
-            s = seq
-        mtype = rnd.choice([0x01, 0x02, 0x04, 0x05, 0x01, 0x03, 0x10, 0x42, 0x80, 0x99, 0x06])
+class _ScriptHost:
+    """A host scripted at random against a board pair: sessions (HELLO, retried HELLO),
+    requests in the session (new, retried, stale), forgeries (random tags, bit flips,
+    frames of an older session, another installation's key, version 1, PROVISION
+    outside its window), garbage. It follows the Python board's answers (HELLO_REPLY)."""
+
+    OPS = ['new'] * 6 + ['retry', 'stale', 'hello', 'hello_retry', 'forged', 'flip', 'old_session',
+                         'other_key', 'version', 'garbage', 'provision', 'time']
+
+    def __init__(self, key, rnd):
+        self.key, self.rnd = key, rnd
+        self.null_seq, self.session, self.tx = 0, None, 0
+        self.last = self.last_hello = self.hello_nonce = None
+        self.recorded = []                    # frames of earlier sessions
+
+    def request_frame(self):
+        rnd = self.rnd
+        mtype = rnd.choice([0x01, 0x02, 0x04, 0x05, 0x01, 0x03, 0x10, 0x42, 0x80, 0x99, 0x06, 0x01, 0x02])
         size = {0x01: 4, 0x06: 30, 0x10: 8}.get(mtype, 0)
         payload = bytes(rnd.randrange(256) for _ in range(size if rnd.random() < 0.85 else rnd.randrange(12)))
         if mtype == 0x06 and rnd.random() < 0.5:
             payload = m.ConfigRecord.defaults(0).pack()
-        version = 2 if op == 'version' else 1
-        raw = encode_frame(Frame(mtype, s, payload, 0, 0, version))
+        return Frame(mtype, 0, payload)
+
+    def chunk(self, op, now_ms):
+        rnd = self.rnd
+        if op == 'retry' and self.last is not None:
+            return self.last
+        if op == 'hello_retry' and self.last_hello is not None:
+            return self.last_hello
+        if op in ('hello', 'hello_retry') or (self.session is None and op in ('new', 'retry', 'stale')):
+            self.null_seq += 1
+            self.hello_nonce = rnd.randbytes(8)
+            raw = encode_frame(Session(self.key).seal(HOST_TO_BOARD, self.null_seq,
+                                                      m.encode(m.Hello(self.hello_nonce), 0)))
+            self.last_hello = raw
+            return raw
+        if op == 'provision':
+            self.null_seq += 1
+            return encode_frame(Session(NULL_KEY).seal(HOST_TO_BOARD, self.null_seq,
+                                                       m.encode(m.Provision(rnd.randbytes(16)), 0)))
+        if op == 'version':
+            return encode_frame(Frame(0x01, rnd.randrange(SEQ_MOD), bytes(4), version=PROTOCOL_V1, tag=b''))
         if op == 'garbage':
-            raw = bytes(rnd.randrange(256) for _ in range(rnd.randrange(20))) + raw
-        last = raw
-        out.append(raw)
-    return out
+            return bytes(rnd.randrange(256) for _ in range(rnd.randrange(1, 20)))
+        if op == 'old_session':
+            return rnd.choice(self.recorded) if self.recorded else b''
+        f = self.request_frame()
+        if op == 'other_key':
+            return encode_frame(Session(rnd.randbytes(16), rnd.randbytes(8), rnd.randbytes(8)).seal(
+                HOST_TO_BOARD, self.tx, f))
+        if self.session is None:
+            return b''
+        if op == 'stale':
+            full = max(0, self.tx - rnd.randint(2, 30))
+        else:
+            full = self.tx
+            self.tx += 1
+        sealed = self.session.seal(HOST_TO_BOARD, full, f)
+        if op == 'forged':
+            sealed = Frame(sealed.type, sealed.seq, sealed.payload, tag=rnd.randbytes(8))
+        raw = bytearray(encode_frame(sealed))
+        if op == 'flip':                      # a bit flipped, the CRC made right again
+            k = rnd.randrange(2, len(raw) - 2)
+            raw[k] ^= 1 << rnd.randrange(8)
+            raw[-2:] = crc16(bytes(raw[2:-2])).to_bytes(2, 'little')
+            if raw[3] != len(raw) - 12:
+                return b''                    # the length byte flipped: not one frame any more
+        raw = bytes(raw)
+        if op == 'new':
+            self.last = raw
+            self.recorded.append(raw)
+        return raw
+
+    def follow(self, out):
+        """Adopt the session of a HELLO_REPLY to our latest HELLO; forget it at BOOT."""
+        for f in Framer().feed(out):
+            if f.type == m.HelloReply.TYPE and self.hello_nonce is not None:
+                cand = Session(self.key, self.hello_nonce, m.decode(f).nonce)
+                if cand.verify(BOARD_TO_HOST, f.seq, f):
+                    self.session, self.tx = cand, 0
+            elif f.type == m.Boot.TYPE:
+                self.session = None
 
 
 @settings(deadline=None, max_examples=150)
-@given(st.lists(st.sampled_from(['new', 'new', 'new', 'retry', 'stale', 'version', 'garbage', 'jump']),
-                min_size=1, max_size=60), st.randoms(use_true_random=False))
+@given(st.lists(st.sampled_from(_ScriptHost.OPS), min_size=1, max_size=60), st.randoms(use_true_random=False))
 def test_board_session_equals_simboard(ops, rnd):
-    """The firmware's session + common requests answer byte for byte like the
-    simulators' SimBoard (the Python model of the board protocol)."""
+    """The firmware's session + common requests answer byte for byte like the simulators'
+    SimBoard (the Python model of the board protocol), counters included, through
+    sessions, retries, replays and forgeries."""
+    from sslfr_drivers.firmware.native import BOARD_COUNTERS
     from sslfr_drivers.sim.base import SimBoard
-    py = SimBoard(board_id=7)
-    fwb = native().Board(kind=0, board_id=7, name='sim-board')
+    key = rnd.randbytes(16)
+    py = SimBoard(board_id=7, key=key)
+    fwb = native().Board(kind=0, board_id=7, key=key)
     assert fwb.boot_bytes == py.take_output()
-    for chunk in _session_frames(ops, rnd):
+    host, now_ms = _ScriptHost(key, rnd), 0
+    names = [k for k in BOARD_COUNTERS if k not in ('watchdog_trips', 'boot_count')]
+    since_boot = dict.fromkeys(names, 0)      # the firmware's counters restart at a reset
+    boot = py._boot
+
+    def rebooted(now):
+        since_boot.update({k: getattr(py, k) for k in names})
+        boot(now)
+    py._boot = rebooted
+    for op in ops:
+        if op == 'time':
+            now_ms += rnd.choice([0, 125, 250, 10_000])
+            py.tick(now_ms / 1000)
+            continue
+        chunk = host.chunk(op, now_ms)
         py.receive(chunk)
-        assert fwb.receive(chunk) == py.take_output(), chunk.hex(' ')
+        out = py.take_output()
+        assert fwb.receive(chunk, now_ms) == out, (op, chunk.hex(' '))
+        host.follow(out)
+    c = fwb.counters()
+    assert {k: c[k] for k in names} == {k: getattr(py, k) - since_boot[k] for k in names}
+    assert c['boot_count'] == py.boot_count
+
+
+def test_forged_frames_never_executed_counters_exact():
+    """On the firmware's session code: 200 requests each with a random tag, 200 with one
+    bit flipped, 50 replays of answered requests, 50 under another key, 20 of an earlier
+    session: none is executed (no ACK, no frames_in), every one counted once; the
+    refusals are rate-limited (at most one per 50 ms)."""
+    rnd = random.Random(19)
+    key = rnd.randbytes(16)
+    b = native().Board(kind=0, board_id=3, key=key)
+    host = _ScriptHost(key, rnd)
+    host.follow(b.receive(host.chunk('hello', 0), 0))
+    old = host.session
+    sent = [host.chunk('new', 0) for _ in range(5)]
+    for raw in sent:
+        b.receive(raw, 0)
+    host.follow(b.receive(host.chunk('hello', 0), 0))
+    assert host.session is not old
+    b.receive(encode_frame(host.session.seal(HOST_TO_BOARD, host.tx, m.encode(m.Ping(1), 0))), 0)
+    host.tx += 1
+    answered = [encode_frame(host.session.seal(HOST_TO_BOARD, host.tx + i, m.encode(m.Ping(i), 0)))
+                for i in range(50)]
+    host.tx += 50
+    for raw in answered:
+        b.receive(raw, 0)
+    before = b.counters()
+    t, nacks = 0, []
+    forged = [host.chunk('forged', 0) for _ in range(200)]
+    flipped = []
+    while len(flipped) < 200:
+        raw = host.chunk('flip', 0)
+        if raw:
+            flipped.append(raw)
+    others = [host.chunk('other_key', 0) for _ in range(50)]
+    for raw in forged + flipped + answered[:49] + others + sent[:5] * 4:
+        t += 10
+        out = b.receive(raw, t)
+        nacks += [m.decode(f) for f in Framer().feed(out)]
+    c = b.counters()
+    assert c['frames_in'] == before['frames_in']           # nothing executed
+    # a flipped bit makes the tag fail (or, in the version byte, a foreign version)
+    assert c['auth_failures'] - before['auth_failures'] + c['version_errors'] - before['version_errors'] \
+        == 200 + 200 + 50 + 20
+    assert c['requests_stale'] - before['requests_stale'] == 49
+    assert c['requests_duplicate'] == before['requests_duplicate']
+    assert all(isinstance(n, m.Nack) and n.code in (m.ErrorCode.AUTH, m.ErrorCode.REPLAY, m.ErrorCode.VERSION)
+               for n in nacks)
+    assert 0 < len(nacks) <= t // 50 + 1
 
 
 def test_board_watchdog_after_one_second_of_silence():
-    b = native().Board()
+    key = bytes(range(16))
+    b = native().Board(key=key)
+    host = _ScriptHost(key, random.Random(1))
+    host.follow(b.receive(host.chunk('hello', 0), 0))
+    forged = host.chunk('forged', 0)
+    ping = [encode_frame(host.session.seal(HOST_TO_BOARD, i, m.encode(m.Ping(1), 0))) for i in range(2)]
     assert not b.watchdog(5000)                       # nothing heard yet: not armed
-    b.receive(encode_frame(m.encode(m.Ping(1), 0)), now_ms=100)
+    b.receive(forged, now_ms=50)                       # a forgery does not arm or feed it
+    assert not b.watchdog(5000)
+    b.receive(ping[0], now_ms=100)
+    b.receive(forged, now_ms=1000)
     assert not b.watchdog(1100) and b.watchdog(1101) and not b.watchdog(5000)
-    b.receive(encode_frame(m.encode(m.Ping(1), 1, None)), now_ms=6000)
+    b.receive(ping[1], now_ms=6000)
     assert b.watchdog(7001) and b.counters()['watchdog_trips'] == 2
+
+
+def test_provisioning_only_in_the_window_after_an_external_reset():
+    """PROVISION is refused LOCKED (counted) without the window and after it closes; in
+    it the board takes the key, answers ACK under the new key and then opens sessions
+    only with it. Python SimBoard and firmware alike."""
+    from sslfr_drivers.sim.base import SimBoard
+    old, new = bytes(range(16)), bytes(range(100, 116))
+    for b in (native().Board(kind=0, key=old), None):
+        py = SimBoard(key=old) if b is None else None
+        py and py.take_output()
+
+        def rx(raw, now_ms, b=b, py=py):
+            if b is not None:
+                return b.receive(raw, now_ms)
+            py.tick(now_ms / 1000)
+            py.receive(raw)
+            return py.take_output()
+
+        def provision(seq, key, now_ms):
+            raw = encode_frame(Session(NULL_KEY).seal(HOST_TO_BOARD, seq, m.encode(m.Provision(key), 0)))
+            return [(f, m.decode(f)) for f in Framer().feed(rx(raw, now_ms))]
+
+        ((f, nack),) = provision(1, new, 0)
+        assert nack == m.Nack(m.Provision.TYPE, m.ErrorCode.LOCKED) and Session(old).verify(BOARD_TO_HOST, f.seq, f)
+        if b is not None:
+            b.open_provisioning(1000)
+        else:
+            py.tick(1.0)
+            py.open_provisioning()
+        ((f, ack),) = provision(2, new, 1500)
+        assert ack == m.Ack(m.Provision.TYPE) and Session(new).verify(BOARD_TO_HOST, f.seq, f)
+        assert provision(3, old, 11_000)[0][1].code == m.ErrorCode.LOCKED       # the window closed
+        host = _ScriptHost(new, random.Random(2))
+        host.follow(rx(host.chunk('hello', 0), 11_100))
+        assert host.session is not None
+        stale = _ScriptHost(old, random.Random(3))
+        stale.follow(rx(stale.chunk('hello', 0), 11_200))
+        assert stale.session is None
+        counters = b.counters() if b is not None else {'provision_refused': py.provision_refused}
+        assert counters['provision_refused'] == 2

@@ -39,6 +39,25 @@ static uint8_t store_config(const board_config_t *c)
     return memcmp(raw, back, CONFIG_EEPROM_SIZE) == 0;
 }
 
+/* PROVISION: the new installation key, written and read back */
+static uint8_t store_key(const uint8_t key[16])
+{
+    uint8_t raw[KEY_EEPROM_SIZE], back[KEY_EEPROM_SIZE];
+    key_image(key, raw);
+    eeprom_update_block(raw, (void *)KEY_EEPROM_ADDR, KEY_EEPROM_SIZE);
+    eeprom_read_block(back, (const void *)KEY_EEPROM_ADDR, KEY_EEPROM_SIZE);
+    return memcmp(raw, back, KEY_EEPROM_SIZE) == 0;
+}
+
+/* this start's boot count: the EEPROM counter + 1, stored back (one EEPROM write per start:
+ * 100 000 starts of endurance) */
+static uint32_t next_boot_count(void)
+{
+    uint32_t n = boot_count_next(eeprom_read_dword((const uint32_t *)BOOT_EEPROM_ADDR));
+    eeprom_update_dword((uint32_t *)BOOT_EEPROM_ADDR, n);
+    return n;
+}
+
 static const common_board_t COMMON = {
     0, FW_MAJOR, FW_MINOR, FW_PATCH, 0, &g_config, 0, 0, store_config,
 };
@@ -90,7 +109,15 @@ void setup(void)
     g_common.handle = BOARD.handle;
     g_common.busy = BOARD.busy;
     Serial.begin(g_config.baud);
-    session_init(&g_session, BOARD.kind, handle, serial_write, 0);
+    uint8_t key[16];
+    eeprom_read_block(raw, (const void *)KEY_EEPROM_ADDR, KEY_EEPROM_SIZE);
+    key_load(raw, key);                          /* the null key when unprovisioned */
+    session_init(&g_session, BOARD.kind, key, next_boot_count(), handle, serial_write, store_key, 0);
+    memset(key, 0, sizeof key);
+    /* an external reset (the USB adapter's DTR when the port opens, or the reset button):
+     * the provisioning window opens; the radio cannot pull the RESET pin */
+    if (g_reset_cause & _BV(EXTRF))
+        session_open_provisioning(&g_session, millis());
     BOARD.setup();
     session_boot(&g_session);
     wdt_enable(WDTO_500MS);         /* a main loop stuck for 0.5 s resets the board */

@@ -9,27 +9,54 @@
 
 uint16_t hl_crc16(const uint8_t *d, uint16_t n, uint16_t crc) { return proto_crc16(d, n, crc); }
 
+/* tag: 8 bytes (used by version-2 frames) */
 uint8_t hl_encode(uint8_t version, uint8_t flags, uint16_t seq, uint16_t ref, uint8_t type,
-                  const uint8_t *payload, uint8_t len, uint8_t *out)
+                  const uint8_t *payload, uint8_t len, const uint8_t *tag, uint8_t *out)
 {
     proto_frame_t f = {.version = version, .len = len, .flags = flags, .seq = seq, .ref = ref, .type = type};
-    if (len > PROTO_MAX_PAYLOAD)
+    if (len > PROTO_MAX_BODY)
         return 0;
     memcpy(f.payload, payload, len);
+    memcpy(f.tag, tag, PROTO_TAG_SIZE);
     return proto_encode(&f, out);
 }
 
-/* hdr = version, len, flags, seq, ref, type */
-uint8_t hl_decode(const uint8_t *data, uint16_t n, uint32_t *hdr, uint8_t *payload)
+/* hdr = version, len, flags, seq, ref, type; tag: 8 bytes (version 2) */
+uint8_t hl_decode(const uint8_t *data, uint16_t n, uint32_t *hdr, uint8_t *payload, uint8_t *tag)
 {
     proto_frame_t f;
     uint8_t r = proto_decode(data, n, &f);
     if (r == PROTO_DECODE_OK) {
         hdr[0] = f.version; hdr[1] = f.len; hdr[2] = f.flags; hdr[3] = f.seq; hdr[4] = f.ref; hdr[5] = f.type;
         memcpy(payload, f.payload, f.len);
+        memcpy(tag, f.tag, proto_tag_size(f.version));
     }
     return r;
 }
+
+/* ---- authentication (lib/siphash.c, lib/auth.c) */
+void hl_siphash(const uint8_t *key, const uint8_t *data, uint8_t n, uint8_t *out) { siphash24(key, data, n, out); }
+
+/* the tag of a frame in the session (nh, nb; NULL: the null session) for frame number full */
+void hl_auth_tag(const uint8_t *key, const uint8_t *nh, const uint8_t *nb, uint8_t dir, uint32_t full,
+                 uint8_t version, uint8_t flags, uint16_t seq, uint16_t ref, uint8_t type,
+                 const uint8_t *payload, uint8_t len, uint8_t *out)
+{
+    auth_keys_t k;
+    proto_frame_t f = {.version = version, .len = len, .flags = flags, .seq = seq, .ref = ref, .type = type};
+    memcpy(f.payload, payload, len);
+    auth_keys_init(&k, key, nh, nb);
+    auth_tag(&k, key, dir, full, &f, out);
+}
+
+void hl_board_nonce(const uint8_t *key, uint32_t boot_count, uint32_t session_count, uint8_t *out)
+{
+    auth_board_nonce(key, boot_count, session_count, out);
+}
+
+void hl_key_image(const uint8_t *key, uint8_t *raw) { key_image(key, raw); }
+uint8_t hl_key_load(const uint8_t *raw, uint8_t *key) { return key_load(raw, key); }
+uint32_t hl_boot_count_next(uint32_t stored) { return boot_count_next(stored); }
 
 /* ---- deframer: delivered frames are written re-encoded (their bytes as received) */
 typedef struct { uint8_t *out; size_t cap, n; } sink_t;
@@ -161,6 +188,8 @@ typedef struct {
     board_config_t cfg;
     common_board_t common;
     uint8_t eeprom[CONFIG_EEPROM_SIZE];
+    uint8_t key_raw[KEY_EEPROM_SIZE];
+    uint32_t boot_count;
     sink_t out;
     char name[NAME_SIZE + 1];
 } hl_board_t;
@@ -178,6 +207,7 @@ static void board_write(void *ctx, const uint8_t *d, uint8_t n)
 static uint8_t no_board_requests(const proto_frame_t *req, proto_frame_t *ans) { (void)req; (void)ans; return 0; }
 static uint8_t never_busy(void) { return 0; }
 static uint8_t store_ram(const board_config_t *c) { config_image(c, g_current->eeprom); return 1; }
+static uint8_t store_key_ram(const uint8_t key[16]) { key_image(key, g_current->key_raw); return 1; }
 
 static uint8_t board_handler(session_t *s, const proto_frame_t *req, proto_frame_t *ans)
 {
@@ -186,18 +216,27 @@ static uint8_t board_handler(session_t *s, const proto_frame_t *req, proto_frame
 
 static void board_start(hl_board_t *b)
 {
+    uint8_t key[16];
     config_load(b->eeprom, b->common.kind, &b->cfg);
-    session_init(&b->s, b->common.kind, board_handler, board_write, b);
+    key_load(b->key_raw, key);
+    b->boot_count = boot_count_next(b->boot_count);
+    session_init(&b->s, b->common.kind, key, b->boot_count, board_handler, board_write, store_key_ram, b);
     session_boot(&b->s);
 }
 
-hl_board_t *hl_board_new(uint8_t kind, uint32_t board_id, const char *name, uint8_t *out, size_t cap)
+/* key: 16 bytes (NULL: unprovisioned); boot_count: the EEPROM counter before this start */
+hl_board_t *hl_board_new(uint8_t kind, uint32_t board_id, const char *name, const uint8_t *key,
+                         uint32_t boot_count, uint8_t *out, size_t cap)
 {
     hl_board_t *b = calloc(1, sizeof *b);
     board_config_t c;
     config_defaults(&c, kind);
     c.board_id = board_id;
     config_image(&c, b->eeprom);
+    memset(b->key_raw, 0xFF, sizeof b->key_raw);
+    if (key)
+        key_image(key, b->key_raw);
+    b->boot_count = boot_count;
     strncpy(b->name, name, NAME_SIZE);
     b->common = (common_board_t){kind, 1, 0, 0, b->name, &b->cfg, no_board_requests, never_busy, store_ram};
     b->out = (sink_t){out, cap, 0};
@@ -220,12 +259,16 @@ size_t hl_board_rx(hl_board_t *b, const uint8_t *data, size_t n, uint32_t now_ms
 }
 
 uint8_t hl_board_watchdog(hl_board_t *b, uint32_t now_ms) { return session_watchdog(&b->s, now_ms); }
+void hl_board_open_provisioning(hl_board_t *b, uint32_t now_ms) { session_open_provisioning(&b->s, now_ms); }
 
-/* frames_in, frames_out, requests_stale, requests_duplicate, watchdog_trips, version_errors */
+/* frames_in, frames_out, requests_stale, requests_duplicate, watchdog_trips, version_errors,
+ * auth_failures, no_session, sessions, boot_count, provision_refused */
 void hl_board_counters(const hl_board_t *b, uint32_t *c)
 {
     c[0] = b->s.frames_in; c[1] = b->s.frames_out; c[2] = b->s.requests_stale;
     c[3] = b->s.requests_duplicate; c[4] = b->s.watchdog_trips; c[5] = b->s.version_errors;
+    c[6] = b->s.auth_failures; c[7] = b->s.no_session; c[8] = b->s.sessions; c[9] = b->s.boot_count;
+    c[10] = b->s.provision_refused;
 }
 
 void hl_board_free(hl_board_t *b) { free(b); }

@@ -1,6 +1,8 @@
 /* Common requests of the SSLFR boards: see common.h. */
 #include "common.h"
 
+#include <string.h>
+
 static uint8_t common_type(uint8_t type)
 {
     return type == MSG_PING || type == MSG_GET_INFO || type == MSG_RESET
@@ -64,3 +66,21 @@ uint8_t config_load(const uint8_t *raw, uint8_t kind, board_config_t *c)
     }
     return 1;
 }
+
+void key_image(const uint8_t key[16], uint8_t *raw)
+{
+    memcpy(raw, key, 16);
+    proto_put_u16(raw + 16, proto_crc16(key, 16, 0xFFFF));
+}
+
+uint8_t key_load(const uint8_t *raw, uint8_t key[16])
+{
+    if (proto_get_u16(raw + 16) != proto_crc16(raw, 16, 0xFFFF)) {
+        memset(key, 0, 16);
+        return 0;
+    }
+    memcpy(key, raw, 16);
+    return 1;
+}
+
+uint32_t boot_count_next(uint32_t stored) { return stored == 0xFFFFFFFFu ? 1u : stored + 1u; }

@@ -30,6 +30,12 @@ uint8_t common_handle(const common_board_t *board, session_t *s, const proto_fra
  * config_load returns 0 (and defaults) for a blank, damaged or foreign image. */
 void config_image(const board_config_t *c, uint8_t *raw);
 uint8_t config_load(const uint8_t *raw, uint8_t kind, board_config_t *c);
+/* EEPROM image of an installation key (KEY_EEPROM_SIZE bytes: key + CRC) and back;
+ * key_load returns 0 (and the null key) for a blank or damaged image. */
+void key_image(const uint8_t key[16], uint8_t *raw);
+uint8_t key_load(const uint8_t *raw, uint8_t key[16]);
+/* The boot count of this start from the EEPROM's u32 (blank 0xFFFFFFFF: 0): stored + 1. */
+uint32_t boot_count_next(uint32_t stored);
 
 #ifdef __cplusplus
 }

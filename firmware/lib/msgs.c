@@ -10,6 +10,8 @@ int8_t msg_request_size(uint8_t type)
     case MSG_PING: return 4;
     case MSG_GET_INFO: case MSG_GET_STATUS: case MSG_RESET: case MSG_GET_CONFIG: case MSG_STOP: return 0;
     case MSG_SET_CONFIG: return CONFIG_SIZE;
+    case MSG_HELLO: return 8;
+    case MSG_PROVISION: return 16;
     case MSG_MOVE_TO: return 8;
     case MSG_HOME: return 9;
     case MSG_SET_ZERO: return 4;
@@ -49,6 +51,12 @@ uint8_t msg_parse_i32(const proto_frame_t *f, int32_t *v)
 uint8_t msg_ack(uint8_t *p, uint8_t request_type) { p[0] = request_type; return 1; }
 uint8_t msg_nack(uint8_t *p, uint8_t request_type, uint8_t code) { p[0] = request_type; p[1] = code; return 2; }
 uint8_t msg_boot(uint8_t *p, uint8_t kind) { p[0] = kind; p[1] = PROTO_VERSION; return 2; }
+uint8_t msg_hello_reply(uint8_t *p, const uint8_t nonce[8], uint32_t boot_count)
+{
+    memcpy(p, nonce, 8);
+    proto_put_u32(p + 8, boot_count);
+    return 12;
+}
 
 uint8_t msg_info(uint8_t *p, uint8_t kind, uint8_t major, uint8_t minor, uint8_t patch,
                  uint32_t board_id, const char *name)

@@ -1,4 +1,4 @@
-/* SSLFR board protocol v1: message codes, error codes and payload layouts
+/* SSLFR board protocol v2: message codes, error codes and payload layouts
  * (docs/protocol.md "Message registry"; Python: messages.py, messages_sensors.py).
  * Plain C99, shared by the firmware and the host test library. */
 #ifndef SSLFR_MSGS_H
@@ -18,6 +18,9 @@ extern "C" {
 #define MSG_RESET 0x04       /* -> ACK, then reboot + BOOT */
 #define MSG_GET_CONFIG 0x05  /* -> CONFIG */
 #define MSG_SET_CONFIG 0x06  /* config record (CONFIG_SIZE bytes) -> ACK (stored; used after RESET) */
+#define MSG_HELLO 0x07       /* 8-byte host nonce, null session -> HELLO_REPLY in the new session */
+#define MSG_PROVISION 0x08   /* 16-byte installation key, under the null key; only in the provisioning
+                              * window after an external reset (USB adapter's DTR) -> ACK under the new key */
 #define MSG_MOVE_TO 0x10     /* i32 steps, f32 speed [steps/s] > 0 */
 #define MSG_STOP 0x11
 #define MSG_HOME 0x12        /* u8 switch, f32 speed [steps/s] (sign = direction), i32 position */
@@ -29,6 +32,7 @@ extern "C" {
 #define MSG_STATUS 0x83
 #define MSG_BOOT 0x84        /* u8 board kind, u8 protocol */
 #define MSG_CONFIG 0x85      /* config record */
+#define MSG_HELLO_REPLY 0x86 /* 8-byte board nonce, u32 boot count */
 #define MSG_NMEA_CHUNK 0xC0
 #define MSG_THERMOCOUPLE_SAMPLE 0xC1
 #define MSG_SWITCH_SAMPLE 0xC2
@@ -44,6 +48,10 @@ extern "C" {
 #define ERR_LIMIT_ACTIVE 7
 #define ERR_VERSION 8
 #define ERR_INTERNAL 9
+#define ERR_AUTH 10          /* tag does not verify (forged, other key, old session) */
+#define ERR_REPLAY 11        /* authenticated but stale in the session */
+#define ERR_NO_SESSION 12    /* no session (the board rebooted): send HELLO */
+#define ERR_LOCKED 13        /* PROVISION outside the provisioning window */
 
 /* board kinds (INFO, BOOT) */
 #define KIND_AXIS_STEPPER 0x01
@@ -87,6 +95,7 @@ uint8_t msg_parse_i32(const proto_frame_t *f, int32_t *v);
 uint8_t msg_ack(uint8_t *p, uint8_t request_type);
 uint8_t msg_nack(uint8_t *p, uint8_t request_type, uint8_t code);
 uint8_t msg_boot(uint8_t *p, uint8_t kind);
+uint8_t msg_hello_reply(uint8_t *p, const uint8_t nonce[8], uint32_t boot_count);
 uint8_t msg_info(uint8_t *p, uint8_t kind, uint8_t major, uint8_t minor, uint8_t patch,
                  uint32_t board_id, const char *name);
 typedef struct {
@@ -129,6 +138,15 @@ typedef struct {
     int32_t min_steps, max_steps;
     uint16_t sensor_zero;
 } board_config_t;
+
+/* ---- the installation key and the boot counter in EEPROM (docs/firmware.md "EEPROM
+ * configuration"): the 16-byte key at KEY_EEPROM_ADDR followed by its CRC-16 (a blank or
+ * damaged block: unprovisioned, the null key), the u32 boot count at BOOT_EEPROM_ADDR
+ * (+1 at every start, blank 0xFFFFFFFF counts as 0; it makes the board's session nonces
+ * fresh across reboots). */
+#define KEY_EEPROM_ADDR 64
+#define KEY_EEPROM_SIZE 18
+#define BOOT_EEPROM_ADDR 96
 
 void config_defaults(board_config_t *c, uint8_t kind);
 void config_pack(const board_config_t *c, uint8_t *p);            /* CONFIG_SIZE bytes */

@@ -1,4 +1,4 @@
-/* SSLFR board protocol v1: see proto.h and docs/protocol.md. */
+/* SSLFR board protocol v2: see proto.h and docs/protocol.md. */
 #include "proto.h"
 
 #include <string.h>
@@ -26,34 +26,48 @@ uint32_t proto_get_u32(const uint8_t *p)
 }
 float proto_get_f32(const uint8_t *p) { uint32_t u = proto_get_u32(p); float v; memcpy(&v, &u, 4); return v; }
 
+uint8_t proto_tag_size(uint8_t version) { return version == PROTO_VERSION ? PROTO_TAG_SIZE : 0; }
+
+void proto_header(const proto_frame_t *f, uint8_t out[8])
+{
+    out[0] = f->version;
+    out[1] = (uint8_t)(f->len + proto_tag_size(f->version));
+    out[2] = f->flags;
+    proto_put_u16(out + 3, f->seq);
+    proto_put_u16(out + 5, f->ref);
+    out[7] = f->type;
+}
+
 uint8_t proto_encode(const proto_frame_t *f, uint8_t *out)
 {
-    if (f->len > PROTO_MAX_PAYLOAD)
+    uint8_t t = proto_tag_size(f->version);
+    if (f->len > PROTO_MAX_BODY - t)
         return 0;
     out[0] = PROTO_SYNC0;
     out[1] = PROTO_SYNC1;
-    out[2] = f->version;
-    out[3] = f->len;
-    out[4] = f->flags;
-    proto_put_u16(out + 5, f->seq);
-    proto_put_u16(out + 7, f->ref);
-    out[9] = f->type;
+    proto_header(f, out + 2);
     memcpy(out + PROTO_HEADER, f->payload, f->len);
-    /* protocol v2 inserts its MAC here, before the CRC */
-    proto_put_u16(out + PROTO_HEADER + f->len,
-                  proto_crc16(out + 2, (uint16_t)(PROTO_HEADER - 2 + f->len), 0xFFFF));
-    return (uint8_t)(PROTO_HEADER + f->len + PROTO_TRAILER);
+    memcpy(out + PROTO_HEADER + f->len, f->tag, t);
+    uint8_t body = (uint8_t)(f->len + t);
+    proto_put_u16(out + PROTO_HEADER + body, proto_crc16(out + 2, (uint16_t)(PROTO_HEADER - 2 + body), 0xFFFF));
+    return (uint8_t)(PROTO_HEADER + body + PROTO_CRC_SIZE);
 }
 
-static void unpack(const uint8_t *b, proto_frame_t *f)
+/* 0 when a version-2 body is shorter than its tag */
+static uint8_t unpack(const uint8_t *b, proto_frame_t *f)
 {
+    uint8_t t = proto_tag_size(b[2]);
+    if (b[3] < t)
+        return 0;
     f->version = b[2];
-    f->len = b[3];
+    f->len = (uint8_t)(b[3] - t);
     f->flags = b[4];
     f->seq = proto_get_u16(b + 5);
     f->ref = proto_get_u16(b + 7);
     f->type = b[9];
     memcpy(f->payload, b + PROTO_HEADER, f->len);
+    memcpy(f->tag, b + PROTO_HEADER + f->len, t);
+    return 1;
 }
 
 static uint8_t crc_ok(const uint8_t *b, uint8_t size)
@@ -63,15 +77,16 @@ static uint8_t crc_ok(const uint8_t *b, uint8_t size)
 
 uint8_t proto_decode(const uint8_t *data, uint16_t n, proto_frame_t *f)
 {
-    if (n < PROTO_HEADER + PROTO_TRAILER)
+    if (n < PROTO_HEADER + PROTO_CRC_SIZE)
         return PROTO_DECODE_SHORT;
     if (data[0] != PROTO_SYNC0 || data[1] != PROTO_SYNC1)
         return PROTO_DECODE_SYNC;
-    if (data[3] > PROTO_MAX_PAYLOAD || n != (uint16_t)(PROTO_HEADER + data[3] + PROTO_TRAILER))
+    if (data[3] > PROTO_MAX_BODY || n != (uint16_t)(PROTO_HEADER + data[3] + PROTO_CRC_SIZE))
         return PROTO_DECODE_LENGTH;
     if (!crc_ok(data, (uint8_t)n))
         return PROTO_DECODE_CRC;
-    unpack(data, f);
+    if (!unpack(data, f))
+        return PROTO_DECODE_LENGTH;
     return PROTO_DECODE_OK;
 }
 
@@ -105,12 +120,12 @@ uint8_t proto_framer_feed(proto_framer_t *fr, uint8_t byte, proto_frame_cb cb, v
             drop(fr, i);
         if (fr->n < 4)
             break;
-        if (fr->buf[3] > PROTO_MAX_PAYLOAD) {
+        if (fr->buf[3] > PROTO_MAX_BODY) {
             fr->length_errors++;
             drop(fr, 1);
             continue;
         }
-        uint8_t size = (uint8_t)(PROTO_HEADER + fr->buf[3] + PROTO_TRAILER);
+        uint8_t size = (uint8_t)(PROTO_HEADER + fr->buf[3] + PROTO_CRC_SIZE);
         if (fr->n < size)
             break;
         if (!crc_ok(fr->buf, size)) {
@@ -118,7 +133,11 @@ uint8_t proto_framer_feed(proto_framer_t *fr, uint8_t byte, proto_frame_cb cb, v
             drop(fr, 1);
             continue;
         }
-        unpack(fr->buf, &f);
+        if (!unpack(fr->buf, &f)) {
+            fr->length_errors++;
+            drop(fr, 1);
+            continue;
+        }
         memmove(fr->buf, fr->buf + size, (uint8_t)(fr->n - size));
         fr->n = (uint8_t)(fr->n - size);
         fr->frames_ok++;
@@ -142,7 +161,7 @@ uint8_t proto_tracker_accept(proto_seq_tracker_t *t, uint16_t seq)
         t->received++;
         return PROTO_SEQ_NEW;
     }
-    uint16_t delta = (uint16_t)(seq - t->last);
+    uint16_t delta = (uint16_t)(seq - (uint16_t)t->last);
     if (delta == 0) {
         t->duplicates++;
         return PROTO_SEQ_DUPLICATE;
@@ -152,7 +171,17 @@ uint8_t proto_tracker_accept(proto_seq_tracker_t *t, uint16_t seq)
         return PROTO_SEQ_STALE;
     }
     t->lost += (uint32_t)(delta - 1);
-    t->last = seq;
+    t->last += delta;
     t->received++;
     return PROTO_SEQ_NEW;
+}
+
+uint32_t proto_tracker_expand(const proto_seq_tracker_t *t, uint16_t seq)
+{
+    if (!t->has_last)
+        return seq;
+    uint16_t delta = (uint16_t)(seq - (uint16_t)t->last);
+    if (delta < 0x8000u)
+        return t->last + delta;
+    return t->last - (uint32_t)(uint16_t)(0u - delta);
 }

@@ -220,8 +220,8 @@ static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
         tx_frame_flush();
         return;
     }
-    if (frame_n >= 4 && (frame_buf[3] > PROTO_MAX_PAYLOAD
-                         || frame_n == (size_t)(PROTO_HEADER + frame_buf[3] + PROTO_TRAILER)))
+    if (frame_n >= 4 && (frame_buf[3] > PROTO_MAX_BODY
+                         || frame_n == (size_t)(PROTO_HEADER + frame_buf[3] + PROTO_CRC_SIZE)))
         tx_frame_flush();
 }
 
@@ -301,13 +301,14 @@ static void status_json(void)
         printf(",\"mark_s\":%.6f,\"first_step_after_mark_s\":%.6f", mark_cycle / (double)F_CPU_HZ,
                mech.first_step_after_rx / (double)F_CPU_HZ);
     if (sym_session) {
-        uint32_t c[6];
+        uint32_t c[11];
         uint8_t tripped;
         ram_read(sym_session, offsetof(session_t, frames_in), c, sizeof c);
         ram_read(sym_session, offsetof(session_t, watchdog_tripped), &tripped, 1);
         printf(",\"frames_in\":%u,\"frames_out\":%u,\"requests_stale\":%u,\"requests_duplicate\":%u,"
-               "\"watchdog_trips\":%u,\"version_errors\":%u,\"watchdog_tripped\":%s",
-               c[0], c[1], c[2], c[3], c[4], c[5], tripped ? "true" : "false");
+               "\"watchdog_trips\":%u,\"version_errors\":%u,\"auth_failures\":%u,\"no_session\":%u,"
+               "\"sessions\":%u,\"boot_count\":%u,\"provision_refused\":%u,\"watchdog_tripped\":%s",
+               c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], tripped ? "true" : "false");
     }
     if (sym_ax) {
         axis_state_t a;

@@ -25,6 +25,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
     'web-password': ('sslfr_bringup.web.password_cli', 'set the operator password of the web page (stored as a scrypt hash)'),
     'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),
+    'keys': ('sslfr_drivers.link.keys_cli', 'installation key: new key file, key id, provision a board over USB'),
     'flash': ('sslfr_drivers.firmware.flash', 'build and flash a board\'s firmware (avrdude), read INFO back, set its EEPROM'),
 }
 

@@ -313,6 +313,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         if problem:
             print(f'sslfr sim: --boards firmware: {problem}', file=sys.stderr)
             return 2
+    # a fresh installation key per run (mode 0600 in the run directory): the simulated
+    # boards are provisioned with it and every node with a board link uses it
+    from sslfr_drivers.link.keys import generate, write_key_file
+    key_file = write_key_file(run / 'installation.key', generate())
     for bname in boards_needed:
         board = ns.boards[bname]
         exe_name = board.sim_executable or ''
@@ -327,11 +331,15 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         controls[bname] = str(run / f'{bname}.sock')
         values = {'pty': links[bname], 'control': controls[bname], 'start': f'{clock.start:.3f}',
                   'speed': f'{speed:g}', 'anchor': '{anchor}', 'axis': bname, 'config': str(config),
-                  'seed': args.seed + len(board_progs), 'world': run / 'world.json', **site}
+                  'seed': args.seed + len(board_progs), 'world': run / 'world.json', 'key_file': key_file,
+                  **site}
         board_progs[bname] = Program(name=f'sim_{bname}', argv=nodeset_mod.sim_board_argv(board, exe, values),
                                      start=-1, stop=3, restart=False, kind='board')
     # ---- nodes (ports = the simulators' pty links)
     extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
+    for node in ns.nodes:
+        if node.board:
+            extra.setdefault(node.name, {})['key_file'] = str(key_file)
     for node, key, value in sets:
         extra.setdefault(node, {})[key] = value
     if any(n.name == 'recorder' for n in ns.nodes):

@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.link.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, PROTOCOL_VERSION, SEQ_MOD,
-                                    Frame, FrameError, Framer, PayloadError, ProtocolError,
-                                    SequenceTracker, crc16, decode_frame, encode_frame)
+from sslfr_drivers.link.auth import HOST_TO_BOARD, Session
+from sslfr_drivers.link.protocol import (FLAG_RESPONSE, MAX_PAYLOAD, PROTOCOL_V1, PROTOCOL_VERSION, SEQ_MOD,
+                                         Frame, FrameError, Framer, PayloadError, ProtocolError,
+                                         SequenceTracker, crc16, decode_frame, encode_frame)
+from sslfr_drivers.link.siphash import siphash24_bytes
 
 frames = st.builds(
     Frame,
@@ -19,6 +21,7 @@ frames = st.builds(
     payload=st.binary(max_size=MAX_PAYLOAD),
     ref=st.integers(0, SEQ_MOD - 1),
     flags=st.sampled_from([0, FLAG_RESPONSE]),
+    tag=st.binary(min_size=8, max_size=8),
 )
 
 
@@ -29,12 +32,46 @@ def test_crc16_check_value():
 
 
 def test_known_frame_bytes():
-    """A hand-checked frame (docs/protocol.md example): PING seq 1, host_ms 0x64."""
-    raw = encode_frame(m.encode(m.Ping(100), 1))
-    body = bytes([PROTOCOL_VERSION, 4, 0, 1, 0, 0, 0, 0x01]) + struct.pack('<I', 100)
+    """A hand-checked frame (docs/protocol.md example): PING seq 1, host_ms 0x64, key
+    00..0f, session nonces Nh = 01..08, Nb = 11..18; the tag is SipHash-2-4 of the
+    24-byte prefix and bytes 2..13 of the frame."""
+    key, nh, nb = bytes(range(16)), bytes(range(1, 9)), bytes(range(0x11, 0x19))
+    raw = encode_frame(Session(key, nh, nb).seal(HOST_TO_BOARD, 1, m.encode(m.Ping(100), 0)))
+    header = bytes([PROTOCOL_VERSION, 4 + 8, 0, 1, 0, 0, 0, 0x01])
+    payload = struct.pack('<I', 100)
+    prefix = b'sslfr' + bytes([1]) + b'\x00\x00' + nh + nb
+    tag = siphash24_bytes(key, prefix + header + payload)
+    body = header + payload + tag
     assert raw == b'\xa5\x5a' + body + struct.pack('<H', crc16(body))
-    assert raw.hex(' ') == 'a5 5a 01 04 00 01 00 00 00 01 64 00 00 00 ' + \
+    assert raw.hex(' ') == 'a5 5a 02 0c 00 01 00 00 00 01 64 00 00 00 ' + tag.hex(' ') + ' ' + \
         ' '.join(f'{b:02x}' for b in struct.pack('<H', crc16(body)))
+    assert len(raw) == 12 + 4 + 8
+
+
+def test_version1_frame_still_delimited_and_read():
+    """A version-1 frame (no tag) is still found and decoded: the board is refused with
+    a clear message and its INFO stays readable."""
+    v1 = Frame(m.Info.TYPE, 3, m.Info(1, 1, 0, 0, 1, 7, b'old').pack(), 2, FLAG_RESPONSE,
+               PROTOCOL_V1)
+    assert v1.tag == b''
+    raw = encode_frame(v1)
+    assert raw[2:4] == bytes([1, 25]) and len(raw) == 12 + 25
+    framer = Framer()
+    (got,) = framer.feed(raw)
+    assert got == v1 and framer.foreign_version == 1
+    assert m.decode(got).protocol == 1
+
+
+def test_version2_frame_shorter_than_its_tag_is_a_length_error():
+    """A CRC-valid version-2 frame whose length cannot hold the tag is never delivered."""
+    body = bytes([PROTOCOL_VERSION, 5, 0, 1, 0, 0, 0, 0x01]) + bytes(5)
+    raw = b'\xa5\x5a' + body + struct.pack('<H', crc16(body))
+    framer = Framer()
+    assert framer.feed(raw) == [] and framer.length_errors == 1
+    with pytest.raises(FrameError):
+        decode_frame(raw)
+    with pytest.raises(FrameError):          # and no frame is encoded without a whole tag
+        encode_frame(Frame(1, 0, b'', version=PROTOCOL_VERSION, tag=b'1234'))
 
 
 @settings(deadline=None)
@@ -46,7 +83,9 @@ def test_roundtrip(frame):
 def test_payload_too_long_refused():
     with pytest.raises(FrameError):
         encode_frame(Frame(1, 0, bytes(MAX_PAYLOAD + 1)))
+    assert MAX_PAYLOAD == 80
     assert len(encode_frame(Frame(1, 0, bytes(MAX_PAYLOAD)))) == 100   # one XBee packet
+    assert len(encode_frame(Frame(1, 0, bytes(88), version=PROTOCOL_V1))) == 100
 
 
 @settings(deadline=None)
@@ -148,6 +187,23 @@ def test_loss_counter_exact_across_wrap(start, gaps):
         skipped += g - 1
         assert t.accept(seq) == 'new'
     assert t.lost == skipped
+
+
+@settings(deadline=None)
+@given(st.integers(0, 2**32 - 1), st.lists(st.integers(-40000, 40000), min_size=1, max_size=50))
+def test_expand_gives_the_full_number_within_the_window(start, steps):
+    """The receiver recovers the sender's 32-bit frame number (the tag covers its
+    epoch) from the 16 bits on the wire, for any frame within half the window of the
+    last new one: new ones ahead, late or replayed ones behind."""
+    t = SequenceTracker()
+    t.last = start
+    for d in steps:
+        full = (t.last + d) % 2**32
+        if abs(d) < SEQ_MOD // 2:
+            assert t.expand(full % SEQ_MOD) == full
+        verdict = t.accept(full % SEQ_MOD)
+        if 0 < d < SEQ_MOD // 2:
+            assert verdict == 'new' and t.last == full
 
 
 def test_wrap_boundary_exact():

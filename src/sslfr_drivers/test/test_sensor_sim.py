@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import pytest
 from hypothesis import given, strategies as st
 
+from drivers_testutil import open_session
 from sslfr_drivers.sensors import max6675
 
 from sslfr_drivers.link import messages as m
@@ -14,7 +15,7 @@ from sslfr_drivers.sensors import nmea
 
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
-from sslfr_drivers.link.protocol import Framer, PayloadError
+from sslfr_drivers.link.protocol import MAX_PAYLOAD, Framer, PayloadError
 from sslfr_drivers.sim.world import Sky
 from sslfr_drivers.sim.sensors import (AbsorberSim, GpsSim, IrradianceSim, WorldPublisher,
                                        read_axis_angles, write_axis_angle)
@@ -23,7 +24,10 @@ NOON = dt.datetime(2026, 6, 21, 12, 0, tzinfo=dt.timezone.utc).timestamp()
 
 
 def _run(board, seconds, dt_=0.05):
-    """Tick ``board`` for ``seconds`` of steady time; return the decoded messages it sent."""
+    """Tick ``board`` for ``seconds`` of steady time; return the decoded messages it sent
+    (in a session: boards send samples only to a host that opened one)."""
+    if board._cur is None:
+        open_session(board)
     framer, out = Framer(), []
     t = board.now
     for _ in range(int(seconds / dt_)):
@@ -121,8 +125,11 @@ def test_irradiance_sim_measures_clear_sky_beam():
 
 def test_sensor_boards_refuse_get_status_and_identify():
     b = IrradianceSim({'start_utc': NOON})
+    from sslfr_drivers.link.auth import HOST_TO_BOARD
     from sslfr_drivers.link.protocol import encode_frame
-    b.receive(encode_frame(m.encode(m.GetStatus(), 1)) + encode_frame(m.encode(m.GetInfo(), 2)))
+    s = open_session(b)
+    b.receive(encode_frame(s.seal(HOST_TO_BOARD, 1, m.encode(m.GetStatus(), 0)))
+              + encode_frame(s.seal(HOST_TO_BOARD, 2, m.encode(m.GetInfo(), 0))))
     out = [m.decode(f) for f in Framer().feed(b.take_output())]
     assert any(isinstance(x, m.Nack) and x.code == m.ErrorCode.UNKNOWN_TYPE for x in out)
     info = [x for x in out if isinstance(x, m.Info)][0]
@@ -135,7 +142,7 @@ def test_thermocouple_sample_roundtrip(ms, a, b):
     assert m.decode(m.encode(msg, 7)) == msg
 
 
-@given(st.binary(min_size=1, max_size=88))
+@given(st.binary(min_size=1, max_size=MAX_PAYLOAD))
 def test_nmea_chunk_roundtrip(data):
     assert m.decode(m.encode(NmeaChunk(data), 1)) == NmeaChunk(data)
 

@@ -25,6 +25,7 @@ NOON = dt.datetime(2026, 3, 21, 12, 0, tzinfo=dt.timezone.utc).timestamp()
 EXPECTED = {
     ('gps', 'port'): ('', None, None, ()),
     ('gps', 'framing'): ('protocol', None, None, ('protocol', 'raw_nmea')),
+    ('gps', 'key_file'): ('', None, None, ()),
     ('gps', 'baudrate'): (115200, 1200, 921600, ()),
     ('gps', 'frame_id'): ('gps', None, None, ()),
     ('gps', 'time_ref_source'): ('gps', None, None, ()),
@@ -35,6 +36,7 @@ EXPECTED = {
     ('gps', 'max_sample_age'): (3.0, 0.1, 3600.0, ()),
     ('gps', 'heartbeat'): (0.5, 0.05, 5.0, ()),
     ('absorber_board', 'port'): ('', None, None, ()),
+    ('absorber_board', 'key_file'): ('', None, None, ()),
     ('absorber_board', 'baudrate'): (115200, 1200, 921600, ()),
     ('absorber_board', 'inlet_frame_id'): ('absorber_inlet', None, None, ()),
     ('absorber_board', 'outlet_frame_id'): ('absorber_outlet', None, None, ()),
@@ -46,6 +48,7 @@ EXPECTED = {
     ('absorber_board', 'max_sample_age'): (1.5, 0.1, 3600.0, ()),
     ('absorber_board', 'heartbeat'): (0.5, 0.05, 5.0, ()),
     ('irradiance', 'port'): ('', None, None, ()),
+    ('irradiance', 'key_file'): ('', None, None, ()),
     ('irradiance', 'baudrate'): (115200, 1200, 921600, ()),
     ('irradiance', 'frame_id'): ('irradiance', None, None, ()),
     ('irradiance', 'luminous_efficacy'): (104.0, 50.0, 250.0, ()),

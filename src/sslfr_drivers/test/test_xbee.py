@@ -114,7 +114,9 @@ def test_runner_xbee_process(tmp_path):
             assert link.wait_up(5)
             assert wait_for(lambda: os.path.exists(ctl), 2)
             SimControl(ctl).cmd(f'reset @{ADDR_B.lower()}')
-            assert wait_for(lambda: link.resets >= 2, 3)
+            # (protocol 2: the power-up BOOT is of no session and proves nothing; the
+            # reset is seen in the authenticated boot count of the next session)
+            assert wait_for(lambda: link.resets >= 1, 3)
             assert not link.get_status().homed
             boards = SimControl(ctl).cmd('status')['boards']
             assert [b['resets'] for b in boards] == [0, 1]

@@ -39,6 +39,7 @@ from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapsho
 from sslfr_drivers.axis.managed_node import ManagedNode
 from sslfr_drivers.axis.params import PARAMS, board_port, params_for, port_problem, tuning_from
 from sslfr_drivers.axis.trajectory import TrajectoryMsg, TrajectoryPoint
+from sslfr_drivers.link.keys import KeyFileError, link_key
 
 _SUCCESS = TransitionCallbackReturn.SUCCESS
 
@@ -116,10 +117,11 @@ class AxisDriver(ManagedNode):
         port = board_port(self.p)
         try:
             session = AxisBoardSession(port, self.p['baudrate'], self.p['request_timeout'],
-                                       self.p['link_timeout'], self.p['heartbeat_period'])
+                                       self.p['link_timeout'], self.p['heartbeat_period'],
+                                       key=link_key(self.p['key_file']))
             info = session.open()
         except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
-            refused = isinstance(exc, BoardRefused)
+            refused = isinstance(exc, (BoardRefused, KeyFileError))   # wrong key, version, key file
             error = str(exc) if refused else f'cannot reach the board on {port}: {exc}'
             if error != self.last_error:
                 self.get_logger().error(f'configure {"refused" if refused else "failed"}: {error}')
@@ -253,10 +255,11 @@ class AxisDriver(ManagedNode):
             m.limit_bits, m.fault_bits = int(b.limit_bits) & 0xFF, int(b.fault_bits) & 0xFFFF
         if session is None:
             m.link_state = int(LinkState.LINK_FAULT if self.refused else LinkState.LINK_DOWN)
+            m.board_info = f'refused: {self.last_error}' if self.refused else ''   # e.g. a wrong key
         else:
             m.link_state = int(session.link_state())
             m.frames_lost, m.frames_bad = session.frames_lost() & 0xFFFFFFFF, session.frames_bad() & 0xFFFFFFFF
-            m.board_info = session.board_info
+            m.board_info = session.refusal() or session.board_info
         self.pub_status.publish(m)
 
     def _publish_diagnostics(self) -> None:

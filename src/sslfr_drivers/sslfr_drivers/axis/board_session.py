@@ -80,15 +80,17 @@ class AxisBoardSession:
         Silence after which the link is declared silent and re-read [s].
     heartbeat : float
         PING when nothing was sent for this long [s] (< the board's 1 s watchdog).
+    key : bytes or None
+        The installation key (link/keys.py); None: unprovisioned boards only.
     """
 
     def __init__(self, port: str, baudrate: int = 115200, request_timeout: float = 0.25,
-                 link_timeout: float = 1.0, heartbeat: float = 0.25):
+                 link_timeout: float = 1.0, heartbeat: float = 0.25, key: bytes | None = None):
         self.port = port
         self.request_timeout = request_timeout
         self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
-                              backoff_min=0.1, backoff_max=2.0)
+                              backoff_min=0.1, backoff_max=2.0, key=key)
         self.board_info = ''
         self.last_status: m.Status | None = None
         self.poll_failures = 0
@@ -202,14 +204,20 @@ class AxisBoardSession:
             return Link.LINK_CONNECTING
         return Link.LINK_DOWN
 
+    def refusal(self) -> str:
+        """'refused: <why>' while the link refuses the board (another protocol version, a
+        key it does not accept), else ''."""
+        return f'refused: {self.link.last_error}' if self.link.state == LinkState.REFUSED else ''
+
     def frames_lost(self) -> int:
         """Board frames lost so far (sequence-number gaps)."""
         return int(self.link.frames_lost)
 
     def frames_bad(self) -> int:
-        """Frames dropped as corrupt: CRC, length and decode errors."""
+        """Frames dropped as corrupt or not authentic: CRC, length and decode errors and
+        frames whose tag does not verify (forged, damaged, another key or session)."""
         fr = self.link.framer
-        return int(fr.crc_errors + fr.length_errors + self.link.decode_errors)
+        return int(fr.crc_errors + fr.length_errors + self.link.decode_errors + self.link.auth_failures)
 
     def counters(self) -> dict[str, int]:
         """Link counters plus STATUS poll failures and reuses, for diagnostics."""

@@ -18,6 +18,7 @@ from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_drivers.axis.core import HOME_SWITCHES, AxisTuning, StallDetector
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
+from sslfr_drivers.link.keys import KEY_FILE_PARAM
 
 _P = ParamSpec
 _ANGLE = (-math.pi, math.pi)
@@ -31,6 +32,7 @@ _SPECS = [
     _P('port', '', "board port: pyserial URL/device (/dev/ttyUSB0, a pty, loop://) or "
        "'xbee:<uart>?addr=<64-bit hex>'; '' = /dev/sslfr/<axis>"),
     _P('baudrate', 115200, 'serial line speed [bit/s]', 'bit/s', 1200, 4_000_000),
+    KEY_FILE_PARAM,
     _P('autostart', True, 'reach and keep the active state by itself: configure (retried with '
        'back-off from retry_period to retry_period_max while no board answers), then activate; '
        'an external deactivate / cleanup / shutdown is respected', read_only=True),

@@ -28,6 +28,36 @@ APT_PACKAGES = ('gcc-avr', 'binutils-avr', 'avr-libc', 'arduino-core-avr', 'sima
                 'libsimavrparts1', 'libsimavr-dev', 'libelf-dev', 'pkg-config', 'avrdude')
 
 
+#: EEPROM layout (firmware/lib/msgs.h): configuration record + CRC at 0, the installation
+#: key + CRC at KEY_EEPROM_ADDR, the u32 boot count at BOOT_EEPROM_ADDR
+KEY_EEPROM_ADDR = 64
+BOOT_EEPROM_ADDR = 96
+EEPROM_IMAGE_SIZE = 100
+
+
+def key_eeprom_image(key: bytes) -> bytes:
+    """The EEPROM block of an installation key: the 16 bytes and their CRC-16."""
+    from sslfr_drivers.link.protocol import crc16
+    if len(key) != 16:
+        raise ValueError('an installation key is 16 bytes')
+    return bytes(key) + crc16(bytes(key)).to_bytes(2, 'little')
+
+
+def eeprom_image(record, key: bytes | None = None, boot_count: int | None = None) -> bytes:
+    """A board's EEPROM as written by the configuration, provisioning and the firmware:
+    ``record`` (messages.ConfigRecord), the installation ``key`` (None: blank, an
+    unprovisioned board), the stored boot count (None: blank). Unused bytes are 0xFF
+    (erased)."""
+    img = bytearray(b'\xff' * EEPROM_IMAGE_SIZE)
+    cfg = record.eeprom_image()
+    img[:len(cfg)] = cfg
+    if key is not None:
+        img[KEY_EEPROM_ADDR:KEY_EEPROM_ADDR + 18] = key_eeprom_image(key)
+    if boot_count is not None:
+        img[BOOT_EEPROM_ADDR:BOOT_EEPROM_ADDR + 4] = (boot_count & 0xFFFFFFFF).to_bytes(4, 'little')
+    return bytes(img)
+
+
 class FirmwareError(RuntimeError):
     """The firmware or its tools cannot be built or run (message says why)."""
 

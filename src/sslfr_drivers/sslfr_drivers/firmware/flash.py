@@ -16,6 +16,7 @@ import sys
 import time
 
 from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.firmware import BOARDS, BOOTLOADER_BAUD, FirmwareError, build, hexfile
 
 #: --set keys: name -> (ConfigRecord field, parser)
@@ -52,6 +53,9 @@ def parser() -> argparse.ArgumentParser:
                         'which this command sends')
     p.add_argument('--timeout', type=float, default=8.0, help='seconds to wait for the board after flashing')
     p.add_argument('--avrdude', default='avrdude', help='avrdude executable')
+    p.add_argument('--key-file', default=None,
+                   help='installation key file of a board already provisioned (re-flashing keeps its key); '
+                        'default: a fresh, unprovisioned board')
     return p
 
 
@@ -86,11 +90,12 @@ def run_avrdude(avrdude: str, port: str, baud: int, hex_path, out=sys.stdout) ->
     print('flash: ' + (verified[-1] if verified else 'written'), file=out, flush=True)
 
 
-def read_board(port: str, baud: int, timeout: float):
-    """Open the board's port and return (BoardLink, Info) once it answers."""
+def read_board(port: str, baud: int, timeout: float, key: bytes | None = None):
+    """Open the board's port and return (BoardLink, Info) once it answers (``key``: the
+    installation key of a provisioned board; re-flashing keeps the EEPROM and its key)."""
     from sslfr_drivers.link.board_link import BoardLink
     from sslfr_drivers.link.transport import SerialTransport
-    link = BoardLink(SerialTransport(port, baud), timeout=0.3, retries=3).start()
+    link = BoardLink(SerialTransport(port, baud), timeout=0.3, retries=3, key=key).start()
     if not link.wait_up(timeout):
         link.stop()
         raise FirmwareError(f'no answer from the board on {port} within {timeout:.0f} s '
@@ -113,7 +118,8 @@ def main(argv: list[str] | None = None, out=sys.stdout) -> int:
             if not hexfile(args.board).exists():
                 raise FirmwareError(f'{hexfile(args.board)} does not exist: run make firmware')
             run_avrdude(args.avrdude, args.port, args.baud, hexfile(args.board), out)
-        link, info = read_board(args.port, fw_baud, args.timeout)
+        key = link_key(args.key_file or '')
+        link, info = read_board(args.port, fw_baud, args.timeout, key)
         try:
             if info.board_kind != KINDS[args.board]:
                 raise FirmwareError(f'the board answers as {m.BoardKind(info.board_kind).name}, not {args.board}')
@@ -129,13 +135,16 @@ def main(argv: list[str] | None = None, out=sys.stdout) -> int:
                 new_baud = rec.baud
                 link.stop()
                 time.sleep(0.3)
-                link, info = read_board(args.port, new_baud, args.timeout)
+                link, info = read_board(args.port, new_baud, args.timeout, key)
                 got = link.request(m.GetConfig()).value
                 if got != rec:
                     raise FirmwareError(f'the board kept {got}, not {rec}')
                 print(f'config: {got}', file=out, flush=True)
         finally:
             link.stop()
+    except KeyFileError as exc:
+        print(f'sslfr flash: {exc}', file=sys.stderr)
+        return 2
     except (FirmwareError, subprocess.TimeoutExpired) as exc:
         print(f'sslfr flash: {exc}', file=sys.stderr)
         return 1

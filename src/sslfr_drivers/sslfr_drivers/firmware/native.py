@@ -8,7 +8,7 @@ from __future__ import annotations
 import ctypes as C
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.link.protocol import MAX_FRAME, Frame, FrameError, decode_frame
+from sslfr_drivers.link.protocol import MAX_FRAME, Frame, FrameError, decode_frame, tag_size
 from sslfr_drivers.firmware import build, hostlib_path
 
 _lib = None
@@ -24,8 +24,15 @@ def lib():
         sig = {
             'hl_crc16': (C.c_uint16, [C.c_char_p, C.c_uint16, C.c_uint16]),
             'hl_encode': (C.c_uint8, [C.c_uint8, C.c_uint8, C.c_uint16, C.c_uint16, C.c_uint8, C.c_char_p,
-                                      C.c_uint8, u8p]),
-            'hl_decode': (C.c_uint8, [C.c_char_p, C.c_uint16, u32p, u8p]),
+                                      C.c_uint8, C.c_char_p, u8p]),
+            'hl_decode': (C.c_uint8, [C.c_char_p, C.c_uint16, u32p, u8p, u8p]),
+            'hl_siphash': (None, [C.c_char_p, C.c_char_p, C.c_uint8, u8p]),
+            'hl_auth_tag': (None, [C.c_char_p, C.c_char_p, C.c_char_p, C.c_uint8, C.c_uint32, C.c_uint8,
+                                   C.c_uint8, C.c_uint16, C.c_uint16, C.c_uint8, C.c_char_p, C.c_uint8, u8p]),
+            'hl_board_nonce': (None, [C.c_char_p, C.c_uint32, C.c_uint32, u8p]),
+            'hl_key_image': (None, [C.c_char_p, u8p]),
+            'hl_key_load': (C.c_uint8, [C.c_char_p, u8p]),
+            'hl_boot_count_next': (C.c_uint32, [C.c_uint32]),
             'hl_framer_size': (C.c_size_t, []), 'hl_framer_init': (None, [C.c_void_p]),
             'hl_framer_feed': (C.c_size_t, [C.c_void_p, C.c_char_p, C.c_size_t, u8p, C.c_size_t]),
             'hl_framer_counters': (None, [C.c_void_p, u32p]),
@@ -43,7 +50,9 @@ def lib():
             'hl_config_defaults': (None, [C.c_uint8, u8p]),
             'hl_config_load': (C.c_uint8, [C.c_char_p, C.c_uint8, u8p]),
             'hl_config_image': (None, [C.c_char_p, u8p]),
-            'hl_board_new': (C.c_void_p, [C.c_uint8, C.c_uint32, C.c_char_p, u8p, C.c_size_t]),
+            'hl_board_new': (C.c_void_p, [C.c_uint8, C.c_uint32, C.c_char_p, C.c_char_p, C.c_uint32, u8p,
+                                          C.c_size_t]),
+            'hl_board_open_provisioning': (None, [C.c_void_p, C.c_uint32]),
             'hl_board_rx': (C.c_size_t, [C.c_void_p, C.c_char_p, C.c_size_t, C.c_uint32, u8p, C.c_size_t]),
             'hl_board_watchdog': (C.c_uint8, [C.c_void_p, C.c_uint32]),
             'hl_board_counters': (None, [C.c_void_p, u32p]),
@@ -68,8 +77,9 @@ def crc16(data: bytes, crc: int = 0xFFFF) -> int:
 def encode_frame(frame: Frame) -> bytes:
     """The firmware's encoder (FrameError for a payload above 88 bytes)."""
     out = _buf(MAX_FRAME)
+    tag = bytes(frame.tag).ljust(8, b'\0')
     n = lib().hl_encode(frame.version, frame.flags, frame.seq, frame.ref, frame.type, bytes(frame.payload),
-                        len(frame.payload), out) if len(frame.payload) <= 255 else 0
+                        len(frame.payload), tag, out) if len(frame.payload) <= 255 else 0
     if n == 0:
         raise FrameError(f'payload of {len(frame.payload)} bytes')
     return bytes(out[:n])
@@ -82,15 +92,56 @@ def decode_frame_reason(data: bytes) -> Frame | str:
     """The firmware's single-frame decoder: the Frame, or why not ('short', 'sync',
     'length', 'crc')."""
     hdr = (C.c_uint32 * 6)()
-    payload = _buf(256)
+    payload, tag = _buf(256), _buf(8)
     data = bytes(data)
     if len(data) > 0xFFFF:
         return 'length'
-    r = lib().hl_decode(data, len(data), hdr, payload)
+    r = lib().hl_decode(data, len(data), hdr, payload, tag)
     if r:
         return DECODE_REASONS[r]
     version, n, flags, seq, ref, mtype = hdr
-    return Frame(mtype, seq, bytes(payload[:n]), ref, flags, version)
+    return Frame(mtype, seq, bytes(payload[:n]), ref, flags, version, bytes(tag[:tag_size(version)]))
+
+
+def siphash24(key: bytes, data: bytes) -> bytes:
+    """The firmware's SipHash-2-4 of ``data`` (at most 255 bytes) as 8 bytes."""
+    out = _buf(8)
+    lib().hl_siphash(bytes(key), bytes(data), len(data), out)
+    return bytes(out)
+
+
+def auth_tag(key: bytes, nh: bytes, nb: bytes, direction: int, full: int, frame: Frame) -> bytes:
+    """The firmware's tag of ``frame`` in the session (``nh``, ``nb``) for frame number ``full``."""
+    out = _buf(8)
+    lib().hl_auth_tag(bytes(key), bytes(nh), bytes(nb), direction, full & 0xFFFFFFFF, frame.version,
+                      frame.flags, frame.seq, frame.ref, frame.type, bytes(frame.payload), len(frame.payload), out)
+    return bytes(out)
+
+
+def board_nonce(key: bytes, boot_count: int, session_count: int) -> bytes:
+    """The firmware's session nonce Nb."""
+    out = _buf(8)
+    lib().hl_board_nonce(bytes(key), boot_count & 0xFFFFFFFF, session_count & 0xFFFFFFFF, out)
+    return bytes(out)
+
+
+def key_image(key: bytes) -> bytes:
+    """The EEPROM image of an installation key (key + CRC-16)."""
+    out = _buf(18)
+    lib().hl_key_image(bytes(key), out)
+    return bytes(out)
+
+
+def key_load(image: bytes) -> tuple[bool, bytes]:
+    """What the firmware makes of a key image: (valid, key in use; the null key if not)."""
+    out = _buf(16)
+    ok = lib().hl_key_load(bytes(image), out)
+    return bool(ok), bytes(out)
+
+
+def boot_count_next(stored: int) -> int:
+    """This start's boot count from the EEPROM's stored u32."""
+    return lib().hl_boot_count_next(stored & 0xFFFFFFFF)
 
 
 class Framer:
@@ -212,15 +263,26 @@ def config_image(record: bytes) -> bytes:
     return bytes(out)
 
 
+#: the board session's counters (firmware/lib/session.h), as the harness reports them too
+BOARD_COUNTERS = ('frames_in', 'frames_out', 'requests_stale', 'requests_duplicate', 'watchdog_trips',
+                  'version_errors', 'auth_failures', 'no_session', 'sessions', 'boot_count', 'provision_refused')
+
+
 class Board:
     """The firmware's board session with the common requests only (PING, GET_INFO,
     RESET, GET_CONFIG, SET_CONFIG; every other type UNKNOWN_TYPE), as a sensor board
     without samples: bytes in, bytes out, at a given board time."""
 
-    def __init__(self, kind: int = 0, board_id: int = 1, name: str = 'sim-board'):
+    def __init__(self, kind: int = 0, board_id: int = 1, name: str = 'sim-board', key: bytes | None = None,
+                 boot_count: int = 0):
         self._out = _buf(1 << 16)
-        self._b = lib().hl_board_new(kind, board_id, name.encode(), self._out, len(self._out))
-        self.boot_bytes = bytes(self._out[:12 + 2])
+        self._b = lib().hl_board_new(kind, board_id, name.encode(), None if key is None else bytes(key),
+                                     boot_count, self._out, len(self._out))
+        self.boot_bytes = bytes(self._out[:12 + 8 + 2])
+
+    def open_provisioning(self, now_ms: int) -> None:
+        """Open the provisioning window at board time ``now_ms`` (an external reset)."""
+        lib().hl_board_open_provisioning(self._b, now_ms & 0xFFFFFFFF)
 
     def receive(self, data: bytes, now_ms: int = 0) -> bytes:
         n = lib().hl_board_rx(self._b, bytes(data), len(data), now_ms & 0xFFFFFFFF, self._out, len(self._out))
@@ -230,10 +292,9 @@ class Board:
         return bool(lib().hl_board_watchdog(self._b, now_ms & 0xFFFFFFFF))
 
     def counters(self) -> dict:
-        c = (C.c_uint32 * 6)()
+        c = (C.c_uint32 * 11)()
         lib().hl_board_counters(self._b, c)
-        return dict(zip(('frames_in', 'frames_out', 'requests_stale', 'requests_duplicate', 'watchdog_trips',
-                         'version_errors'), c))
+        return dict(zip(BOARD_COUNTERS, c))
 
     def __del__(self):
         if getattr(self, '_b', None):

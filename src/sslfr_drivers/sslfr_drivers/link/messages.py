@@ -8,11 +8,11 @@ fields are little-endian.
 Type code ranges (documented in docs/protocol.md; never reuse a code):
 
 =============  ==============================================================
-0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET, GET_CONFIG, SET_CONFIG)
+0x01 - 0x0F    common host -> board requests (PING, GET_INFO, GET_STATUS, RESET, GET_CONFIG, SET_CONFIG, HELLO, PROVISION)
 0x10 - 0x3F    axis-board requests (MOVE_TO, STOP, HOME, SET_ZERO)
 0x40 - 0x5F    RESERVED for sensor-board requests (sensor_messages module)
 0x60 - 0x7F    reserved (future)
-0x80 - 0x8F    common board -> host frames (ACK, NACK, INFO, STATUS, BOOT, CONFIG)
+0x80 - 0x8F    common board -> host frames (ACK, NACK, INFO, STATUS, BOOT, CONFIG, HELLO_REPLY)
 0x90 - 0xBF    axis-board unsolicited frames (none yet)
 0xC0 - 0xDF    RESERVED for sensor-board frames (samples, NMEA passthrough)
 0xE0 - 0xFF    reserved (future; 0xFF never used)
@@ -62,6 +62,10 @@ class ErrorCode(IntEnum):
     LIMIT_ACTIVE = 7      # the move would go further into an active limit switch
     VERSION = 8           # protocol version not supported
     INTERNAL = 9
+    AUTH = 10             # the frame's tag does not verify (forged, other key, old session)
+    REPLAY = 11           # authenticated but stale in the session (a replayed or late frame)
+    NO_SESSION = 12       # the board has no session (it rebooted): send HELLO
+    LOCKED = 13           # PROVISION outside the provisioning window (only after an external reset)
 
 
 class LimitBits(IntFlag):
@@ -341,6 +345,32 @@ class SetConfig(_RecordMessage):
     RESPONSE: ClassVar[bool] = True
 
 
+@register
+@dataclass(frozen=True)
+class Hello(Message):
+    """Start a session (docs/protocol.md "Authentication"): ``nonce`` = the host's fresh
+    8-byte Nh. Sent in the null session; answered with HELLO_REPLY in the new one."""
+
+    TYPE: ClassVar[int] = 0x07
+    FORMAT: ClassVar[str] = '8s'
+    RESPONSE: ClassVar[bool] = True
+    nonce: bytes = bytes(8)
+
+
+@register
+@dataclass(frozen=True)
+class Provision(Message):
+    """Set the board's installation key (docs/deploy.md "Board keys"): tagged under the
+    null key in the null session, accepted only during the provisioning window that an
+    external reset opens (the USB adapter's DTR: never from the radio; else NACK
+    LOCKED); answered ACK in the null session of the new key."""
+
+    TYPE: ClassVar[int] = 0x08
+    FORMAT: ClassVar[str] = '16s'
+    RESPONSE: ClassVar[bool] = True
+    key: bytes = bytes(16)
+
+
 # ------------------------------------------------------------------ axis requests
 @register
 @dataclass(frozen=True)
@@ -504,6 +534,19 @@ class Config(_RecordMessage):
     """The board's configuration record (answer to GET_CONFIG); :attr:`value` decodes it."""
 
     TYPE: ClassVar[int] = 0x85
+
+
+@register
+@dataclass(frozen=True)
+class HelloReply(Message):
+    """Answer to HELLO, tagged in the new session: the board's nonce Nb and its boot
+    count (kept in EEPROM, +1 per power-up or reset: a change tells the host the board
+    rebooted)."""
+
+    TYPE: ClassVar[int] = 0x86
+    FORMAT: ClassVar[str] = '8sI'
+    nonce: bytes
+    boot_count: int
 
 
 @register

@@ -3,26 +3,28 @@
 Pure Python (no rclpy). The wire format is documented in docs/protocol.md; this
 module is its reference implementation and the simulated boards use it too.
 
-Frame layout (all multi-byte integers little-endian)::
+Frame layout of protocol version 2 (all multi-byte integers little-endian)::
 
     offset size field
     0      2    SYNC = 0xA5 0x5A
-    2      1    version      protocol version (PROTOCOL_VERSION)
-    3      1    length       payload length N, 0..MAX_PAYLOAD
+    2      1    version      protocol version (PROTOCOL_VERSION = 2)
+    3      1    length       L = N + TAG_SIZE: payload and tag, 8..MAX_BODY
     4      1    flags        bit0 FLAG_RESPONSE: this frame answers request `ref`
     5      2    seq          sender's sequence number, u16, +1 per frame sent (wraps)
     7      2    ref          seq of the request answered (valid if FLAG_RESPONSE)
     9      1    type         message type (see messages.py registry)
-    10     N    payload
-    10+N   2    crc          CRC-16/CCITT-FALSE over bytes 2 .. 10+N-1
+    10     N    payload      0..MAX_PAYLOAD bytes
+    10+N   8    tag          message authentication code (link/auth.py)
+    18+N   2    crc          CRC-16/CCITT-FALSE over bytes 2 .. 17+N
 
-Bytes 0..3 and the CRC trailer are frozen for every protocol version, so a frame
-from a board speaking another version is still delimited and CRC-checked and can be
-refused with a clear message (:class:`ProtocolVersionError`) instead of being
-misparsed.
+Version 1 had no tag (``length`` = N, 0..88). Bytes 0..3 and the CRC trailer are
+frozen for every protocol version (the tag counts in ``length``), so a frame of
+another version is still delimited and CRC-checked and can be refused with a clear
+message (:class:`ProtocolVersionError`) instead of being misparsed; a version-1
+board's INFO stays readable.
 
-A whole frame is at most ``HEADER_SIZE + MAX_PAYLOAD + 2 = 100`` bytes: it fits in
-one XBee 802.15.4 RF packet (100 bytes maximum payload, no encryption).
+A whole frame is at most ``HEADER_SIZE + MAX_BODY + 2 = 100`` bytes: it fits in one
+XBee 802.15.4 RF packet (100 bytes maximum payload, no encryption).
 """
 from __future__ import annotations
 
@@ -30,12 +32,20 @@ import struct
 from dataclasses import dataclass
 
 SYNC = b'\xa5\x5a'
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
+#: the version without authentication (its boards are read for INFO, refused otherwise)
+PROTOCOL_V1 = 1
 HEADER_SIZE = 10
 CRC_SIZE = 2
-MAX_PAYLOAD = 88
-MAX_FRAME = HEADER_SIZE + MAX_PAYLOAD + CRC_SIZE
+TAG_SIZE = 8
+#: largest ``length`` field (payload + tag): one frame = one XBee RF packet
+MAX_BODY = 88
+#: largest payload of a version-2 frame
+MAX_PAYLOAD = MAX_BODY - TAG_SIZE
+MAX_FRAME = HEADER_SIZE + MAX_BODY + CRC_SIZE
 SEQ_MOD = 1 << 16
+#: full sequence numbers (the epoch in the upper 16 bits) wrap here
+FULL_MOD = 1 << 32
 #: a sequence number ahead of the last one by less than this is new; otherwise stale.
 SEQ_WINDOW = SEQ_MOD // 2
 
@@ -92,6 +102,11 @@ def crc16(data: bytes | bytearray | memoryview, crc: int = 0xFFFF) -> int:
     return crc
 
 
+def tag_size(version: int) -> int:
+    """Bytes of authentication tag a frame of ``version`` carries in its body."""
+    return TAG_SIZE if version == PROTOCOL_VERSION else 0
+
+
 @dataclass(frozen=True)
 class Frame:
     """One decoded frame.
@@ -111,6 +126,10 @@ class Frame:
         Flag bits (``FLAG_RESPONSE``).
     version : int
         Protocol version the sender speaks.
+    tag : bytes
+        Authentication tag (version 2: 8 bytes, ``None`` gives 8 zero bytes, which
+        no receiver accepts: seal frames with :mod:`sslfr_drivers.link.auth`; other
+        versions: empty).
     """
 
     type: int
@@ -119,11 +138,22 @@ class Frame:
     ref: int = 0
     flags: int = 0
     version: int = PROTOCOL_VERSION
+    tag: bytes | None = None
+
+    def __post_init__(self):
+        if self.tag is None:
+            object.__setattr__(self, 'tag', bytes(tag_size(self.version)))
 
     @property
     def is_response(self) -> bool:
         """True when the RESPONSE flag is set (an answer to a host request)."""
         return bool(self.flags & FLAG_RESPONSE)
+
+    def header(self) -> bytes:
+        """Bytes 2..9 of the wire frame: version, length, flags, seq, ref, type (the
+        first 8 bytes the tag covers; the payload follows)."""
+        return _HDR.pack(SYNC, self.version, len(self.payload) + len(self.tag), self.flags,
+                         self.seq, self.ref, self.type)[2:]
 
 
 def encode_frame(frame: Frame) -> bytes:
@@ -132,17 +162,30 @@ def encode_frame(frame: Frame) -> bytes:
     Raises
     ------
     FrameError
-        Payload longer than ``MAX_PAYLOAD`` or a field out of range.
+        Payload longer than the version allows, a tag of the wrong size, or a
+        field out of range.
     """
     n = len(frame.payload)
-    if n > MAX_PAYLOAD:
-        raise FrameError(f'payload of {n} bytes exceeds MAX_PAYLOAD={MAX_PAYLOAD}')
+    tag = frame.tag
+    if len(tag) != tag_size(frame.version):
+        raise FrameError(f'a version-{frame.version} frame carries a {tag_size(frame.version)}-byte '
+                         f'tag, not {len(tag)}')
+    if n + len(tag) > MAX_BODY:
+        raise FrameError(f'payload of {n} bytes exceeds {MAX_BODY - len(tag)} (version {frame.version})')
     if not (0 <= frame.type <= 255 and 0 <= frame.seq < SEQ_MOD and 0 <= frame.ref < SEQ_MOD
             and 0 <= frame.flags <= 255 and 0 <= frame.version <= 255):
         raise FrameError(f'frame field out of range: {frame!r}')
-    body = _HDR.pack(SYNC, frame.version, n, frame.flags, frame.seq, frame.ref,
-                     frame.type) + bytes(frame.payload)
+    body = _HDR.pack(SYNC, frame.version, n + len(tag), frame.flags, frame.seq, frame.ref,
+                     frame.type) + bytes(frame.payload) + bytes(tag)
     return body + struct.pack('<H', crc16(memoryview(body)[2:]))
+
+
+def _split_body(version: int, body: bytes) -> tuple[bytes, bytes] | None:
+    """(payload, tag) of a frame body, None when a version-2 body is shorter than its tag."""
+    t = tag_size(version)
+    if len(body) < t:
+        return None
+    return (body[:len(body) - t], body[len(body) - t:]) if t else (body, b'')
 
 
 def decode_frame(data: bytes) -> Frame:
@@ -151,7 +194,8 @@ def decode_frame(data: bytes) -> Frame:
     Raises
     ------
     FrameError
-        Wrong sync, length, size or CRC.
+        Wrong sync, length, size or CRC (a version-2 frame shorter than its tag is a
+        wrong length).
     """
     data = bytes(data)
     if len(data) < HEADER_SIZE + CRC_SIZE:
@@ -159,19 +203,23 @@ def decode_frame(data: bytes) -> Frame:
     sync, version, n, flags, seq, ref, mtype = _HDR.unpack_from(data)
     if sync != SYNC:
         raise FrameError('bad sync bytes')
-    if n > MAX_PAYLOAD or len(data) != HEADER_SIZE + n + CRC_SIZE:
+    if n > MAX_BODY or len(data) != HEADER_SIZE + n + CRC_SIZE:
         raise FrameError(f'length field {n} does not match {len(data)} bytes')
     (crc,) = struct.unpack_from('<H', data, HEADER_SIZE + n)
     if crc != crc16(memoryview(data)[2:HEADER_SIZE + n]):
         raise FrameError('CRC mismatch')
-    return Frame(mtype, seq, data[HEADER_SIZE:HEADER_SIZE + n], ref, flags, version)
+    split = _split_body(version, data[HEADER_SIZE:HEADER_SIZE + n])
+    if split is None:
+        raise FrameError(f'length field {n} is shorter than the tag of a version-{version} frame')
+    return Frame(mtype, seq, split[0], ref, flags, version, split[1])
 
 
 class Framer:
     """Stateful deframer fed with byte chunks of any size.
 
     Frames may be split across chunks and several frames may arrive in one chunk.
-    Garbage between frames is skipped; after a bad CRC or impossible length the
+    Garbage between frames is skipped; after a bad CRC or impossible length (above
+    MAX_BODY, or a version-2 length shorter than the tag, checked after the CRC) the
     framer resynchronises on the next SYNC after the bad frame's first byte, so a
     good frame hidden inside a corrupted one is still found. :meth:`feed` never
     raises on any input and only ever returns frames whose CRC is correct.
@@ -218,7 +266,7 @@ class Framer:
             if len(buf) < 4:
                 break
             n = buf[3]
-            if n > MAX_PAYLOAD:
+            if n > MAX_BODY:
                 self.length_errors += 1
                 self.bytes_discarded += 1
                 del buf[:1]
@@ -233,7 +281,13 @@ class Framer:
                 del buf[:1]
                 continue
             _, version, _, flags, seq, ref, mtype = _HDR.unpack_from(buf)
-            frame = Frame(mtype, seq, bytes(buf[HEADER_SIZE:size - 2]), ref, flags, version)
+            split = _split_body(version, bytes(buf[HEADER_SIZE:size - 2]))
+            if split is None:
+                self.length_errors += 1
+                self.bytes_discarded += 1
+                del buf[:1]
+                continue
+            frame = Frame(mtype, seq, split[0], ref, flags, version, split[1])
             del buf[:size]
             self.frames_ok += 1
             if version != PROTOCOL_VERSION:
@@ -243,20 +297,26 @@ class Framer:
 
 
 class SequenceCounter:
-    """Outgoing sequence numbers: 0, 1, ..., 65535, 0, ... (``next()``)."""
+    """Outgoing sequence numbers: 0, 1, ..., 65535, 0, ... (``next()``), and the full
+    32-bit count behind them (``next_full()``: the tag covers its upper half, the
+    epoch, so a frame recorded 65536 frames earlier never verifies again)."""
 
     def __init__(self, start: int = 0):
-        self._next = start % SEQ_MOD
+        self._next = start % FULL_MOD
+
+    def next_full(self) -> int:
+        """The next outgoing full sequence number (0..2**32-1; seq = its low 16 bits)."""
+        s = self._next
+        self._next = (s + 1) % FULL_MOD
+        return s
 
     def next(self) -> int:
         """The next outgoing sequence number (0..65535, wrapping)."""
-        s = self._next
-        self._next = (s + 1) % SEQ_MOD
-        return s
+        return self.next_full() % SEQ_MOD
 
     def peek(self) -> int:
-        """The number :meth:`next` will return, without consuming it."""
-        return self._next
+        """The 16-bit number :meth:`next` will return, without consuming it."""
+        return self._next % SEQ_MOD
 
 
 class SequenceTracker:
@@ -269,6 +329,10 @@ class SequenceTracker:
     wrap-around. A jump of ``SEQ_WINDOW`` or more backwards-looking is stale. The
     first frame after :meth:`restart` (a board reset or reconnect) is always new and
     counts no loss.
+
+    The tracker also keeps the sender's full 32-bit count (``last``): :meth:`expand`
+    gives the full number a 16-bit ``seq`` stands for (the nearest to ``last``; the
+    first frame after a restart is in epoch 0), the one the sender's tag covers.
 
     Counters: ``received`` (new frames), ``lost``, ``duplicates``, ``stale``.
     """
@@ -283,6 +347,15 @@ class SequenceTracker:
     def restart(self) -> None:
         """Forget the last sequence number (the peer restarted its counter)."""
         self.last = None
+
+    def expand(self, seq: int) -> int:
+        """The full 32-bit sequence number that 16-bit ``seq`` stands for."""
+        if self.last is None:
+            return seq
+        delta = (seq - self.last) % SEQ_MOD
+        if delta < SEQ_WINDOW:
+            return (self.last + delta) % FULL_MOD
+        return (self.last - (SEQ_MOD - delta)) % FULL_MOD
 
     def accept(self, seq: int) -> str:
         """Classify ``seq`` (0..65535): 'new', 'duplicate' or 'stale'; updates the
@@ -299,6 +372,6 @@ class SequenceTracker:
             self.stale += 1
             return 'stale'
         self.lost += delta - 1
-        self.last = seq
+        self.last = (self.last + delta) % FULL_MOD
         self.received += 1
         return 'new'

@@ -73,7 +73,7 @@ class SensorBoardNode(Node):
     def _make_source(self, v: dict) -> BoardSource:
         return BoardSource(v['port'], v.get('framing', 'protocol'), v['baudrate'],
                            on_message=self._on_message, on_bytes=self._enqueue,
-                           heartbeat=v['heartbeat'])
+                           heartbeat=v['heartbeat'], key_file=v.get('key_file', ''))
 
     def _change(self, new: dict) -> None:
         """ParameterGuard's apply: reopen the board if needed, then the subclass's

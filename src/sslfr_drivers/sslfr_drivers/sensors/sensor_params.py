@@ -12,12 +12,13 @@ from __future__ import annotations
 
 from sslfr_common.params import ParamSpec, ParamTable
 
+from sslfr_drivers.link.keys import KEY_FILE_PARAM
 from sslfr_drivers.sensors.veml7700 import LUMINOUS_EFFICACY
 
 HEARTBEAT = ParamSpec('heartbeat', 0.5, 'board link PING period [s]', 's', 0.05, 5.0)
 
 #: Parameters whose change reopens the board (``framing``: the GPS only).
-SOURCE_KEYS: tuple[str, ...] = ('port', 'framing', 'baudrate', 'heartbeat')
+SOURCE_KEYS: tuple[str, ...] = ('port', 'framing', 'baudrate', 'heartbeat', 'key_file')
 
 
 def _board_table(board: str, sample: str, max_age: float, *specs: ParamSpec,
@@ -27,6 +28,7 @@ def _board_table(board: str, sample: str, max_age: float, *specs: ParamSpec,
         ParamSpec('port', '', f'{board} port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
                               'empty = no board (the node stays up and reports it) [-]'),
         ParamSpec('baudrate', 115200, baudrate, 'bit/s', 1200, 921600),
+        KEY_FILE_PARAM,
         *specs,
         ParamSpec('max_sample_age', max_age, f'diagnostics WARN when no {sample} for this long [s]',
                   's', 0.1, 3600.0),

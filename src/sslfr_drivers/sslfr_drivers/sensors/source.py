@@ -15,6 +15,7 @@ from typing import Any, Callable
 
 from sslfr_drivers.link import sensor_messages  # noqa: F401 - registers the sensor message types
 from sslfr_drivers.link.board_link import BoardLink
+from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.link.reader import Protocol, ReaderThread
 from sslfr_drivers.link.transport import TransportError, make_transport
 
@@ -49,12 +50,16 @@ class BoardSource:
         Every chunk of raw bytes (raw framing), reader thread.
     heartbeat : float
         PING period keeping the link's silence detection alive [s].
+    key_file : str
+        Installation key file of the link ('' = none: unprovisioned boards only); a
+        file others may read refuses the link (:attr:`last_error` says why).
     """
 
     def __init__(self, port: str, framing: str = 'protocol', baudrate: int = 115200,
                  on_message: Callable | None = None, on_bytes: Callable | None = None,
-                 heartbeat: float = 0.5):
+                 heartbeat: float = 0.5, key_file: str = ''):
         self.port = port
+        self.key_file = key_file
         self.framing = framing
         self.baudrate = baudrate
         self.on_message = on_message or (lambda msg: None)
@@ -75,8 +80,14 @@ class BoardSource:
             self.last_error = f'bad port {self.port!r}: {exc}'
             return self
         if self.framing == 'protocol':
+            try:
+                key = link_key(self.key_file)
+            except KeyFileError as exc:             # never a link with an exposed key
+                transport.close()
+                self.last_error = f'not starting the board link: {exc}'
+                return self
             self.link = BoardLink(transport, name=self.port, heartbeat=self.heartbeat,
-                                  silence=max(1.0, 4 * self.heartbeat))
+                                  silence=max(1.0, 4 * self.heartbeat), key=key)
             self.link.add_listener(lambda msg, frame: self.on_message(msg))
             self.link.start()
         else:

@@ -13,16 +13,30 @@ message or :class:`Refuse`) and optionally :meth:`SimBoard.update` (called from
 ``tick``), :meth:`SimBoard.boot_state` (state lost at reset) and
 :meth:`SimBoard.watchdog_expired`. Like the firmware, a board:
 
+* authenticates every frame (protocol version 2, docs/protocol.md "Authentication"):
+  HELLO in the null session opens a *pending* session (answered HELLO_REPLY with the
+  board's nonce); the first request that verifies in it makes it the current one
+  (the previous session ends then, not before: a replayed HELLO cannot end the
+  host's session); any other request must verify in the current session;
+* refuses (never executes) an unauthenticated request (NACK AUTH, or NO_SESSION when
+  it has no session) and a stale one (NACK REPLAY), counting each; refusals are
+  answered at most once per ``REFUSAL_INTERVAL_MS`` (a flood is not echoed);
+* takes a new installation key (PROVISION, tagged under the null key) only in the
+  provisioning window an external reset opens (:meth:`reset` with ``external=True``,
+  :meth:`open_provisioning`), else NACK LOCKED (counted ``provision_refused``);
 * answers every request whose type has ``RESPONSE`` with exactly one frame whose
   ``ref`` is the request's sequence number;
 * answers a *duplicated* request (same sequence number and type as the previous
   one: the host retried because the answer was lost) from its cache, with a new
   sequence number, without executing it again;
-* ignores stale requests (older sequence numbers) unless three arrive in a row or
-  the request is PING/GET_INFO (a restarted host), which resynchronise it;
-* sends BOOT (sequence 0) after power-up and after every reset;
-* runs the watchdog: nothing valid heard for ``WATCHDOG_S`` = 1 s ->
-  :meth:`watchdog_expired` (axis boards stop the motor).
+* sends BOOT (null session, sequence 0) after power-up and after every reset, and
+  unsolicited frames (samples) only in a session;
+* runs the watchdog: no new authenticated request for ``WATCHDOG_S`` = 1 s ->
+  :meth:`watchdog_expired` (axis boards stop the motor); forged, replayed and
+  duplicated frames do not feed it.
+
+``protocol_version=1`` plays a board of the previous protocol (no tags, no
+sessions) for the refusal tests.
 """
 from __future__ import annotations
 
@@ -31,8 +45,15 @@ import random
 from dataclasses import dataclass
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError, SequenceCounter,
-                        SequenceTracker, encode_frame)
+from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, board_nonce
+from sslfr_drivers.link.protocol import (PROTOCOL_VERSION, Frame, Framer, PayloadError,
+                                         SequenceCounter, SequenceTracker, encode_frame)
+
+#: [ms] least time between two refusal NACKs (AUTH, REPLAY, NO_SESSION, VERSION) of
+#: a board: a flood of forged frames is counted, not echoed (firmware: lib/session.c)
+REFUSAL_INTERVAL_MS = 50
+#: [ms] the provisioning window after an external reset (firmware: SESSION_PROVISION_MS)
+PROVISION_WINDOW_MS = 10000
 
 
 class Refuse(Exception):
@@ -41,6 +62,19 @@ class Refuse(Exception):
     def __init__(self, code: m.ErrorCode):
         super().__init__(code.name)
         self.code = code
+
+
+class _BoardSession:
+    """One session as a board keeps it: tags, the host's sequence numbers, its own."""
+
+    def __init__(self, key: bytes, nh: bytes, nb: bytes):
+        self.auth = Session(key, nh, nb)
+        self.nh = nh
+        self.rx = SequenceTracker()
+        self.tx = SequenceCounter()
+        self.reply: bytes = b''                      # the HELLO_REPLY (resent to a retried HELLO)
+        self.last_req: tuple[int, int] | None = None
+        self.last_answer: m.Message | None = None
 
 
 class SimBoard:
@@ -55,6 +89,9 @@ class SimBoard:
     protocol_version : int
         Version written in frames and INFO (set != PROTOCOL_VERSION to simulate an
         old board that must be refused).
+    key : bytes or None
+        The installation key the board was provisioned with; None: unprovisioned
+        (the null key). :meth:`provision` changes it (a re-flash).
     """
 
     kind: m.BoardKind = m.BoardKind.UNKNOWN
@@ -65,10 +102,17 @@ class SimBoard:
     REQUESTS = frozenset({m.Ping.TYPE, m.GetInfo.TYPE, m.Reset.TYPE, m.GetConfig.TYPE, m.SetConfig.TYPE})
 
     def __init__(self, board_id: int = 1, rng: random.Random | None = None,
-                 protocol_version: int = PROTOCOL_VERSION):
+                 protocol_version: int = PROTOCOL_VERSION, key: bytes | None = None):
         self.board_id = board_id
         self.rng = rng or random.Random()
         self.protocol_version = protocol_version
+        self.key = bytes(key) if key is not None else NULL_KEY
+        self.boot_count = 0          # kept across resets, like the firmware's EEPROM counter
+        self.auth_failures = 0
+        self.no_session = 0
+        self.version_errors = 0
+        self.sessions = 0
+        self.provision_refused = 0
         self._out = bytearray()
         self._ticked = False
         self.now = 0.0
@@ -112,9 +156,25 @@ class SimBoard:
         self._out.clear()
         return out
 
-    def reset(self) -> None:
-        """Reboot: volatile state is lost, BOOT is sent (sequence 0)."""
+    def reset(self, external: bool = False) -> None:
+        """Reboot: volatile state is lost, BOOT is sent (sequence 0). ``external``: a
+        reset through the RESET pin (the USB adapter's DTR, the reset button), which
+        opens the provisioning window for PROVISION_WINDOW_S."""
         self.resets += 1
+        self._boot(self.now)
+        if external:
+            self.open_provisioning()
+
+    def open_provisioning(self) -> None:
+        """Open the provisioning window now (firmware: after an external reset)."""
+        self._provision_from = self.now
+
+    def provision(self, key: bytes | None, protocol_version: int | None = None) -> None:
+        """Give the board ``key`` (None: unprovisioned) and/or another protocol version,
+        as a re-flash over USB would, and restart it (not counted as a reset)."""
+        self.key = bytes(key) if key is not None else NULL_KEY
+        if protocol_version is not None:
+            self.protocol_version = protocol_version
         self._boot(self.now)
 
     # ------------------------------------------------------------ subclass API
@@ -166,13 +226,36 @@ class SimBoard:
                       self.name.encode('ascii')[:16])
 
     def send(self, msg: m.Message, ref: int | None = None) -> None:
-        """Queue ``msg`` (unsolicited if ``ref`` is None)."""
-        frame = m.encode(msg, self._seq.next(), ref)
+        """Queue ``msg`` (unsolicited if ``ref`` is None): in the current session
+        (dropped when there is none: samples wait for a host)."""
         if self.protocol_version != PROTOCOL_VERSION:
-            frame = Frame(frame.type, frame.seq, frame.payload, frame.ref, frame.flags,
-                          self.protocol_version)
+            self._queue(Frame(msg.TYPE, self._seq.next(), msg.pack(), ref or 0, 0 if ref is None else 1,
+                              self.protocol_version))
+        elif self._cur is not None:
+            self._send_in(self._cur, msg, ref)
+
+    def _send_in(self, bs: _BoardSession | None, msg: m.Message, ref: int | None) -> None:
+        """``msg`` tagged in session ``bs`` (None: the null session)."""
+        if bs is None:
+            full, auth = self._null_tx.next_full() & 0xFFFF, self._null
+        else:
+            full, auth = bs.tx.next_full(), bs.auth
+        self._queue(auth.seal(BOARD_TO_HOST, full, m.encode(msg, 0, ref)))
+
+    def _queue(self, frame: Frame) -> None:
         self._out += encode_frame(frame)
         self.frames_out += 1
+
+    def _refuse(self, frame: Frame, code: m.ErrorCode, bs: _BoardSession | None) -> None:
+        """NACK(code) to ``frame`` in session ``bs``, at most once per REFUSAL_INTERVAL_MS."""
+        now_ms = int(self.now * 1000)
+        if self._last_refusal_ms is not None and now_ms - self._last_refusal_ms < REFUSAL_INTERVAL_MS:
+            return
+        self._last_refusal_ms = now_ms
+        if self.protocol_version != PROTOCOL_VERSION:
+            self.send(m.Nack(frame.type, code), ref=frame.seq)
+        else:
+            self._send_in(bs, m.Nack(frame.type, code), frame.seq)
 
     @property
     def uptime_ms(self) -> int:
@@ -185,22 +268,146 @@ class SimBoard:
         if stored is not None:
             self.config = stored
         self._framer = Framer()
-        self._seq = SequenceCounter()
-        self._host = SequenceTracker()
+        self._seq = SequenceCounter()            # version 1 only
+        self._host = SequenceTracker()           # version 1 only
         self._last_req: tuple[int, int] | None = None
         self._last_answer: m.Message | None = None
         self._stale_run = 0
         self._reset_pending = False
+        self.boot_count = (self.boot_count + 1) & 0xFFFFFFFF
+        self._null = Session(self.key)
+        self._null_tx = SequenceCounter()
+        self._cur: _BoardSession | None = None
+        self._pend: _BoardSession | None = None
+        self._session_count = 0
+        self._last_refusal_ms: int | None = None
+        self._provision_from: float | None = None
         self.boot_time = now
         self.last_heard: float | None = None
         self.watchdog_tripped = False
         self.boot_state()
-        self.send(m.Boot(int(self.kind), self.protocol_version))
+        boot = m.Boot(int(self.kind), self.protocol_version)
+        if self.protocol_version != PROTOCOL_VERSION:
+            self.send(boot)
+        else:
+            self._send_in(None, boot, None)
 
     def _on_frame(self, frame: Frame) -> None:
         if frame.version != self.protocol_version:
-            self.send(m.Nack(frame.type, m.ErrorCode.VERSION), ref=frame.seq)
+            self.version_errors += 1
+            self._refuse(frame, m.ErrorCode.VERSION, None)
             return
+        if self.protocol_version != PROTOCOL_VERSION:
+            self._on_frame_v1(frame)
+            return
+        if frame.type == m.Hello.TYPE:
+            self._hello(frame)
+            return
+        if frame.type == m.Provision.TYPE:
+            self._provision(frame)
+            return
+        bs = None
+        if self._cur is not None and self._cur.auth.verify(HOST_TO_BOARD, self._cur.rx.expand(frame.seq), frame):
+            bs = self._cur
+        elif self._pend is not None and self._pend.auth.verify(HOST_TO_BOARD, frame.seq, frame):
+            bs = self._cur = self._pend       # the host uses the new session: the old one ends
+            self._pend = None
+            self.sessions += 1
+        if bs is None:
+            if self._cur is None and self._pend is None:
+                self.no_session += 1
+                self._refuse(frame, m.ErrorCode.NO_SESSION, None)
+            else:
+                self.auth_failures += 1
+                self._refuse(frame, m.ErrorCode.AUTH, self._cur)
+            return
+        verdict = bs.rx.accept(frame.seq)
+        if verdict == 'duplicate' and bs.last_req == (frame.seq, frame.type):
+            self.requests_duplicate += 1
+            if bs.last_answer is not None:
+                self._send_in(bs, bs.last_answer, frame.seq)
+            return
+        if verdict != 'new':
+            self.requests_stale += 1
+            self._refuse(frame, m.ErrorCode.REPLAY, bs)
+            return
+        self.frames_in += 1
+        self.last_heard = self.now
+        self.watchdog_tripped = False
+        answer = self._answer(frame)
+        bs.last_req = (frame.seq, frame.type)
+        bs.last_answer = answer
+        if answer is not None:
+            self._send_in(bs, answer, frame.seq)
+        if self._reset_pending:
+            self.reset()
+
+    def _hello(self, frame: Frame) -> None:
+        """HELLO (null session): open a pending session and answer HELLO_REPLY in it;
+        a retried HELLO (same nonce as the pending one) gets the same reply again."""
+        if not self._null.verify(HOST_TO_BOARD, frame.seq, frame):
+            self.auth_failures += 1
+            self._refuse(frame, m.ErrorCode.AUTH, self._cur)
+            return
+        try:
+            hello = m.decode(frame)
+        except PayloadError:
+            self._send_in(None, m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD), frame.seq)
+            return
+        if self._pend is not None and self._pend.nh == hello.nonce:
+            self._out += self._pend.reply
+            self.frames_out += 1
+            return
+        self._session_count += 1
+        nb = board_nonce(self.key, self.boot_count, self._session_count)
+        bs = _BoardSession(self.key, hello.nonce, nb)
+        reply = bs.auth.seal(BOARD_TO_HOST, bs.tx.next_full(),
+                             m.encode(m.HelloReply(nb, self.boot_count), 0, frame.seq))
+        bs.reply = encode_frame(reply)
+        self._pend = bs
+        self._out += bs.reply
+        self.frames_out += 1
+
+    def _provision(self, frame: Frame) -> None:
+        """PROVISION (tagged under the null key): the new key, only inside the
+        provisioning window; ACK in the null session of the new key."""
+        if not Session(NULL_KEY).verify(HOST_TO_BOARD, frame.seq, frame):
+            self.auth_failures += 1
+            self._refuse(frame, m.ErrorCode.AUTH, self._cur)
+            return
+        if self._provision_from is None or int(self.now * 1000) - int(self._provision_from * 1000) \
+                >= PROVISION_WINDOW_MS:
+            self.provision_refused += 1
+            self._refuse(frame, m.ErrorCode.LOCKED, None)
+            return
+        try:
+            msg = m.decode(frame)
+        except PayloadError:
+            self._send_in(None, m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD), frame.seq)
+            return
+        self.key = bytes(msg.key)
+        self._null = Session(self.key)
+        self._cur = self._pend = None
+        self._send_in(None, m.Ack(frame.type), frame.seq)
+
+    def _answer(self, frame: Frame) -> m.Message | None:
+        """The answer to one accepted request (a NACK for a refused one)."""
+        try:
+            if frame.type not in self.REQUESTS:
+                raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
+            msg = m.decode(frame)
+        except Refuse as r:
+            return m.Nack(frame.type, r.code)
+        except PayloadError:
+            return m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD)
+        try:
+            return self.handle(msg, frame)
+        except Refuse as r:
+            return m.Nack(frame.type, r.code)
+
+    def _on_frame_v1(self, frame: Frame) -> None:
+        """A board of protocol version 1 (or any other: no authentication), kept to test
+        refusal."""
         self.frames_in += 1
         self.last_heard = self.now
         self.watchdog_tripped = False
@@ -218,19 +425,7 @@ class SimBoard:
             self._host.restart()
             self._host.accept(frame.seq)
         self._stale_run = 0
-        try:
-            if frame.type not in self.REQUESTS:
-                raise Refuse(m.ErrorCode.UNKNOWN_TYPE)
-            msg = m.decode(frame)
-        except Refuse as r:
-            answer: m.Message | None = m.Nack(frame.type, r.code)
-        except PayloadError:
-            answer = m.Nack(frame.type, m.ErrorCode.BAD_PAYLOAD)
-        else:
-            try:
-                answer = self.handle(msg, frame)
-            except Refuse as r:
-                answer = m.Nack(frame.type, r.code)
+        answer = self._answer(frame)
         self._last_req = (frame.seq, frame.type)
         self._last_answer = answer
         if answer is not None:

@@ -32,8 +32,8 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.sim import board_class
 from sslfr_drivers.sim.axis import AxisConfig
 from sslfr_drivers.sim.base import FaultInjector, _split_frames
-from sslfr_drivers.sim.runner import PtyEndpoint, Runner, build_parser, serve_until_signalled, xbee_host
-from sslfr_drivers.firmware import KIND_TO_BOARD, FirmwareError
+from sslfr_drivers.sim.runner import PtyEndpoint, Runner, board_key, build_parser, serve_until_signalled, xbee_host
+from sslfr_drivers.firmware import KIND_TO_BOARD, FirmwareError, eeprom_image
 from sslfr_drivers.sim.fw_harness import Harness, axis_mech, sensor_zero_for
 
 _KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'gps': m.BoardKind.GPS, 'absorber': m.BoardKind.ABSORBER,
@@ -76,7 +76,7 @@ class FirmwareBoard:
 
     def __init__(self, kind: str, options: dict, rng: random.Random, board_id: int = 1, *,
                  uart_fd: int | None = None, link: str | None = None, path_file: str | None = None,
-                 pace: float = 1.0):
+                 pace: float = 1.0, key: bytes | None = None):
         if kind not in KIND_TO_BOARD:
             raise ValueError(f'no firmware for board kind {kind!r} (known: {", ".join(KIND_TO_BOARD)})')
         self.kind = _KINDS[kind]
@@ -106,7 +106,7 @@ class FirmwareBoard:
             ours.setblocking(False)
             self._sock, uart_fd = ours, theirs.fileno()
             self._theirs = theirs
-        self.harness = Harness(self.board, eeprom=record.eeprom_image(), link=link, path_file=path_file,
+        self.harness = Harness(self.board, eeprom=eeprom_image(record, key), link=link, path_file=path_file,
                                uart_fd=uart_fd, pace=pace, mech=mech, sensor_zero=sensor,
                                seed=rng.randrange(1, 2**31))
         self._rx = bytearray()
@@ -378,11 +378,14 @@ def main(argv: list[str] | None = None) -> int:
     cannot start."""
     args = parser().parse_args(argv)
     if args.protocol_version is not None:
-        print('fw_board: the firmware speaks protocol version 1 only (--protocol-version is for sim_board)',
+        print('fw_board: the firmware speaks protocol version 2 only (--protocol-version is for sim_board)',
               file=sys.stderr)
         return 2
     rng = random.Random(args.seed)
     opts = dict(o.split('=', 1) for o in args.opt)
+    ok, key = board_key(args, 'fw_board')
+    if not ok:
+        return 2
 
     def announce(path):
         print(f'SIM_PTY {path}', flush=True)
@@ -391,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.xbee:
             def make(kind, options, board_id):
-                board = make_firmware_board(kind, options, rng, board_id, pace=args.pace)
+                board = make_firmware_board(kind, options, rng, board_id, pace=args.pace, key=key)
                 boards.append(board)
                 return board
 
@@ -405,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             opts.setdefault('axis', args.axis)
             board = (FirmwareAxis if args.kind == 'axis' else FirmwareSensor)(
-                args.kind, opts, rng, 1, link=args.link, path_file=args.path_file, pace=args.pace)
+                args.kind, opts, rng, 1, link=args.link, path_file=args.path_file, pace=args.pace, key=key)
             board.harness.on_pty = announce
             board.start()
             boards.append(board)

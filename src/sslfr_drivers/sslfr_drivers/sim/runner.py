@@ -318,14 +318,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=int, default=None, help='random seed (noise and faults)')
     p.add_argument('--protocol-version', type=int, default=None,
                    help='speak another protocol version (to test refusal)')
+    p.add_argument('--key-file', default=None,
+                   help='boards provisioned with the installation key of this key file (sslfr keys new); '
+                        'default: unprovisioned boards (the null key)')
     return p
 
 
+def board_key(args, prog: str) -> tuple[bool, bytes | None]:
+    """(ok, key) of ``--key-file`` (the message printed when the file cannot be used)."""
+    if not args.key_file:
+        return True, None
+    from sslfr_drivers.link.keys import KeyFileError, load_key
+    try:
+        return True, load_key(args.key_file)
+    except KeyFileError as exc:
+        print(f'{prog}: {exc}', file=sys.stderr)
+        return False, None
+
+
 def make_board(kind: str, options: dict, rng: random.Random, board_id: int,
-               protocol_version: int | None) -> SimBoard:
-    """A board model of ``kind`` from its options; ``protocol_version`` (if given)
-    replaces the version it speaks, for refusal tests."""
+               protocol_version: int | None, key: bytes | None = None) -> SimBoard:
+    """A board model of ``kind`` from its options, provisioned with ``key`` (None:
+    unprovisioned); ``protocol_version`` (if given) replaces the version it speaks, for
+    refusal tests."""
     board = board_class(kind).from_options(options, rng, board_id=board_id)
+    if key is not None:
+        board.take_output()              # its first BOOT (unprovisioned) never reaches the wire
+        board.provision(key)
     if protocol_version is not None:
         board.protocol_version = protocol_version
         board.reset()
@@ -365,14 +384,17 @@ def main(argv: list[str] | None = None) -> int:
                              rng=random.Random(rng.random()))
 
     opts = dict(o.split('=', 1) for o in args.opt)
+    ok, key = board_key(args, 'sim_board')
+    if not ok:
+        return 2
     if args.xbee:
         host = xbee_host(args.board, opts, lambda kind, o, board_id: make_board(
-            kind, o, rng, board_id, args.protocol_version), injector, 'sim_board')
+            kind, o, rng, board_id, args.protocol_version, key), injector, 'sim_board')
         if host is None:
             return 2
     else:
         opts.setdefault('axis', args.axis)
-        host = PlainHost(make_board(args.kind, opts, rng, 1, args.protocol_version), injector())
+        host = PlainHost(make_board(args.kind, opts, rng, 1, args.protocol_version, key), injector())
     endpoint = PtyEndpoint(args.link, args.path_file, announce)
     return serve_until_signalled(Runner(endpoint, host, control=args.control))
 

@@ -61,6 +61,7 @@ from sslfr_planner import raytrace
 from sslfr_drivers.sensors import max6675
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.protocol import MAX_PAYLOAD
 from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
 from sslfr_drivers.sim.world import AbsorberThermal, GpsReceiver, Sky, ThermalParameters
 from sslfr_drivers.sim.base import Refuse, SimBoard
@@ -205,7 +206,7 @@ class GpsSim(_SensorSim):
                                     hdop=float(o.get('hdop', 1.1)), ttff=float(o.get('ttff', 1.0)),
                                     seed=int(o.get('seed', 1)))
         self.receiver.clock_offset = float(o.get('clock_offset', 0.0))
-        self.chunk = max(1, min(88, int(o.get('chunk', 64))))
+        self.chunk = max(1, min(MAX_PAYLOAD, int(o.get('chunk', 64))))
         self._next_epoch = 0.0
         self.epochs = 0
 
@@ -227,10 +228,10 @@ class GpsSim(_SensorSim):
         for i in range(0, len(data), self.chunk):
             self.send(NmeaChunk(data[i:i + self.chunk]))
 
-    def send(self, msg, ref=None):
+    def _queue(self, frame):
         if self.framing == 'raw_nmea':
             return  # a bare GPS module: no BOOT, no answers, only NMEA text
-        super().send(msg, ref)
+        super()._queue(frame)
 
     def receive(self, data: bytes) -> None:
         if self.framing == 'raw_nmea':
