@@ -6,14 +6,19 @@ parameters :mod:`.params`, decisions :class:`.core.AxisSupervisor`, trajectory
 :mod:`.trajectory`, lifecycle policy :mod:`.activation` (via :mod:`.managed_node`),
 board I/O :class:`.board_session.AxisBoardSession` (docs/architecture.md).
 
-Control tick (steady clock, ``control_rate``): read (board STATUS) -> update
-(``AxisSupervisor.tick``) -> write (one board command). Lifecycle: configure = open
+Control tick (steady clock): read (board STATUS) -> update (``AxisSupervisor.tick``)
+-> write (one board command), at ``control_rate`` while the board moves or homes or a
+command is under way, else when the next step of the setpoint is due, at the safety
+watchdog's deadline or after ``idle_poll_period`` (``AxisSupervisor.next_tick``);
+a trajectory, a safety change, a mode change, a home / jog request and activation
+run it at once (a guard condition). Lifecycle: configure = open
 the board and read INFO (refused boards leave it unconfigured); activate = follow
 ``tracker/trajectory``; deactivate = STOP; cleanup / shutdown = STOP + close. With
 ``autostart`` (default) the node reaches and keeps ``active`` by itself, configure
 retried with back-off; outside requests still work and are respected, and every
-``change_state`` request gets an answer. ``axes/<axis>/status`` has its own timer and
-never waits for board I/O: 5 Hz in every lifecycle state.
+``change_state`` request gets an answer. ``axes/<axis>/status`` (5 Hz in every
+lifecycle state) and ``joint_states`` (10 Hz while the board answers) come from one
+publishing timer that never waits for board I/O.
 """
 from __future__ import annotations
 
@@ -53,6 +58,11 @@ def trajectory_msg(msg: JointTrajectory) -> TrajectoryMsg:
 class AxisDriver(ManagedNode):
     """Lifecycle node following ``tracker/trajectory`` on one axis board."""
 
+    #: executor threads it needs (board I/O, status heartbeat, lifecycle, the rest) and the
+    #: Python loggers forwarded to its logger: used by main() and by a composed process
+    EXECUTOR_THREADS = 4
+    LOG_BRIDGE = ('sslfr_drivers',)
+
     def __init__(self, **kwargs):
         super().__init__('axis_driver', **kwargs)
         self._lock = threading.RLock()
@@ -71,7 +81,8 @@ class AxisDriver(ManagedNode):
         self.board: BoardState | None = None
         self.active = self.refused = False
         self._snap = Snapshot()
-        self._tick_n = 0
+        self._pub_n = 0
+        self._period = 1.0 / p['control_rate']
         self._stop_seen = False
         self.rate = TimeRate()
 
@@ -85,9 +96,11 @@ class AxisDriver(ManagedNode):
         self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, tl1)
         self.create_service(Trigger, f'axes/{self.axis}/home', self._on_home)
         self.create_service(Jog, f'axes/{self.axis}/jog', self._on_jog)
-        group = MutuallyExclusiveCallbackGroup
-        self.create_timer(1.0 / p['control_rate'], self._control_tick, group(), self.steady)
-        self._status_timer = self.create_timer(1.0 / p['status_rate'], self._publish_status, group(), self.steady)
+        control = MutuallyExclusiveCallbackGroup()
+        self._control_timer = self.create_timer(self._period, self._control_tick, control, self.steady)
+        self._wake = self.create_guard_condition(self._control_tick, control)   # events: tick at once
+        self._status_timer = self.create_timer(self._publish_period(p), self._publish, MutuallyExclusiveCallbackGroup(),
+                                               self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         if p['autostart']:
             self.start_self_activation(p['retry_period'], p['retry_period_max'])
@@ -105,7 +118,7 @@ class AxisDriver(ManagedNode):
             self.p, self.sup.cfg, self.sup.stall = p, cfg, stall
             self.sup.safety.timeout = p['safety_timeout']
             self.sup.safety.silent_stow_after = p['safety_silent_stow_after']
-            self._status_timer.timer_period_ns = int(1e9 / p['status_rate'])
+            self._status_timer.timer_period_ns = int(1e9 * self._publish_period(p))
             self.activation.set_retry(p['retry_period'], p['retry_period_max'])
 
     # ------------------------------------------------------------ lifecycle
@@ -137,6 +150,7 @@ class AxisDriver(ManagedNode):
         with self._lock:
             self.active = True
             self.sup.clear_fault()
+        self._wake.trigger()
         self.get_logger().info('active: following tracker/trajectory')
         return super().on_activate(state)
 
@@ -178,6 +192,8 @@ class AxisDriver(ManagedNode):
             reason = self.sup.store.offer(trajectory_msg(msg), self.axis, now, self.sup.cfg.limits)
         if reason:
             self.get_logger().warning(f'trajectory refused ({reason}); keeping the last good one')
+        else:
+            self._wake.trigger()
 
     def _on_safety(self, msg: SafetyState) -> None:
         now = steady_now(self.steady)
@@ -188,8 +204,12 @@ class AxisDriver(ManagedNode):
             session.stop_now()      # before taking the lock: never wait behind a control tick
         self._stop_seen = stop_us
         with self._lock:
+            before = self.sup.safety.verdict(now)[0]
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
                                     msg.sequence, list(msg.reasons))
+            changed = self.sup.safety.verdict(now)[0] is not before
+        if changed:
+            self._wake.trigger()     # stow / stop / follow again: at once, not at the next poll
 
     def _on_phase(self, msg: TrackerPhase) -> None:
         mode = operator_mode(msg.phase, msg.mode)
@@ -197,10 +217,13 @@ class AxisDriver(ManagedNode):
             old = self.sup.mode
             if self.sup.set_mode(mode):
                 self.get_logger().info(f'operator mode {old} -> {mode} ({msg.phase_name})')
+                self._wake.trigger()
 
     def _on_home(self, request, response):
         with self._lock:
             response.success, response.message = self.sup.request_home(self.active and self.session is not None)
+        if response.success:
+            self._wake.trigger()
         return response
 
     def _on_jog(self, request, response):
@@ -210,19 +233,20 @@ class AxisDriver(ManagedNode):
         response.success = ok
         if ok:
             response.target = target
+            self._wake.trigger()
         return response
 
     # ------------------------------------------------------------ read -> update -> write
     def _control_tick(self) -> None:
         with self._lock:
-            session = self.session
-            reading = session.read(steady_now(self.steady), 1.0 / self.p['control_rate']) if session \
-                else BoardReading(None)
+            session, period = self.session, 1.0 / self.p['control_rate']
+            reading = session.read(steady_now(self.steady), period) if session else BoardReading(None)
             now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())   # as read
             for line in self.sup.note_link_events(reading.reset, reading.reconnected):
                 self.get_logger().warning(line)
             self.board = board = reading.board
-            act = self.sup.tick(now_ros, now_steady, board, self.active, self.rate.update(now_ros, now_steady))
+            rate = self.rate.update(now_ros, now_steady)
+            act = self.sup.tick(now_ros, now_steady, board, self.active, rate)
             fault = self.sup.take_new_fault()
             if fault:
                 self.get_logger().error(f'axis fault: {fault}')
@@ -231,16 +255,33 @@ class AxisDriver(ManagedNode):
                 if warning:
                     self.get_logger().warning(warning)
             self._snap = self.sup.snapshot(now_ros, board)
-            self._tick_n += 1
-            if board is not None and self._tick_n % max(1, round(self.p['control_rate'] / self.p['joint_state_rate'])) == 0:
-                js = JointState(name=[self.axis], position=[float(self._snap.measured)],
-                                velocity=[float(session.velocity(self.sup.cfg.calibration))])
-                js.header.stamp = stamp(now_ros)
-                self.pub_joint.publish(js)
+            wait = period if act.kind != 'none' else self.sup.next_tick(
+                now_ros, now_steady, board, rate, period, self.p['idle_poll_period'])
+            self._control_timer.timer_period_ns = int(wait * 1e9)
+            self._control_timer.reset()          # the next tick `wait` from now (an event may come first)
 
     # ------------------------------------------------------------ outputs
+    @staticmethod
+    def _publish_period(p: dict) -> float:
+        return 1.0 / max(p['status_rate'], p['joint_state_rate'])
+
+    def _publish(self) -> None:
+        """One timer at the faster of ``status_rate`` and ``joint_state_rate``: the
+        status heartbeat (every lifecycle state) and joint_states (while the board
+        answers) from the last tick's snapshot; no lock, no board I/O."""
+        p, snap, session = self.p, self._snap, self.session
+        fast = max(p['status_rate'], p['joint_state_rate'])
+        self._pub_n += 1
+        if snap.board is not None and session is not None and self._pub_n % max(1, round(fast / p['joint_state_rate'])) == 0:
+            js = JointState(name=[self.axis], position=[float(snap.measured)],
+                            velocity=[float(session.velocity(self.sup.cfg.calibration))])
+            # the read time while moving (fast ticks); at rest the position holds until now
+            js.header.stamp = stamp(snap.stamp) if snap.board.moving else self.get_clock().now().to_msg()
+            self.pub_joint.publish(js)
+        if self._pub_n % max(1, round(fast / p['status_rate'])) == 0:
+            self._publish_status()
+
     def _publish_status(self) -> None:
-        """The 5 Hz heartbeat of every lifecycle state: no lock, no board I/O."""
         snap, session, life = self._snap, self.session, self.lifecycle_state()
         m = AxisStatus(axis=self.axis, state=snap.state if life == 'active' else life,
                        commanded=snap.commanded, setpoint=snap.setpoint, measured=snap.measured,
@@ -285,9 +326,8 @@ class AxisDriver(ManagedNode):
 def main(args=None) -> int:
     """``ros2 run sslfr_drivers axis_driver``: four executor threads (board I/O, status
     heartbeat, lifecycle, everything else); the link's logs reach the node's logger."""
-    return run_node('axis_driver', AxisDriver, args=args,
-                    executor=lambda ctx: MultiThreadedExecutor(num_threads=4, context=ctx),
-                    log_bridge=('sslfr_drivers',))
+    return run_node('axis_driver', AxisDriver, args=args, log_bridge=AxisDriver.LOG_BRIDGE,
+                    executor=lambda ctx: MultiThreadedExecutor(num_threads=AxisDriver.EXECUTOR_THREADS, context=ctx))
 
 
 if __name__ == '__main__':
