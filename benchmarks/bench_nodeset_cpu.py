@@ -120,6 +120,8 @@ def main(argv=None) -> int:
     ap.add_argument('--set', action='append', default=[], help='NODE:KEY=VALUE for the sim')
     ap.add_argument('--json', default=None, help='write the figures to this file')
     ap.add_argument('--keep', action='store_true', help='keep the sim output directory')
+    ap.add_argument('--layout', default=None, help='process layout of the node set (composed, separate; '
+                                                   'default: the node set\'s)')
     args = ap.parse_args(argv)
     minutes = int(args.window // 60) + 3
     h, m = (int(x) for x in args.start.split(':'))
@@ -127,6 +129,8 @@ def main(argv=None) -> int:
     out = Path(tempfile.mkdtemp(prefix='bench-cpu-'))
     cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
            '--no-report', '--anchor-margin', '3', '--out', str(out)]
+    if args.layout:
+        cmd += ['--layout', args.layout]
     for f in args.fault:
         cmd += ['--fault', f]
     for s in args.set:

@@ -1,66 +1,52 @@
 """``axis_driver``: lifecycle node driving one SSLFR axis board (stepper + sensor).
 
-One instance per axis (parameter ``axis``; node names ``<axis>_driver`` by
-convention, ``-r __node:=mirrors_driver``). This file only wires ROS to pure code:
-parameters :mod:`.params`, decisions :class:`.core.AxisSupervisor`, trajectory
-:mod:`.trajectory`, lifecycle policy :mod:`.activation` (via :mod:`.managed_node`),
-board I/O :class:`.board_session.AxisBoardSession` (docs/architecture.md).
+One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This file
+only wires ROS to pure code: parameters :mod:`.params`, decisions
+:class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
+:mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
+:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md).
 
-Control tick (steady clock): read (board STATUS) -> update (``AxisSupervisor.tick``)
--> write (one board command), at ``control_rate`` while the board moves or homes or a
-command is under way, else when the next step of the setpoint is due, at the safety
-watchdog's deadline or after ``idle_poll_period`` (``AxisSupervisor.next_tick``);
-a trajectory, a safety change, a mode change, a home / jog request and activation
-run it at once (a guard condition). Lifecycle: configure = open
-the board and read INFO (refused boards leave it unconfigured); activate = follow
-``tracker/trajectory``; deactivate = STOP; cleanup / shutdown = STOP + close. With
-``autostart`` (default) the node reaches and keeps ``active`` by itself, configure
-retried with back-off; outside requests still work and are respected, and every
-``change_state`` request gets an answer. ``axes/<axis>/status`` (5 Hz in every
-lifecycle state) and ``joint_states`` (10 Hz while the board answers) come from one
-publishing timer that never waits for board I/O.
+The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
+its own thread: at ``control_rate`` while something moves, else at the next setpoint
+step, the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at
+once on a trajectory, safety change, mode change, home / jog request or activation.
+No executor callback waits for the board (configure waits at most ``OPEN_WAIT``), so
+a single-threaded executor serves the node, alone or composed. With ``autostart`` the
+node reaches and keeps ``active`` by itself; every ``change_state`` request gets an
+answer. ``axes/<axis>/status`` (5 Hz, every lifecycle state) and ``joint_states``
+(10 Hz while the board answers) come from one publishing timer.
 """
 from __future__ import annotations
 
 import threading
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from sslfr_common.contract import LinkState
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
+from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused
+from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused, open_session
+from sslfr_drivers.axis.control_loop import BackgroundOpen, ControlLoop
 from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapshot, TimeRate,
                                      diagnostic_verdict, operator_mode)
 from sslfr_drivers.axis.managed_node import ManagedNode
+from sslfr_drivers.axis.msgs import diagnostics_msg, joint_msg, status_msg, trajectory_msg
 from sslfr_drivers.axis.params import PARAMS, board_port, params_for, port_problem, tuning_from
-from sslfr_drivers.axis.trajectory import TrajectoryMsg, TrajectoryPoint
 
 _SUCCESS = TransitionCallbackReturn.SUCCESS
-
-
-def trajectory_msg(msg: JointTrajectory) -> TrajectoryMsg:
-    """A ``JointTrajectory`` in numbers (seconds) for :mod:`.trajectory`."""
-    return TrajectoryMsg(tuple(msg.joint_names), to_sec(msg.header.stamp), tuple(
-        TrajectoryPoint(to_sec(p.time_from_start), tuple(p.positions), tuple(p.velocities),
-                        tuple(p.accelerations)) for p in msg.points))
+OPEN_WAIT = 0.25      # [s] longest wait of a configure for the board's INFO (the attempt goes on)
 
 
 class AxisDriver(ManagedNode):
     """Lifecycle node following ``tracker/trajectory`` on one axis board."""
 
-    #: executor threads it needs (board I/O, status heartbeat, lifecycle, the rest) and the
-    #: Python loggers forwarded to its logger: used by main() and by a composed process
-    EXECUTOR_THREADS = 4
+    #: Python loggers forwarded to its logger (main() and a composed process)
     LOG_BRIDGE = ('sslfr_drivers',)
 
     def __init__(self, **kwargs):
@@ -82,7 +68,7 @@ class AxisDriver(ManagedNode):
         self.active = self.refused = False
         self._snap = Snapshot()
         self._pub_n = 0
-        self._period = 1.0 / p['control_rate']
+        self._opening: BackgroundOpen | None = None
         self._stop_seen = False
         self.rate = TimeRate()
 
@@ -96,16 +82,13 @@ class AxisDriver(ManagedNode):
         self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, tl1)
         self.create_service(Trigger, f'axes/{self.axis}/home', self._on_home)
         self.create_service(Jog, f'axes/{self.axis}/jog', self._on_jog)
-        control = MutuallyExclusiveCallbackGroup()
-        self._control_timer = self.create_timer(self._period, self._control_tick, control, self.steady)
-        self._wake = self.create_guard_condition(self._control_tick, control)   # events: tick at once
-        self._status_timer = self.create_timer(self._publish_period(p), self._publish, MutuallyExclusiveCallbackGroup(),
-                                               self.steady)
+        self._status_timer = self.create_timer(self._publish_period(p), self._publish, clock=self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         if p['autostart']:
             self.start_self_activation(p['retry_period'], p['retry_period_max'])
         self.get_logger().info(f'axis {self.axis}: port {board_port(p)}, '
                                f'{"autostart" if p["autostart"] else "waiting for configure"}')
+        self._loop = ControlLoop(self._control_step, name=f'{self.axis} control').start()
 
     def _apply(self, p: dict) -> None:
         """A run-time parameter change that passed the table (ValueError refuses it)."""
@@ -123,15 +106,18 @@ class AxisDriver(ManagedNode):
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
-        """Open the board link and read INFO (outside the lock: status and control go
-        on); FAILURE, logged once per distinct error, when the board cannot be reached
-        or is refused. The position counts as lost until re-referenced."""
-        port = board_port(self.p)
-        try:
-            session = AxisBoardSession(port, self.p['baudrate'], self.p['request_timeout'],
-                                       self.p['link_timeout'], self.p['heartbeat_period'])
-            info = session.open()
-        except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
+        """Open the board and read INFO in a thread, waiting at most ``OPEN_WAIT``; FAILURE,
+        logged once per distinct error, when the board cannot be reached (yet) or is
+        refused. The position counts as lost until re-referenced."""
+        port, p = board_port(self.p), dict(self.p)
+        if self._opening is None or self._opening.key != port:
+            if self._opening is not None:
+                self._opening.discard(AxisBoardSession.close)
+            self._opening = BackgroundOpen(port, lambda: open_session(port, p))
+        res = self._opening.result(OPEN_WAIT)
+        self._opening = self._opening if res is None else None
+        session, exc = res or (None, ConnectionError('no INFO yet (still waiting for the board)'))
+        if exc is not None:
             refused = isinstance(exc, BoardRefused)
             error = str(exc) if refused else f'cannot reach the board on {port}: {exc}'
             if error != self.last_error:
@@ -142,7 +128,7 @@ class AxisDriver(ManagedNode):
             self.session, self.refused = session, False
             self.last_error = self.sup.last_error = ''
             self.sup.position_lost()
-        self.get_logger().info(f'configured: board {info} on {port}')
+        self.get_logger().info(f'configured: board {session.board_info} on {port}')
         return _SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
@@ -150,7 +136,7 @@ class AxisDriver(ManagedNode):
         with self._lock:
             self.active = True
             self.sup.clear_fault()
-        self._wake.trigger()
+        self._loop.wake()
         self.get_logger().info('active: following tracker/trajectory')
         return super().on_activate(state)
 
@@ -175,7 +161,10 @@ class AxisDriver(ManagedNode):
     on_shutdown = on_cleanup
 
     def on_exit(self) -> None:
-        """Called by run_node once spinning ends, the context still valid."""
+        """run_node, spinning ended: the control loop ends, then STOP and close."""
+        self._loop.stop()
+        if self._opening is not None:
+            self._opening.discard(AxisBoardSession.close)
         self.on_cleanup(None)
 
     def _send_stop(self, why: str) -> None:
@@ -193,7 +182,7 @@ class AxisDriver(ManagedNode):
         if reason:
             self.get_logger().warning(f'trajectory refused ({reason}); keeping the last good one')
         else:
-            self._wake.trigger()
+            self._loop.wake()
 
     def _on_safety(self, msg: SafetyState) -> None:
         now = steady_now(self.steady)
@@ -209,7 +198,7 @@ class AxisDriver(ManagedNode):
                                     msg.sequence, list(msg.reasons))
             changed = self.sup.safety.verdict(now)[0] is not before
         if changed:
-            self._wake.trigger()     # stow / stop / follow again: at once, not at the next poll
+            self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 
     def _on_phase(self, msg: TrackerPhase) -> None:
         mode = operator_mode(msg.phase, msg.mode)
@@ -217,13 +206,13 @@ class AxisDriver(ManagedNode):
             old = self.sup.mode
             if self.sup.set_mode(mode):
                 self.get_logger().info(f'operator mode {old} -> {mode} ({msg.phase_name})')
-                self._wake.trigger()
+                self._loop.wake()
 
     def _on_home(self, request, response):
         with self._lock:
             response.success, response.message = self.sup.request_home(self.active and self.session is not None)
         if response.success:
-            self._wake.trigger()
+            self._loop.wake()
         return response
 
     def _on_jog(self, request, response):
@@ -233,14 +222,16 @@ class AxisDriver(ManagedNode):
         response.success = ok
         if ok:
             response.target = target
-            self._wake.trigger()
+            self._loop.wake()
         return response
 
     # ------------------------------------------------------------ read -> update -> write
-    def _control_tick(self) -> None:
+    def _control_step(self) -> float:
+        """One read -> update -> write (control thread); returns the seconds until the
+        next one. The lock is held for the decisions only, never during board I/O."""
+        session, period = self.session, 1.0 / self.p['control_rate']
+        reading = session.read(steady_now(self.steady), period) if session else BoardReading(None)
         with self._lock:
-            session, period = self.session, 1.0 / self.p['control_rate']
-            reading = session.read(steady_now(self.steady), period) if session else BoardReading(None)
             now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())   # as read
             for line in self.sup.note_link_events(reading.reset, reading.reconnected):
                 self.get_logger().warning(line)
@@ -248,17 +239,17 @@ class AxisDriver(ManagedNode):
             rate = self.rate.update(now_ros, now_steady)
             act = self.sup.tick(now_ros, now_steady, board, self.active, rate)
             fault = self.sup.take_new_fault()
-            if fault:
-                self.get_logger().error(f'axis fault: {fault}')
-            if session is not None and board is not None and act.kind != 'none':
-                warning = self.sup.record_write(act, *session.write(act))
-                if warning:
-                    self.get_logger().warning(warning)
+        if fault:
+            self.get_logger().error(f'axis fault: {fault}')
+        result = session.write(act) if session is not None and board is not None and act.kind != 'none' else None
+        with self._lock:
+            warning = self.sup.record_write(act, *result) if result is not None else None
             self._snap = self.sup.snapshot(now_ros, board)
             wait = period if act.kind != 'none' else self.sup.next_tick(
                 now_ros, now_steady, board, rate, period, self.p['idle_poll_period'])
-            self._control_timer.timer_period_ns = int(wait * 1e9)
-            self._control_timer.reset()          # the next tick `wait` from now (an event may come first)
+        if warning:
+            self.get_logger().warning(warning)
+        return wait
 
     # ------------------------------------------------------------ outputs
     @staticmethod
@@ -273,32 +264,11 @@ class AxisDriver(ManagedNode):
         fast = max(p['status_rate'], p['joint_state_rate'])
         self._pub_n += 1
         if snap.board is not None and session is not None and self._pub_n % max(1, round(fast / p['joint_state_rate'])) == 0:
-            js = JointState(name=[self.axis], position=[float(snap.measured)],
-                            velocity=[float(session.velocity(self.sup.cfg.calibration))])
-            # the read time while moving (fast ticks); at rest the position holds until now
-            js.header.stamp = stamp(snap.stamp) if snap.board.moving else self.get_clock().now().to_msg()
-            self.pub_joint.publish(js)
+            self.pub_joint.publish(joint_msg(self.axis, snap, session, self.sup.cfg.calibration,
+                                             self.get_clock().now().to_msg()))
         if self._pub_n % max(1, round(fast / p['status_rate'])) == 0:
-            self._publish_status()
-
-    def _publish_status(self) -> None:
-        snap, session, life = self._snap, self.session, self.lifecycle_state()
-        m = AxisStatus(axis=self.axis, state=snap.state if life == 'active' else life,
-                       commanded=snap.commanded, setpoint=snap.setpoint, measured=snap.measured,
-                       error=snap.measured - snap.setpoint)
-        # the time the board was read: measured, setpoint and error belong to it
-        m.header.stamp = stamp(snap.stamp) if snap.stamp > 0 else self.get_clock().now().to_msg()
-        if snap.board is not None:
-            b = snap.board
-            m.steps, m.moving, m.homed = int(b.steps), bool(b.moving), bool(b.homed)
-            m.limit_bits, m.fault_bits = int(b.limit_bits) & 0xFF, int(b.fault_bits) & 0xFFFF
-        if session is None:
-            m.link_state = int(LinkState.LINK_FAULT if self.refused else LinkState.LINK_DOWN)
-        else:
-            m.link_state = int(session.link_state())
-            m.frames_lost, m.frames_bad = session.frames_lost() & 0xFFFFFFFF, session.frames_bad() & 0xFFFFFFFF
-            m.board_info = session.board_info
-        self.pub_status.publish(m)
+            self.pub_status.publish(status_msg(self.axis, snap, self.lifecycle_state(), session, self.refused,
+                                               self.get_clock().now().to_msg()))
 
     def _publish_diagnostics(self) -> None:
         now = steady_now(self.steady)
@@ -307,9 +277,7 @@ class AxisDriver(ManagedNode):
             last_error = self.last_error or self.sup.last_error
             level, message = diagnostic_verdict(life, self.sup, self.session is not None, last_error)
             pending = self.activation.pending(life, now)
-            st = DiagnosticStatus(level=bytes([level]), name=f'{self.get_name()}: axis {self.axis}',
-                                  message=f'{message}; {pending}' if pending else message,
-                                  hardware_id=self.session.board_info if self.session else board_port(self.p))
+            name, hw = f'{self.get_name()}: axis {self.axis}', self.session.board_info if self.session else board_port(self.p)
             values = {'lifecycle': life, 'state': self.sup.state, 'reason': self.sup.reason,
                       'port': board_port(self.p), 'mode': self.sup.mode,
                       'last_rejected_trajectory': self.sup.store.last_reason, 'last_error': last_error,
@@ -317,17 +285,14 @@ class AxisDriver(ManagedNode):
                       'parameter_changes_refused': self.params.refused,
                       'last_refused_parameter': self.params.last_refusal,
                       **(self.session.counters() if self.session is not None else {})}
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(arr)
+        self.pub_diag.publish(diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw,
+                                              values, self.get_clock().now().to_msg()))
 
 
 def main(args=None) -> int:
-    """``ros2 run sslfr_drivers axis_driver``: four executor threads (board I/O, status
-    heartbeat, lifecycle, everything else); the link's logs reach the node's logger."""
-    return run_node('axis_driver', AxisDriver, args=args, log_bridge=AxisDriver.LOG_BRIDGE,
-                    executor=lambda ctx: MultiThreadedExecutor(num_threads=AxisDriver.EXECUTOR_THREADS, context=ctx))
+    """``ros2 run sslfr_drivers axis_driver``: a single-threaded executor (board I/O in
+    the driver's own threads); the link's logs reach the node's logger."""
+    return run_node('axis_driver', AxisDriver, args=args, log_bridge=AxisDriver.LOG_BRIDGE)
 
 
 if __name__ == '__main__':

@@ -256,3 +256,11 @@ class AxisBoardSession:
         except (LinkError, ProtocolError) as exc:
             return WriteResult(False, str(exc) or type(exc).__name__)
         return WriteResult(True)
+
+
+def open_session(port: str, p: dict) -> AxisBoardSession:
+    """A session on ``port`` with the driver's parameters ``p``, opened (INFO read);
+    the exceptions of :meth:`AxisBoardSession.open`."""
+    session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'])
+    session.open()
+    return session
