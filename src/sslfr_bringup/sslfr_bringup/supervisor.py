@@ -613,16 +613,21 @@ class RosSide(threading.Thread):
                 elif kind == 'deactivate':
                     names, timeout, done = arg
                     deadline = time.monotonic() + timeout
-                    futures = []
-                    for name in names:
-                        client = clients.get(name)
-                        if client is None:
-                            client = clients[name] = node.create_client(ChangeState, f'{name}/change_state')
-                        if client.service_is_ready():
-                            req = ChangeState.Request()
-                            req.transition.id = Transition.TRANSITION_DEACTIVATE
-                            futures.append(client.call_async(req))
-                    while futures and time.monotonic() < deadline and not all(f.done() for f in futures):
+                    futures, waiting = [], list(names)
+                    # a service not discovered yet (a process that just started, or one
+                    # with many nodes) is waited for within the deadline, never skipped
+                    while time.monotonic() < deadline:
+                        for name in list(waiting):
+                            client = clients.get(name)
+                            if client is None:
+                                client = clients[name] = node.create_client(ChangeState, f'{name}/change_state')
+                            if client.service_is_ready():
+                                req = ChangeState.Request()
+                                req.transition.id = Transition.TRANSITION_DEACTIVATE
+                                futures.append(client.call_async(req))
+                                waiting.remove(name)
+                        if not waiting and all(f.done() for f in futures):
+                            break
                         executor.spin_once(timeout_sec=0.02)
                     done.set()
         except BaseException as exc:  # noqa: BLE001
