@@ -208,6 +208,7 @@ def main(argv=None) -> int:
     ap.add_argument('--set', action='append', default=[], help='NODE:KEY=VALUE for the sim')
     ap.add_argument('--json', default=None, help='write the figures to this file')
     ap.add_argument('--keep', action='store_true', help='keep the sim output directory')
+    ap.add_argument('--nodeset', default=None, help='node-set description for the sim (e.g. another sim.clock_rate)')
     ap.add_argument('--layout', default=None, help='process layout of the node set (composed, separate; '
                                                    'default: the node set\'s)')
     args = ap.parse_args(argv)
@@ -219,6 +220,8 @@ def main(argv=None) -> int:
            '--no-report', '--anchor-margin', '3', '--out', str(out)]
     if args.layout:
         cmd += ['--layout', args.layout]
+    if args.nodeset:
+        cmd += ['--nodeset', args.nodeset]
     for f in args.fault:
         cmd += ['--fault', f]
     for s in args.set:
