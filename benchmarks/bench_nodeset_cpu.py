@@ -11,7 +11,9 @@ command, 140 s). Goal: total <= 15 % of one core, PSS <= 200 MB.
 ``--confine F`` runs the node processes in a cgroup limited to F of one core (cgroup
 v1 ``cpu.cfs_quota_us`` or v2 ``cpu.max``, root needed) - the Raspberry Pi 3 budget is
 about 0.4 of one core of this machine - and ``--fault SPEC`` passes faults to the sim
-(e.g. ``overtemp@12:01`` or ``kill:safety@12:01``). ``--layout`` chooses the process
+(e.g. ``overtemp@12:01`` or ``kill:safety@12:01``; a restarted node process is put in
+the cgroup too, but its CPU time is not in the figures: they follow the processes
+present at the start of the window). ``--layout`` chooses the process
 layout of the node set (composed, separate). With ``--json FILE`` the figures are also
 written as JSON.
 
@@ -231,6 +233,8 @@ def main(argv=None) -> int:
             cmd += ['--set', f'{axis}_driver:status_rate=20.0']
     load0 = os.getloadavg()
     group = Cgroup(args.confine) if args.confine else None
+    import threading
+    done = threading.Event()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     lines: list[str] = []
@@ -248,10 +252,19 @@ def main(argv=None) -> int:
         if group is not None:              # nodes restarted since: confine them too
             for p in node_processes(proc.pid).values():
                 group.add(p.pid)
-        import threading
         threading.Thread(target=lambda: [lines.append(ln) for ln in proc.stdout], daemon=True).start()
         domain = int(re.search(r'ROS_DOMAIN_ID=(\d+)', ''.join(lines)).group(1))
         observer = Observer(domain)
+        if group is not None:             # a node process restarted later (a fault) is confined too
+            def confine_restarted():
+                while proc.poll() is None and not done.is_set():
+                    for p in node_processes(proc.pid).values():
+                        try:
+                            group.add(p.pid)
+                        except OSError:
+                            pass
+                    time.sleep(0.5)
+            threading.Thread(target=confine_restarted, daemon=True).start()
         time.sleep(5.0)                   # settle: the first trajectory, first homing done
         procs = node_processes(proc.pid)
         t0 = time.monotonic()
@@ -270,6 +283,7 @@ def main(argv=None) -> int:
                 cpu[n] = float('nan')
         throttled = group.throttled() if group is not None else ''
     finally:
+        done.set()
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             try:
