@@ -355,3 +355,6 @@ def test_next_tick_follows_the_sun_one_step_at_a_time():
         t += sup.next_tick(t, t, _board(steps=steps, sensor=cal.angle(steps)), 1.0, 0.05, 0.5)
     assert worst <= 1 and 38 <= moves <= 46, (worst, moves)
     assert ticks < 60 * 3, ticks                      # 20 Hz would be 1200
+    # 90x faster than real time (a simulated day): a step every 17 ms, the control rate
+    board = _board(steps=steps, sensor=cal.angle(steps))
+    assert sup.next_tick(t, t, board, 90.0, 0.05, 0.5) == 0.05

@@ -527,8 +527,10 @@ class AxisSupervisor:
         (silence -> STOP, then -> STOW; :class:`SafetyWatch`), and, while following,
         the instant the commanded setpoint (``lead * time_rate`` ahead) crosses to the
         next step (from the trajectory's velocity; a trajectory, safety or mode event
-        wakes the tick at once anyway). Never below ``fast``: the previous fixed-rate
-        behaviour is the fastest this gets.
+        wakes the tick at once anyway). While the setpoint moves a step or more per
+        ``slow`` (a simulation many times faster than real time, where ``time_rate`` is
+        estimated from a /clock that jumps) it stays at ``fast``. Never below ``fast``:
+        the previous fixed-rate behaviour is the fastest this gets.
         """
         if (board is None or board.moving or board.homing or not board.homed or self._cmd_steps is not None
                 or self.home_requested or self._ref):
@@ -549,6 +551,8 @@ class AxisSupervisor:
             elif sp is not None and sp[2] == 'following' and sp[1] != 0.0:
                 x = (self.cfg.limits.clamp(sp[0]) - cal.offset) / cal.joint_per_step   # [steps]
                 v = sp[1] / cal.joint_per_step                                           # [steps/s ROS]
+                if abs(v) * time_rate * slow >= 1.0:
+                    return fast     # a step per idle period or more (a fast simulation): no prediction
                 boundary = round(x) + (0.5 if v > 0 else -0.5)
                 wait = min(wait, max(0.0, (boundary - x) / v) / time_rate + 1e-3)
         return max(fast, wait)
