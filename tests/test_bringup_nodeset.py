@@ -230,6 +230,12 @@ def test_systemd_unit(tmp_path):
     assert 'Environment=ROS_STATIC_PEERS=192.168.1.20' in open_text
 
 
+def test_systemd_unit_runs_the_chosen_layout():
+    text = service.render_unit(root=Path('/r'), config='c', user='u', domain_id=7, discovery_range='LOCALHOST',
+                               layout='composed')
+    assert 'ExecStart=/r/sslfr up --config c --layout composed' in text.splitlines()
+
+
 def test_install_service_dry_run_prints_and_writes_unit(tmp_path, site):
     env = dict(os.environ)
     out = subprocess.run([str(ROOT / 'sslfr'), 'install-service', '--dry-run', '--user', 'pi', '--config', str(site)],
