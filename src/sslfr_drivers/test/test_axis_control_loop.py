@@ -34,6 +34,20 @@ def test_control_loop_runs_after_the_wait_it_returns_and_at_once_when_woken():
     assert len(times) == n, 'no step after stop'
 
 
+def test_control_loop_keeps_its_rate_when_a_step_takes_time():
+    starts = []
+
+    def step():
+        starts.append(time.monotonic())
+        time.sleep(0.02)                  # board I/O inside the step
+        return 0.05
+    loop = ControlLoop(step).start()
+    time.sleep(0.55)
+    loop.stop()
+    periods = [b - a for a, b in zip(starts, starts[1:])]
+    assert periods and sum(periods) / len(periods) < 0.06, periods     # 50 ms, not 70 ms
+
+
 def test_control_loop_paces_itself_and_survives_a_failing_step():
     calls = []
 

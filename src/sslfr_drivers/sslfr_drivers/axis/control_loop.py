@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Callable
 
 _log = logging.getLogger('sslfr_drivers.axis')
@@ -22,7 +23,9 @@ _log = logging.getLogger('sslfr_drivers.axis')
 class ControlLoop:
     """``step() -> seconds until the next step`` in a thread, woken early by :meth:`wake`.
 
-    A step raising an exception is logged and the loop goes on after ``retry`` [s].
+    The wait counts from the START of the step (a fixed rate, like a timer: the board
+    I/O inside a step does not stretch the period). A step raising an exception is
+    logged and the loop goes on after ``retry`` [s].
     """
 
     def __init__(self, step: Callable[[], float], name: str = 'control', retry: float = 0.05):
@@ -55,11 +58,13 @@ class ControlLoop:
             self._event.clear()
             if self._halt:
                 return
+            started = time.monotonic()
             try:
-                wait = max(0.0, float(self._step()))
+                wait = float(self._step())
             except Exception:  # noqa: BLE001 - the control loop must survive a bad step
                 _log.exception('control step failed')
                 wait = self._retry
+            wait = max(0.0, wait - (time.monotonic() - started))
             self.steps += 1
 
 
