@@ -358,3 +358,15 @@ def test_next_tick_follows_the_sun_one_step_at_a_time():
     # 90x faster than real time (a simulated day): a step every 17 ms, the control rate
     board = _board(steps=steps, sensor=cal.angle(steps))
     assert sup.next_tick(t, t, board, 90.0, 0.05, 0.5) == 0.05
+
+
+def test_time_rate_ignores_a_step_right_after_a_clock_jump():
+    from sslfr_drivers.axis.core import TimeRate
+    r = TimeRate()
+    t_ros, t_st = 1000.0, 0.0
+    for _ in range(40):                   # 90x, /clock every 50 ms wall
+        t_ros, t_st = t_ros + 4.5, t_st + 0.05
+        r.update(t_ros, t_st)
+    assert 80 < r.rate < 100
+    r.update(t_ros + 4.5, t_st + 0.002)   # an event-woken step 2 ms later, after a jump
+    assert 80 < r.rate < 100, r.rate

@@ -670,14 +670,19 @@ class TimeRate:
     faster than ``max_rate``: a replay restarting, the time being set) is ignored.
     """
 
-    def __init__(self, gain: float = 0.3, max_rate: float = 1e5) -> None:
+    def __init__(self, gain: float = 0.3, max_rate: float = 1e5, min_interval: float = 0.04) -> None:
         self.rate = 1.0
         self.gain = gain
         self.max_rate = max_rate
+        self.min_interval = min_interval
         self._last: tuple[float, float] | None = None
 
     def update(self, now_ros: float, now_steady: float) -> float:
-        """Feed ROS time [s] and steady time [s]; return the rate [-]."""
+        """Feed ROS time [s] and steady time [s]; return the rate [-]. A pair less than
+        ``min_interval`` [s] after the reference is not used (a control step woken by
+        an event just after a /clock jump would read a rate of thousands)."""
+        if self._last is not None and now_steady - self._last[1] < self.min_interval:
+            return self.rate
         last, self._last = self._last, (now_ros, now_steady)
         if last is None or now_steady - last[1] <= 0.0:
             return self.rate
