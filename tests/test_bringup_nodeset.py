@@ -128,7 +128,7 @@ def _launch_module():
 
 def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     mod = _launch_module()
-    entries = mod._entries(str(site), '/sslfr1', str(tmp_path), layout='separate')
+    entries = mod._entries(str(site), '/sslfr1', str(tmp_path))
     assert [e['name'] for e in entries] == [n.name for n in nodeset.load().start_order()]
     by = {e['name']: e for e in entries}
     moved = str(tmp_path / 'site.params.yaml')      # the site config, moved under /sslfr1
@@ -141,7 +141,7 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     assert nodeset.node_params(doc, 'planner', '/sslfr1')['collector.law'] == 'continuous'
     assert nodeset.node_params(doc, 'gps', '/sslfr1')['port'] == '/dev/ttyAMA0'
     assert nodeset.node_params(doc, 'gps', '/sslfr1')['site.latitude_deg'] == 36.835
-    root = {e['name']: e for e in mod._entries(str(site), '', None, True, layout='separate')}
+    root = {e['name']: e for e in mod._entries(str(site), '', None, True)}
     assert root['gps']['parameters'] == [str(site), {'use_sim_time': True}]
     with pytest.raises(ImportError):
         mod.generate_launch_description()   # needs ROS launch (on the Pi)
@@ -203,7 +203,7 @@ def test_build_programs_reports_missing_executables_and_never_fakes_them(site, t
 
     def finder(pkg, exe):   # only the planner "is installed"
         return Path('/opt/x/planner') if exe == 'planner' else None
-    programs, missing = up.build_programs(ns, site, finder=finder, run_dir=tmp_path / 'run', layout='separate')
+    programs, missing = up.build_programs(ns, site, finder=finder, run_dir=tmp_path / 'run')
     assert [p.name for p in programs] == ['planner']
     assert len(missing) == len(ns.nodes) - 1 and any('mirrors_driver (sslfr_drivers/axis_driver)' in m for m in missing)
 
