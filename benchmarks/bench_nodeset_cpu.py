@@ -11,8 +11,20 @@ command, 140 s). Goal: total <= 15 % of one core, PSS <= 200 MB.
 ``--confine F`` runs the node processes in a cgroup limited to F of one core (cgroup
 v1 ``cpu.cfs_quota_us`` or v2 ``cpu.max``, root needed) - the Raspberry Pi 3 budget is
 about 0.4 of one core of this machine - and ``--fault SPEC`` passes faults to the sim
-(e.g. ``overtemp@12:01:30+30``). With ``--json FILE`` the figures are also written as
-JSON (used by the confined-CPU tests).
+(e.g. ``overtemp@12:01`` or ``kill:safety@12:01``; a restarted node process is put in
+the cgroup too, but its CPU time is not in the figures: they follow the processes
+present at the start of the window). ``--layout`` chooses the process
+layout of the node set (composed, separate). With ``--json FILE`` the figures are also
+written as JSON.
+
+The deadlines are watched live from a ROS node of this script (in the sim's domain,
+not counted in the CPU figures): the gaps of each ``axes/<axis>/status`` heartbeat, the
+tracking error |measured - setpoint| of every status while following (in motor steps),
+the over-temperature reaction (first outlet sample over the limit -> ``safety/state``
+STOW -> mirrors status ``stowing``) and, after a killed safety supervisor, the last
+``safety/state`` -> each axis status ``stopped`` (with ``--fault`` the drivers' status
+runs at 20 Hz instead of 5 Hz: the observation adds at most 50 ms, and costs CPU). Load averages at start and end are printed:
+CPU figures taken while other jobs load the machine must say so.
 
     python benchmarks/bench_nodeset_cpu.py [--window 140] [--confine 0.4] [--layout NAME]
 """
@@ -56,6 +68,84 @@ def node_processes(root_pid: int) -> dict[str, psutil.Process]:
         elif any(c.endswith(('/composed', '/nodeset_process')) for c in cmd[:2]):
             out[next((c for c in cmd if c.startswith('--group=')), 'composed')] = p
     return out
+
+
+class Observer:
+    """Watches the deadlines on the sim's topics (see the module docstring)."""
+
+    def __init__(self, domain: int):
+        import threading
+
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import Temperature
+        from sslfr_common.contract import JOINTS, TEMPERATURE_LIMIT_C
+        from sslfr_interfaces.msg import AxisStatus, SafetyState
+
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=domain)
+        self.node = rclpy.create_node('bench_nodeset_observer', context=self.ctx)
+        self.safety: list[tuple[float, int, tuple]] = []
+        self.status: dict[str, list[tuple[float, str, float]]] = {a: [] for a in JOINTS}
+        self.hot: list[float] = []
+        now = time.monotonic
+
+        def on_temp(m):
+            if m.temperature > TEMPERATURE_LIMIT_C:
+                self.hot.append(now())
+        self.node.create_subscription(Temperature, 'absorber/outlet_temperature', on_temp, 10)
+        self.node.create_subscription(SafetyState, 'safety/state',
+                                      lambda m: self.safety.append((now(), m.level, tuple(m.reasons))), 10)
+        for axis in JOINTS:
+            self.node.create_subscription(
+                AxisStatus, f'axes/{axis}/status',
+                lambda m, a=axis: self.status[a].append((now(), m.state, m.error)), 10)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.limit = TEMPERATURE_LIMIT_C
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self.ctx.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.1)
+            except Exception:  # noqa: BLE001 - context shut down
+                return
+
+    def close(self):
+        import rclpy
+        rclpy.try_shutdown(context=self.ctx)
+        self._thread.join(2.0)
+
+    def report(self, t0: float, t1: float) -> dict:
+        """Deadlines seen between monotonic ``t0`` and ``t1``."""
+        from sslfr_common.contract import STEP_ANGLE
+        out: dict = {'status_gap_max_s': {}, 'tracking_error_steps': {}}
+        for axis, rows in self.status.items():
+            rows = [r for r in rows if t0 <= r[0] <= t1]
+            t = [r[0] for r in rows]
+            out['status_gap_max_s'][axis] = round(max((b - a for a, b in zip(t, t[1:])), default=float('nan')), 3)
+            err = sorted(abs(r[2]) / STEP_ANGLE for r in rows if r[1] == 'following' and r[2] == r[2])
+            if err:
+                out['tracking_error_steps'][axis] = {'max': round(err[-1], 2),
+                                                     'p99': round(err[int(0.99 * (len(err) - 1))], 2),
+                                                     'n': len(err)}
+        hot = [t for t in self.hot if t >= t0]
+        if hot:
+            stow = next((t for t, lvl, rs in self.safety if t >= hot[0] and lvl >= 2
+                         and any('over-temperature' in r for r in rs)), None)
+            mirrors = next((t for t, st, _ in self.status['mirrors'] if t >= hot[0] and st == 'stowing'), None)
+            out['overtemp'] = {'sample_to_safety_stow_ms': None if stow is None else round(1000 * (stow - hot[0]), 1),
+                               'sample_to_mirrors_stowing_ms':
+                                   None if mirrors is None else round(1000 * (mirrors - hot[0]), 1)}
+        arrivals = [t for t, _, _ in self.safety if t0 <= t <= t1]
+        gaps = [(b - a, a) for a, b in zip(arrivals, arrivals[1:])]
+        last = max(gaps)[1] if gaps and max(gaps)[0] > 1.0 else (arrivals[-1] if arrivals and arrivals[-1] < t1 - 2 else None)
+        if last is not None:
+            out['safety_silent'] = {a: next((round(t - last, 3) for t, st, _ in rows if t > last and st in ('stopped', 'stowing')),
+                                            None) for a, rows in self.status.items()}
+        return out
 
 
 def cpu_seconds(p: psutil.Process) -> float:
@@ -120,6 +210,9 @@ def main(argv=None) -> int:
     ap.add_argument('--set', action='append', default=[], help='NODE:KEY=VALUE for the sim')
     ap.add_argument('--json', default=None, help='write the figures to this file')
     ap.add_argument('--keep', action='store_true', help='keep the sim output directory')
+    ap.add_argument('--nodeset', default=None, help='node-set description for the sim (e.g. another sim.clock_rate)')
+    ap.add_argument('--layout', default=None, help='process layout of the node set (composed, separate; '
+                                                   'default: the node set\'s)')
     args = ap.parse_args(argv)
     minutes = int(args.window // 60) + 3
     h, m = (int(x) for x in args.start.split(':'))
@@ -127,11 +220,21 @@ def main(argv=None) -> int:
     out = Path(tempfile.mkdtemp(prefix='bench-cpu-'))
     cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
            '--no-report', '--anchor-margin', '3', '--out', str(out)]
+    if args.layout:
+        cmd += ['--layout', args.layout]
+    if args.nodeset:
+        cmd += ['--nodeset', args.nodeset]
     for f in args.fault:
         cmd += ['--fault', f]
     for s in args.set:
         cmd += ['--set', s]
+    if args.fault:        # a reaction to observe: the drivers' status at 20 Hz (50 ms resolution)
+        for axis in ('mirrors', 'mobile_structure', 'secondary_reflector'):
+            cmd += ['--set', f'{axis}_driver:status_rate=20.0']
+    load0 = os.getloadavg()
     group = Cgroup(args.confine) if args.confine else None
+    import threading
+    done = threading.Event()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     lines: list[str] = []
@@ -149,14 +252,27 @@ def main(argv=None) -> int:
         if group is not None:              # nodes restarted since: confine them too
             for p in node_processes(proc.pid).values():
                 group.add(p.pid)
-        import threading
         threading.Thread(target=lambda: [lines.append(ln) for ln in proc.stdout], daemon=True).start()
+        domain = int(re.search(r'ROS_DOMAIN_ID=(\d+)', ''.join(lines)).group(1))
+        observer = Observer(domain)
+        if group is not None:             # a node process restarted later (a fault) is confined too
+            def confine_restarted():
+                while proc.poll() is None and not done.is_set():
+                    for p in node_processes(proc.pid).values():
+                        try:
+                            group.add(p.pid)
+                        except OSError:
+                            pass
+                    time.sleep(0.5)
+            threading.Thread(target=confine_restarted, daemon=True).start()
         time.sleep(5.0)                   # settle: the first trajectory, first homing done
         procs = node_processes(proc.pid)
         t0 = time.monotonic()
         c0 = {n: cpu_seconds(p) for n, p in procs.items()}
         time.sleep(args.window)
         wall = time.monotonic() - t0
+        deadlines = observer.report(t0, t0 + wall)
+        observer.close()
         cpu, pss, rss = {}, {}, {}
         for n, p in procs.items():
             try:
@@ -167,6 +283,7 @@ def main(argv=None) -> int:
                 cpu[n] = float('nan')
         throttled = group.throttled() if group is not None else ''
     finally:
+        done.set()
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             try:
@@ -176,14 +293,23 @@ def main(argv=None) -> int:
         if group is not None:
             group.remove()
     total = sum(v for v in cpu.values() if v == v)
-    print(f'node set at real time (sslfr sim --speed 1, {args.start} UTC Almeria), {len(cpu)} processes, '
-          f'{wall:.0f} s window, load average {os.getloadavg()[0]:.1f}'
+    load1 = os.getloadavg()
+    print(f'node set at real time (sslfr sim --speed 1, {args.start} UTC Almeria, layout '
+          f'{args.layout or "default"}), {len(cpu)} processes, {wall:.0f} s window, load average (1/5/15 min) '
+          f'{load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at start, {load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at end'
           + (f', confined to {args.confine:.2f} core ({group.how}; {throttled})' if group else ''))
     for n in sorted(cpu, key=lambda k: -cpu[k]):
         print(f'  {n:<44} CPU {cpu[n]:6.2f} %   PSS {pss.get(n, 0):6.1f} MB   RSS {rss.get(n, 0):6.1f} MB')
     print(f'total CPU {total:.1f} % of one core (goal <= 15 %); before: {BEFORE_TOTAL:.0f} % '
           f'-> ratio {BEFORE_TOTAL / total:.1f}x' if total else 'no CPU measured')
     print(f'PSS sum {sum(pss.values()):.0f} MB (goal <= 200 MB), RSS sum {sum(rss.values()):.0f} MB')
+    print(f'status heartbeat, largest gap [s]: {deadlines["status_gap_max_s"]}')
+    print(f'tracking error while following [motor steps] (bound: 1 step + sensor noise): '
+          f'{deadlines["tracking_error_steps"]}')
+    if 'overtemp' in deadlines:
+        print(f'over-temperature (goal: stow frame <= 200 ms): {deadlines["overtemp"]}')
+    if 'safety_silent' in deadlines:
+        print(f'safety silent -> axis stopped [s] (goal <= 1.2 s): {deadlines["safety_silent"]}')
     sim = {}
     try:
         sim = json.loads((out / 'sim.json').read_text())
@@ -193,6 +319,8 @@ def main(argv=None) -> int:
         Path(args.json).write_text(json.dumps({'cpu_percent': cpu, 'total_cpu_percent': total,
                                                'pss_mb': pss, 'rss_mb': rss, 'window_s': wall,
                                                'confine': args.confine, 'throttled': throttled,
+                                               'layout': args.layout, 'load_start': load0, 'load_end': load1,
+                                               'deadlines': deadlines,
                                                'out': str(out), 'sim': sim}, indent=2))
     if not args.keep and not args.json:
         import shutil

@@ -230,6 +230,12 @@ def test_systemd_unit(tmp_path):
     assert 'Environment=ROS_STATIC_PEERS=192.168.1.20' in open_text
 
 
+def test_systemd_unit_runs_the_chosen_layout():
+    text = service.render_unit(root=Path('/r'), config='c', user='u', domain_id=7, discovery_range='LOCALHOST',
+                               layout='composed')
+    assert 'ExecStart=/r/sslfr up --config c --layout composed' in text.splitlines()
+
+
 def test_install_service_dry_run_prints_and_writes_unit(tmp_path, site):
     env = dict(os.environ)
     out = subprocess.run([str(ROOT / 'sslfr'), 'install-service', '--dry-run', '--user', 'pi', '--config', str(site)],
@@ -316,3 +322,106 @@ def test_config_loader_never_raises_anything_but_a_refusal(data, tmp_path):
         nodeset.check_config(ns, nodeset.read_params(path))
     except nodeset.NodeSetError:
         pass
+
+
+# ------------------------------------------------------------------ layouts (issue 16)
+def test_layouts_compose_hardware_and_keep_safety_alone():
+    ns = nodeset.load()
+    assert ns.layout in ns.layouts and {'composed', 'separate'} <= set(ns.layouts)
+    sep = ns.processes('separate')
+    assert [p.name for p in sep] == [n.name for n in ns.start_order()] and not any(p.composed for p in sep)
+    comp = {p.name: [n.name for n in p.nodes] for p in ns.processes('composed')}
+    assert comp['safety'] == ['safety'] and comp['recorder'] == ['recorder']
+    assert comp['hardware'][:3] == list(AXES), 'the drivers stop their motors first'
+    assert {'gps', 'absorber_board', 'irradiance'} <= set(comp['hardware'])
+    assert sorted(n for names in comp.values() for n in names) == sorted(n.name for n in ns.nodes)
+    for p in ns.processes('composed'):
+        assert not p.composed or not any(n.critical for n in p.nodes)
+    # a selection keeps the groups' remaining nodes together; one left runs alone
+    sel = {p.name: [n.name for n in p.nodes] for p in ns.only(['safety', 'gps', *AXES]).processes('composed')}
+    assert sel == {'safety': ['safety'], 'hardware': [*AXES, 'gps']}
+    assert [p.name for p in ns.only(['gps', 'planner']).processes('composed')] == ['gps', 'planner']
+    with pytest.raises(KeyError, match='known: separate, composed'):
+        ns.processes('clustered')
+
+
+def _doc(layouts, **defaults):
+    nodes = [{'name': 'a', 'package': 'p', 'executable': 'e', 'component': 'm:A'},
+             {'name': 'b', 'package': 'p', 'executable': 'e', 'component': 'm:B'},
+             {'name': 's', 'package': 'p', 'executable': 'e', 'component': 'm:S', 'critical': True},
+             {'name': 'x', 'package': 'p', 'executable': 'e'}]
+    return {'defaults': defaults, 'nodes': nodes, 'layouts': layouts}
+
+
+@pytest.mark.parametrize('doc,needle', [
+    (_doc({'c': {'g': ['a', 's']}}), 's is critical and must run in its own process'),
+    (_doc({'c': {'g': ['a', 'zz']}}), "unknown node 'zz'"),
+    (_doc({'c': {'g': ['a', 'b'], 'h': ['b']}}), "node 'b' is in two processes"),
+    (_doc({'c': {'g': ['a', 'x']}}), 'x has no component'),
+    (_doc({'c': {'a': ['b', 'x']}}), 'not named after a node'),
+    (_doc({'c': ['a']}), 'mapping of process names'),
+    (_doc({}, layout='c'), "defaults.layout 'c': no such layout"),
+])
+def test_invalid_layouts_are_refused_with_the_reason(doc, needle):
+    with pytest.raises(nodeset.NodeSetError, match=needle):
+        nodeset.parse(doc)
+
+
+def test_composed_programs_and_launch_entries_give_each_node_its_own_arguments(site, tmp_path):
+    ns = nodeset.load()
+    programs, missing = up.build_programs(ns, site, finder=lambda pkg, exe: Path(f'/opt/{pkg}/{exe}'),
+                                          run_dir=tmp_path / 'run', layout='composed')
+    assert not missing
+    by = {p.name: p for p in programs}
+    hw = by['hardware']
+    assert hw.argv[0] == '/opt/sslfr_bringup/composed' and hw.argv[1:3] == ['--process', 'hardware']
+    assert hw.stop == 0 and not hw.critical and hw.lifecycle and hw.lifecycle_nodes == AXES
+    assert hw.node_names[:3] == AXES and by['safety'].node_names == ('safety',) and by['safety'].critical
+    from sslfr_bringup.composed import split_nodes
+    name, specs = split_nodes(hw.argv[1:])
+    assert name == 'hardware' and [c for c, _ in specs][:3] == ['sslfr_drivers.axis.axis_driver_node:AxisDriver'] * 3
+    for node, (component, args) in zip(hw.node_names, specs):
+        assert args[:3] == ['--ros-args', '-r', f'__node:={node}'] and str(site) in args
+        if node != 'gps':                               # the site config gives the gps its port
+            own = args[args.index(str(site)) + 2]       # its overrides file, after the site config
+            assert list(yaml.safe_load(Path(own).read_text())) == [f'/{node}']
+    assert yaml.safe_load(Path(specs[0][1][-1]).read_text())['/mirrors_driver']['ros__parameters'] == \
+        {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors'}
+    (tmp_path / 'l').mkdir()
+    entries = nodeset.launch_entries(ns, site, write_dir=tmp_path / 'l', layout='composed')
+    e = {x['process']: x for x in entries}
+    assert e['hardware']['executable'] == 'composed' and e['hardware']['name'] is None
+    assert split_nodes(e['hardware']['arguments'])[0] == 'hardware' and e['safety']['name'] == 'safety'
+    with pytest.raises(nodeset.NodeSetError, match='composed layout needs write_dir'):
+        nodeset.launch_entries(ns, site, layout='composed')
+
+
+@pytest.mark.parametrize('argv,needle', [
+    ([], 'usage'), (['--process', 'g'], 'needs module:Class'), (['--process', 'g', 'x'], 'expected --node'),
+    (['--process', 'g', '--node', '--ros-args'], 'module:Class'),
+])
+def test_composed_command_line_refused_with_the_reason(argv, needle):
+    from sslfr_bringup.composed import split_nodes
+    with pytest.raises(ValueError, match=needle):
+        split_nodes(argv)
+
+
+def test_composed_nodes_each_get_their_own_name_and_parameters(launch, ros, tmp_path):
+    """Two recorders in one composed process: each its own name, params files and
+    parameters (cli_args, use_global_arguments=False), as in their own processes."""
+    from rcl_interfaces.srv import GetParameters
+    site = tmp_path / 'site.yaml'
+    site.write_text('/**:\n  ros__parameters:\n    max_file_size: 1000000\n')
+    args = []
+    for name in ('rec_a', 'rec_b'):
+        own = tmp_path / f'{name}.yaml'
+        own.write_text(f'/{name}:\n  ros__parameters:\n    output_dir: {tmp_path / name}\n')
+        args += ['--node', 'sslfr_bringup.recorder_node:Recorder', '--ros-args', '-r', f'__node:={name}',
+                 '--params-file', str(site), '--params-file', str(own)]
+    proc = launch('sslfr_bringup', 'composed', '--process', 'two', *args)
+    for name in ('rec_a', 'rec_b'):
+        res = ros.call(GetParameters, f'{name}/get_parameters',
+                       GetParameters.Request(names=['output_dir', 'max_file_size']), timeout=20)
+        assert res is not None, proc.output()
+        assert res.values[0].string_value == str(tmp_path / name), proc.output()
+        assert res.values[1].integer_value == 1000000

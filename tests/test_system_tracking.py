@@ -1,8 +1,8 @@
 """System scenarios, tracking: the whole node set (real processes) against simulated
 boards through `./sslfr sim`, observed live on topics and in the recorded bag.
 
-- a tracking window at high speed: every axis within one motor step + the position
-  sensor noise of the ideal angle of the ephemeris core (sslfr_planner.tracking_table),
+- a tracking window at high speed, in both process layouts of the node set (composed,
+  separate): every axis within one motor step + the position sensor noise of the ideal angle of the ephemeris core (sslfr_planner.tracking_table),
   allowing for the sim-time quantisation (see sslfr_bringup.scenario);
 - sunrise and sunset windows: the phase changes NIGHT -> PRE_DAWN -> TRACKING and
   TRACKING -> STOWING -> NIGHT at the times of the reference table, the mirrors
@@ -61,7 +61,8 @@ def _site(day: scenario.Day):
     return (float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k])), 22.0)
 
 
-def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(ros, ros_env, tmp_path):
+@pytest.mark.parametrize('layout', ['composed', 'separate'])   # issue 16: both process layouts
+def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros, ros_env, tmp_path):
     from sslfr_interfaces.msg import AxisStatus, TrackerPhase
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
@@ -70,7 +71,7 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(ros, ros_en
                              QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     live_status = ros.collect(AxisStatus, 'axes/mirrors/status')
     text, summary, day = _run_live(ros, ros_env, tmp_path / 'out',
-                                   ['--start', '09:45', '--end', '10:30', '--speed', str(speed)])
+                                   ['--start', '09:45', '--end', '10:30', '--speed', str(speed), '--layout', layout])
     # live: the phase was TRACKING and the mirrors driver was following
     assert any(m.phase_name == 'TRACKING' for m in live_phase), [m.phase_name for m in live_phase]
     assert any(abs(m.error) < 1e-3 and m.link_state == AxisStatus.LINK_UP for m in live_status)

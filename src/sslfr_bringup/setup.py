@@ -26,6 +26,7 @@ setup(
             'sslfr = sslfr_bringup.cli:main',
             'recorder = sslfr_bringup.recorder_node:main',
             'web = sslfr_bringup.web_node:main',
+            'composed = sslfr_bringup.composed:main',
         ],
     },
 )

@@ -1,5 +1,6 @@
 """``ros2 launch sslfr_bringup tracker.launch.py [config:=FILE] [namespace:=/ns]
-[domain_id:=N] [discovery_range:=LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT] [use_sim_time:=true]``
+[domain_id:=N] [discovery_range:=LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT] [use_sim_time:=true]
+[layout:=composed|separate]``
 
 The whole tracker on a Pi with ROS 2 Jazzy from apt. A THIN reader of the one node-set
 description (config/nodeset.yaml via :mod:`sslfr_bringup.nodeset`); `./sslfr up` reads
@@ -11,6 +12,9 @@ the same description and applies it the same way:
 - under ``namespace:=/ns`` the site config's node sections are moved with the nodes
   (rcl matches a bare ``planner:`` section only in the root namespace), so several
   collectors, each with its own config, share one domain;
+- ``layout:=`` chooses the processes (default: the node set's, ``separate``: a process
+  per node; ``composed``: the drivers and sensor nodes in one ``composed`` process,
+  planner and web in another, safety and recorder each alone: the choice for a Pi);
 - ``use_sim_time:=true`` reaches every node (replaying a day with ``ros2 bag play --clock``);
 - the axis drivers (lifecycle nodes) activate themselves, also after a respawn and when
   their board appears late; launch only starts them (an outside lifecycle command is
@@ -23,14 +27,14 @@ an ordered stop (axes first); the systemd unit uses `sslfr up` for that reason
 
 
 def _entries(config: str | None = None, namespace: str | None = None, write_dir: str | None = None,
-             use_sim_time: bool = False) -> list[dict]:
-    """Node entries to launch (pure: no `launch` import, tested without ROS launch)."""
+             use_sim_time: bool = False, layout: str | None = None) -> list[dict]:
+    """Process entries to launch (pure: no `launch` import, tested without ROS launch)."""
     from sslfr_bringup import nodeset
 
     ns = nodeset.load()
     cfg = nodeset.resolve_config(config or None, default=ns.config)
     return nodeset.launch_entries(ns, cfg, namespace=namespace, write_dir=write_dir,
-                                  use_sim_time=use_sim_time)
+                                  use_sim_time=use_sim_time, layout=layout)
 
 
 def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
@@ -63,10 +67,14 @@ def generate_launch_description():
             return LaunchConfiguration(name).perform(context)
         namespace = arg('namespace')
         use_sim_time = arg('use_sim_time').lower() in ('true', '1', 'yes')
-        write_dir = tempfile.mkdtemp(prefix='sslfr-launch-') if namespace.strip('/') else None
+        write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
         actions = [SetEnvironmentVariable(k, v) for k, v in
                    _environment(arg('domain_id'), arg('discovery_range')).items()]
-        for e in _entries(arg('config'), namespace or None, write_dir, use_sim_time):
+        for e in _entries(arg('config'), namespace or None, write_dir, use_sim_time, arg('layout') or None):
+            if e['name'] is None:          # a composed process: each node's own --ros-args in arguments
+                actions.append(Node(package=e['package'], executable=e['executable'], arguments=e['arguments'],
+                                    output='screen', respawn=True, respawn_delay=2.0))
+                continue
             common = dict(package=e['package'], executable=e['executable'], name=e['name'],
                           namespace=e['namespace'], parameters=e['parameters'],
                           remappings=e['remappings'], output='screen',
@@ -79,6 +87,10 @@ def generate_launch_description():
                               description='site params file (path or name in sslfr_bringup/config); '
                                           'default: the node set\'s (almeria_sslfr.yaml)'),
         DeclareLaunchArgument('namespace', default_value='', description='namespace of the whole tracker'),
+        DeclareLaunchArgument('layout', default_value='',
+                              description='process layout (config/nodeset.yaml layouts: composed = drivers and '
+                                          'sensors in one process, safety alone; separate = a process per node; '
+                                          'default: the node set\'s)'),
         DeclareLaunchArgument('domain_id', default_value='',
                               description='ROS_DOMAIN_ID of the nodes (default: $ROS_DOMAIN_ID, else the '
                                           'node set\'s, 42)'),

@@ -8,6 +8,11 @@ Vocabulary
 ----------
 node     one ROS node process (:class:`NodeSpec`): executable, name, role parameters,
          lifecycle or not, start order and stop group.
+process  one OS process of a *layout* (:class:`ProcessSpec`): one node (``separate``) or
+         several nodes composed in one process and one executor (``composed``: the
+         ``composed`` executable, each node built from its ``component`` class with its
+         own name, namespace, params files and parameters); critical nodes (safety)
+         always alone.
 board    a device a node talks to (:class:`BoardSpec`): its udev name on the Pi and the
          simulated board process that replaces it in ``./sslfr sim``.
 config   the site's ROS params file (``almeria_sslfr.yaml`` ...): node tuning and the
@@ -58,6 +63,20 @@ class NodeSpec:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     remaps: Mapping[str, str] = field(default_factory=dict)
     params: str | None = None      # 'module:attribute' of its parameter table (see node_table)
+    component: str | None = None   # 'module:Class' of its node (composed layouts)
+
+
+@dataclass(frozen=True)
+class ProcessSpec:
+    """One process of a layout: ``name`` (the node's, or the group's) and its nodes in
+    start order (the axis drivers first: their ``on_exit`` stops the motors first)."""
+
+    name: str
+    nodes: tuple[NodeSpec, ...]
+
+    @property
+    def composed(self) -> bool:
+        return len(self.nodes) > 1
 
 
 @dataclass(frozen=True)
@@ -74,6 +93,9 @@ class NodeSet:
     stable_after: float = 60.0
     stop_timeout: float = 5.0
     sim: Mapping[str, Any] = field(default_factory=dict)
+    #: process layouts: name -> ((group name, (node names...)), ...); nodes in no group run alone
+    layouts: Mapping[str, tuple] = field(default_factory=lambda: {'separate': ()})
+    layout: str = 'separate'                  # the default layout
     #: the whole description's nodes when this is a selection (``only``/``without``):
     #: a site config is judged against all of them, not the selection
     all_nodes: tuple[NodeSpec, ...] = ()
@@ -99,6 +121,27 @@ class NodeSet:
 
     def lifecycle_nodes(self) -> list[NodeSpec]:
         return [n for n in self.nodes if n.lifecycle]
+
+    def processes(self, layout: str | None = None) -> list[ProcessSpec]:
+        """The processes of ``layout`` (default: the node set's) in start order: each
+        group of the layout with the nodes of this (selected) set, the other nodes alone.
+        A group left with one node runs it alone; nodes within a process: stop group,
+        then start order. KeyError for an unknown layout."""
+        name = layout or self.layout
+        if name not in self.layouts:
+            raise KeyError(f'no layout {name!r} in the node set (known: {", ".join(self.layouts)})')
+        mine = {n.name: n for n in self.start_order()}
+        out, grouped = [], set()
+        for group, members in self.layouts[name]:
+            # stop group first (the axes' on_exit stops the motors first), then start order
+            nodes = tuple(sorted((mine[m] for m in members if m in mine), key=lambda n: (n.stop, n.start)))
+            grouped.update(n.name for n in nodes)
+            if len(nodes) > 1:
+                out.append(ProcessSpec(group, nodes))
+            elif nodes:
+                out.append(ProcessSpec(nodes[0].name, nodes))
+        out += [ProcessSpec(n.name, (n,)) for n in mine.values() if n.name not in grouped]
+        return sorted(out, key=lambda p: min(n.start for n in p.nodes))
 
     def only(self, names: Iterable[str]) -> 'NodeSet':
         """A copy restricted to ``names`` (unknown names raise KeyError)."""
@@ -194,7 +237,8 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
                               lifecycle=bool(n.get('lifecycle', False)),
                               critical=bool(n.get('critical', False)), start=start, stop=stop,
                               board=board, parameters=params, remaps=remaps,
-                              params=str(n['params']) if n.get('params') else None))
+                              params=str(n['params']) if n.get('params') else None,
+                              component=str(n['component']) if n.get('component') else None))
     if not nodes:
         raise NodeSetError('node set: no nodes')
     d = data.get('defaults') or {}
@@ -209,7 +253,44 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
                    namespace=str(d.get('namespace') or ''), restart_backoff=backoff,
                    stable_after=float(d.get('stable_after', 60.0)),
                    stop_timeout=float(d.get('stop_timeout', 5.0)),
-                   sim=dict(data.get('sim') or {}), path=path)
+                   sim=dict(data.get('sim') or {}), path=path,
+                   **_parse_layouts(data, {n.name: n for n in nodes}))
+
+
+def _parse_layouts(data: Mapping[str, Any], nodes: Mapping[str, NodeSpec]) -> dict:
+    """``layouts:`` (name -> {group: [node names]}) and ``defaults.layout``: every node
+    named once, known, with a ``component``, and never a critical node in a group (the
+    safety supervisor always has its own process: a crash elsewhere cannot take it down)."""
+    layouts: dict[str, tuple] = {'separate': ()}
+    for lname, groups in (data.get('layouts') or {}).items():
+        where = f'layouts.{lname}'
+        if groups in (None, {}):
+            layouts[str(lname)] = ()
+            continue
+        if not isinstance(groups, Mapping):
+            raise NodeSetError(f'{where}: a mapping of process names to node lists')
+        seen: set[str] = set()
+        out = []
+        for gname, members in groups.items():
+            members = _as_tuple_str(members, f'{where}.{gname}')
+            if str(gname) in nodes and members != (str(gname),):
+                raise NodeSetError(f'{where}.{gname}: a process is not named after a node it does not run alone')
+            for m in members:
+                if m not in nodes:
+                    raise NodeSetError(f'{where}.{gname}: unknown node {m!r}')
+                if m in seen:
+                    raise NodeSetError(f'{where}.{gname}: node {m!r} is in two processes')
+                seen.add(m)
+                if len(members) > 1 and nodes[m].critical:
+                    raise NodeSetError(f'{where}.{gname}: {m} is critical and must run in its own process')
+                if len(members) > 1 and not nodes[m].component:
+                    raise NodeSetError(f'{where}.{gname}: {m} has no component (module:Class) to compose')
+            out.append((str(gname), members))
+        layouts[str(lname)] = tuple(out)
+    layout = str((data.get('defaults') or {}).get('layout', 'separate'))
+    if layout not in layouts:
+        raise NodeSetError(f'defaults.layout {layout!r}: no such layout (known: {", ".join(layouts)})')
+    return {'layouts': layouts, 'layout': layout}
 
 
 def load(path: str | os.PathLike | None = None) -> NodeSet:
@@ -478,9 +559,27 @@ def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
     return args
 
 
+#: The executable running a composed process (sslfr_bringup/composed.py).
+COMPOSED = ('sslfr_bringup', 'composed')
+
+
+def composed_args(proc: ProcessSpec, node_args: Mapping[str, list[str]]) -> list[str]:
+    """Arguments of the ``composed`` executable for ``proc``: ``--process NAME`` then,
+    per node, ``--node module:Class --ros-args ...`` (its own :func:`ros_args`: name,
+    namespace, params files, remaps). Each node reads only its own ``--ros-args``."""
+    out = ['--process', proc.name]
+    for node in proc.nodes:
+        out += ['--node', str(node.component), *node_args[node.name]]
+    return out
+
+
 def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | None = None,
-                   write_dir: str | os.PathLike | None = None, use_sim_time: bool = False) -> list[dict]:
-    """What tracker.launch.py turns into ``launch_ros`` actions, in start order.
+                   write_dir: str | os.PathLike | None = None, use_sim_time: bool = False,
+                   layout: str | None = None) -> list[dict]:
+    """What tracker.launch.py turns into ``launch_ros`` actions, in start order, one
+    per process of ``layout`` (default: the node set's). A composed process is the
+    ``composed`` executable with ``arguments`` (:func:`composed_args`; its nodes'
+    overrides written to ``write_dir``), ``name`` None, ``nodes`` the node names.
 
     Each entry: package, executable, name, namespace, parameters (a list: the site
     params file, moved under the namespace as :func:`site_config` does, then a dict of
@@ -489,13 +588,30 @@ def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | N
     with a namespace).
     """
     nsp = ns.namespace if namespace is None else namespace
-    if nsp.strip('/') and write_dir is None:
-        raise NodeSetError('launch_entries: a namespace needs write_dir for the moved site config')
+    procs = ns.processes(layout)
+    composed = any(p.composed for p in procs)
+    if (nsp.strip('/') or composed) and write_dir is None:
+        raise NodeSetError('launch_entries: a namespace or a composed layout needs write_dir '
+                           '(the moved site config, the composed nodes\' overrides files)')
     config, params = site_config(config, nsp, write_dir or '.', ns)
     out = []
-    for node in ns.start_order():
+    for proc in procs:
+        if proc.composed:
+            args = {}
+            for node in proc.nodes:
+                overrides = node_overrides(ns, node, params, use_sim_time=use_sim_time, namespace=nsp)
+                ofile = Path(write_dir) / f'{node.name}.params.yaml'
+                ofile.write_text(yaml.safe_dump(overrides_document(ns, node, overrides, nsp)))
+                args[node.name] = ros_args(ns, node, config, overrides_file=ofile, namespace=nsp)
+            out.append({'package': COMPOSED[0], 'executable': COMPOSED[1], 'name': None, 'process': proc.name,
+                        'nodes': [n.name for n in proc.nodes], 'arguments': composed_args(proc, args),
+                        'namespace': nsp, 'parameters': [], 'remappings': [], 'lifecycle': False,
+                        'critical': any(n.critical for n in proc.nodes)})
+            continue
+        node = proc.nodes[0]
         overrides = node_overrides(ns, node, params, use_sim_time=use_sim_time, namespace=nsp)
         out.append({'package': node.package, 'executable': node.executable, 'name': node.name,
+                    'process': node.name, 'nodes': [node.name], 'arguments': [],
                     'namespace': nsp, 'parameters': [str(config), overrides] if overrides else [str(config)],
                     'remappings': list(node.remaps.items()), 'lifecycle': node.lifecycle,
                     'critical': node.critical})

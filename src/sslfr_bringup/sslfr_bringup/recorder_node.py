@@ -30,8 +30,8 @@ from .bag.schema import DefinitionNotFoundError
 class Recorder(Node):
     """Record topics to per-day MCAP bags."""
 
-    def __init__(self):
-        super().__init__('recorder')
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
         cfg = declare_parameters(self, rc.TABLE)
         error = rc.output_error(cfg)
         if error:

@@ -50,12 +50,14 @@ def systemd_word(value: str) -> str:
 
 
 def render_unit(*, root: Path, config: str, user: str, domain_id: int, discovery_range: str,
-                namespace: str = '', peers: str = '') -> str:
+                namespace: str = '', peers: str = '', layout: str = '') -> str:
     """Text of the systemd unit (pure; tested). Every value that reaches the file is
     checked and quoted (:func:`systemd_word`); ValueError when one cannot be written."""
     up = ' '.join(systemd_word(w) for w in (f'{root}/sslfr', 'up', '--config', str(config)))
     if namespace:
         up += ' --namespace ' + systemd_word(namespace)
+    if layout:
+        up += ' --layout ' + systemd_word(layout)
     env = [f'ROS_DOMAIN_ID={domain_id}', f'ROS_AUTOMATIC_DISCOVERY_RANGE={discovery_range}',
            'PYTHONUNBUFFERED=1', 'RCUTILS_COLORIZED_OUTPUT=0', 'RCUTILS_LOGGING_BUFFERED_STREAM=0']
     if peers:
@@ -138,6 +140,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--peers', type=static_peers, default='',
                    help='ROS_STATIC_PEERS, e.g. the monitoring laptop\'s IP (several: a;b)')
     p.add_argument('--namespace', type=ros_namespace, default='', help='namespace of the tracker, e.g. /sslfr1')
+    p.add_argument('--layout', default='', help='process layout of the node set (composed: the choice for a Pi 3; '
+                                                'default: the node set\'s)')
     p.add_argument('--unit-dir', type=output_dir, default=Path('/etc/systemd/system'),
                    help='where to write the unit (an existing or creatable directory)')
     p.add_argument('--dry-run', action='store_true', help='print the unit, write nothing')
@@ -156,11 +160,13 @@ def _body(argv: list[str]) -> int:
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
     except nodeset_mod.NodeSetError as exc:
         raise CliError(f'argument --config: {exc}') from None
+    if args.layout and args.layout not in ns.layouts:
+        raise CliError(f'argument --layout: no layout {args.layout!r} (known: {", ".join(ns.layouts)})')
     domain = args.domain_id if args.domain_id is not None else ns.domain_id
     user = args.user or os.environ.get('SUDO_USER') or getpass.getuser()
     text = render_unit(root=repo_root(), config=str(config), user=user, domain_id=domain,
                        discovery_range=args.discovery_range or ns.discovery_range,
-                       namespace=args.namespace, peers=args.peers)
+                       namespace=args.namespace, peers=args.peers, layout=args.layout)
     if args.dry_run:
         print(text, end='')
         return 0

@@ -184,6 +184,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--set', action='append', default=[], metavar='NODE:KEY=VALUE',
                    help='set a node parameter for this run (YAML value, after the site config), '
                         'e.g. mirrors_driver:status_rate=20 (repeatable)')
+    p.add_argument('--layout', default=None,
+                   help='process layout (config/nodeset.yaml layouts: composed, separate; default: the node set\'s)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
@@ -249,6 +251,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     t_wall0 = time.monotonic()
     try:
         ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
+        ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
         params = nodeset_mod.read_params(config)
         problems = nodeset_mod.check_config(ns, params, where=str(config))
@@ -347,12 +350,12 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     if any(n.name == 'planner' for n in ns.nodes):   # persisted site: per run, not ~/.local/state
         extra.setdefault('planner', {})['state_dir'] = str(out / 'state')
     sim_ports = {b: str(p) for b, p in links.items()}
-    node_progs, missing_nodes = _node_programs(ns, config, sim_ports, extra, run)
+    no_sim = [n for n in ns.nodes if n.board and n.board not in links]
+    for node in no_sim:
+        missing.append(f'{node.name}: its board {node.board} has no simulator, node not started')
+    node_progs, missing_nodes = _node_programs(ns.without(n.name for n in no_sim) if no_sim else ns,
+                                               config, sim_ports, extra, run, args.layout)
     missing += missing_nodes
-    for node in ns.nodes:
-        if node.board and node.board not in links and any(p.name == node.name for p in node_progs):
-            missing.append(f'{node.name}: its board {node.board} has no simulator, node not started')
-            node_progs = [p for p in node_progs if p.name != node.name]
     for m in missing:
         print(f'sslfr sim: MISSING {m}', file=sys.stderr)
     if not node_progs:
@@ -425,7 +428,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                     + ', '.join(p.name for p in node_progs))
             _wait_links({b: links[b] for b in timed}, {b: board_progs[b] for b in timed}, 60.0, stop)
             sup.say(f'sensor simulators up at +{time.monotonic() - t_wall0:.1f} s')
-            names = {p.name for p in node_progs}
+            names = {n for p in node_progs for n in p.node_names}
             wait_until(lambda: names <= ros.graph_nodes, 60.0,
                        lambda: 'nodes in the ROS graph: ' + ', '.join(sorted(names - ros.graph_nodes)))
             lifecycle = [p for p in node_progs if p.lifecycle]
@@ -519,9 +522,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ros.shutdown()
 
 
-def _node_programs(ns, config, sim_ports, extra, run_dir):
+def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None):
     from sslfr_bringup.up import build_programs
-    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra, run_dir=run_dir)
+    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra, run_dir=run_dir,
+                          layout=layout)
 
 
 def _report(bag_root: Path, out: Path) -> int:

@@ -109,6 +109,8 @@ class Program:
     lifecycle: bool = False
     restart: bool = True
     kind: str = 'node'            # 'node' or 'board' (simulated board)
+    nodes: tuple = ()             # ROS nodes it runs (several: a composed process); () = (name,)
+    lifecycle_nodes: tuple = ()   # its lifecycle nodes; () = (name,) when lifecycle
     # runtime state
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
@@ -118,9 +120,18 @@ class Program:
     held: bool = False            # killed on purpose (fault injection): no restart
     lifecycle_state: str = ''     # '', 'activating', 'active', 'failed'
     lifecycle_retry: float | None = None
+    lifecycle_pending: set = field(default_factory=set)   # lifecycle nodes not yet active
     last_exit: int | None = None
     log_file: object = None
     history: list = field(default_factory=list)   # (monotonic, event, detail)
+
+    @property
+    def node_names(self) -> tuple:
+        return self.nodes or (self.name,)
+
+    @property
+    def lifecycle_names(self) -> tuple:
+        return self.lifecycle_nodes or ((self.name,) if self.lifecycle else ())
 
     @property
     def pid(self) -> int | None:
@@ -176,6 +187,10 @@ class Supervisor:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             if p.log_file is None:
                 p.log_file = open(self.log_dir / f'{p.name}.log', 'ab')  # noqa: SIM115 - closed in close()
+                for node in p.node_names:     # a composed process: each node's log is the process's
+                    link = self.log_dir / f'{node}.log'
+                    if node != p.name and not link.exists():
+                        link.symlink_to(f'{p.name}.log')
             stdout = p.log_file
         try:
             p.proc = subprocess.Popen(_orphan_guard(p.argv), env=self.env, stdout=stdout,
@@ -209,25 +224,35 @@ class Supervisor:
         if self.ros is None:
             return
         p.lifecycle_state = 'activating'
-        self.ros.request_active(p.name)
+        p.lifecycle_pending = set(p.lifecycle_names)
+        for name in p.lifecycle_names:
+            self.ros.request_active(name)
+
+    def program_of(self, node: str) -> Program | None:
+        """The program running ROS node ``node`` (its own, or the composed one)."""
+        return self.programs.get(node) or next(
+            (p for p in self.programs.values() if node in p.node_names), None)
 
     def step(self) -> None:
         """One supervision pass: reap exits, schedule/perform restarts, lifecycle."""
         now = time.monotonic()
         if self.ros is not None:
             for name, ok, msg in self.ros.results():
-                p = self.programs.get(name)
+                p = self.program_of(name)
                 if p is None or not p.alive():
                     continue
+                who = p.name if name == p.name else f'{p.name}/{name}'
                 if ok:
-                    p.lifecycle_state = 'active'
+                    p.lifecycle_pending.discard(name)
+                    if not p.lifecycle_pending and p.lifecycle_state != 'failed':
+                        p.lifecycle_state = 'active'
                     self._event(p, 'active', msg)
-                    self.say(f'{p.name}: lifecycle active')
+                    self.say(f'{who}: lifecycle active')
                 else:
                     p.lifecycle_state = 'failed'
                     p.lifecycle_retry = now + 3.0
                     self._event(p, 'activate-failed', msg)
-                    self.say(f'{p.name}: {msg}; checking again in 3 s', 4)
+                    self.say(f'{who}: {msg}; checking again in 3 s', 4)
         for p in self.programs.values():
             if self.stopping:
                 return
@@ -285,9 +310,12 @@ class Supervisor:
 
     # ------------------------------------------------------------------ fault injection
     def kill(self, name: str, hold: bool = True) -> None:
-        """SIGKILL program ``name`` (a fault); with ``hold`` it stays down until
-        :meth:`release`, otherwise the normal restart policy applies."""
-        p = self.programs[name]
+        """SIGKILL program ``name`` (a fault; a node name kills the process running it,
+        all of a composed process); with ``hold`` it stays down until :meth:`release`,
+        otherwise the normal restart policy applies."""
+        p = self.program_of(name)
+        if p is None:
+            raise KeyError(name)
         p.held = hold
         if p.alive():
             os.killpg(p.proc.pid, signal.SIGKILL)
@@ -297,7 +325,9 @@ class Supervisor:
 
     def release(self, name: str) -> None:
         """Let a held program start again now."""
-        p = self.programs[name]
+        p = self.program_of(name)
+        if p is None:
+            raise KeyError(name)
         if p.held:
             p.held = False
             p.failures = 0
@@ -316,7 +346,7 @@ class Supervisor:
         order = sorted(groups)
         for i, g in enumerate(order):
             progs = [p for p in groups[g] if p.alive()]
-            lifecycle = [p.name for p in progs if p.lifecycle]     # active or about to be
+            lifecycle = [n for p in progs for n in p.lifecycle_names]     # active or about to be
             if lifecycle and self.ros is not None:
                 # stop the motors through the drivers' own deactivate (bounded wait)
                 self.ros.deactivate(lifecycle, timeout=min(1.0, max(0.1, deadline - time.monotonic() - 1.5)))
@@ -583,16 +613,21 @@ class RosSide(threading.Thread):
                 elif kind == 'deactivate':
                     names, timeout, done = arg
                     deadline = time.monotonic() + timeout
-                    futures = []
-                    for name in names:
-                        client = clients.get(name)
-                        if client is None:
-                            client = clients[name] = node.create_client(ChangeState, f'{name}/change_state')
-                        if client.service_is_ready():
-                            req = ChangeState.Request()
-                            req.transition.id = Transition.TRANSITION_DEACTIVATE
-                            futures.append(client.call_async(req))
-                    while futures and time.monotonic() < deadline and not all(f.done() for f in futures):
+                    futures, waiting = [], list(names)
+                    # a service not discovered yet (a process that just started, or one
+                    # with many nodes) is waited for within the deadline, never skipped
+                    while time.monotonic() < deadline:
+                        for name in list(waiting):
+                            client = clients.get(name)
+                            if client is None:
+                                client = clients[name] = node.create_client(ChangeState, f'{name}/change_state')
+                            if client.service_is_ready():
+                                req = ChangeState.Request()
+                                req.transition.id = Transition.TRANSITION_DEACTIVATE
+                                futures.append(client.call_async(req))
+                                waiting.remove(name)
+                        if not waiting and all(f.done() for f in futures):
+                            break
                         executor.spin_once(timeout_sec=0.02)
                     done.set()
         except BaseException as exc:  # noqa: BLE001

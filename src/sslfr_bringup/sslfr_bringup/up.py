@@ -1,8 +1,9 @@
 """``sslfr up``: start the whole node set on real boards as supervised processes.
 
 Reads the one node-set description (config/nodeset.yaml) and a site config (ROS
-params file; default ``almeria_sslfr.yaml``), starts every node as its own process
-(recorder, safety, gps, absorber_board, irradiance, planner, the three axis drivers),
+params file; default ``almeria_sslfr.yaml``), starts the nodes as processes of the node set's layout
+(default ``separate``: every node its own process; ``--layout composed``: drivers and
+sensors in one process, planner and web in another, safety and recorder each alone),
 drives the axis drivers' lifecycle to ``active``, restarts a crashed node with backoff
 (a restart of the safety supervisor is reported loudly) and, on SIGINT/SIGTERM, stops
 the axes first, then the rest, within 5 s. This is what the systemd unit runs.
@@ -29,15 +30,18 @@ from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
                    sim_ports: dict | None = None, use_sim_time: bool = False,
                    extra: dict | None = None, namespace: str | None = None,
-                   finder=find_executable) -> tuple[list[Program], list[str]]:
-    """Programs for every node of ``ns`` whose executable is installed, and the list
-    of missing ``package/executable`` (reported, never replaced by anything else).
+                   finder=find_executable, layout: str | None = None) -> tuple[list[Program], list[str]]:
+    """Programs for every process of ``layout`` (default: the node set's) whose
+    executable is installed, and the list of missing ``package/executable`` (reported,
+    never replaced by anything else).
 
     Each node's overrides (role parameters, port, use_sim_time, ``extra[name]``) are
     written to ``run_dir/<node>.params.yaml`` (the caller owns ``run_dir`` and
     removes it), passed after the site config so they win over its node section.
     Under a namespace the site config's node sections are moved with it
-    (:func:`nodeset.site_config`).
+    (:func:`nodeset.site_config`). A composed process is the ``composed`` executable
+    with each node's own arguments (:func:`nodeset.composed_args`); its Program is
+    named after the group and lists its nodes (``nodes``, ``lifecycle_nodes``).
     """
     import yaml
 
@@ -46,20 +50,31 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     namespace = ns.namespace if namespace is None else namespace
     config, params = nodeset_mod.site_config(config, namespace, run_dir, ns)
     programs, missing = [], []
-    for node in ns.start_order():
-        exe = finder(node.package, node.executable)
-        if exe is None:
-            missing.append(f'{node.name} ({node.package}/{node.executable})')
-            continue
+
+    def node_args(node):
         overrides = nodeset_mod.node_overrides(ns, node, params, sim_ports, use_sim_time,
                                                (extra or {}).get(node.name), namespace=namespace)
         ofile = None
         if overrides:
             ofile = run_dir / f'{node.name}.params.yaml'
             ofile.write_text(yaml.safe_dump(nodeset_mod.overrides_document(ns, node, overrides, namespace)))
-        argv = [str(exe), *nodeset_mod.ros_args(ns, node, config, overrides_file=ofile, namespace=namespace)]
-        programs.append(Program(name=node.name, argv=argv, start=node.start, stop=node.stop,
-                                critical=node.critical, lifecycle=node.lifecycle))
+        return nodeset_mod.ros_args(ns, node, config, overrides_file=ofile, namespace=namespace)
+
+    for proc in ns.processes(layout):
+        package, executable = nodeset_mod.COMPOSED if proc.composed else \
+            (proc.nodes[0].package, proc.nodes[0].executable)
+        exe = finder(package, executable)
+        if exe is None:
+            missing.append(f'{proc.name} ({package}/{executable})')
+            continue
+        args = {n.name: node_args(n) for n in proc.nodes}
+        argv = [str(exe), *(nodeset_mod.composed_args(proc, args) if proc.composed else args[proc.name])]
+        programs.append(Program(name=proc.name, argv=argv, start=min(n.start for n in proc.nodes),
+                                stop=min(n.stop for n in proc.nodes),
+                                critical=any(n.critical for n in proc.nodes),
+                                lifecycle=any(n.lifecycle for n in proc.nodes),
+                                nodes=tuple(n.name for n in proc.nodes),
+                                lifecycle_nodes=tuple(n.name for n in proc.nodes if n.lifecycle)))
     return programs, missing
 
 
@@ -72,6 +87,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else the node set\'s, 42)')
     p.add_argument('--namespace', default=None, help='namespace of the whole tracker, e.g. /sslfr1')
+    p.add_argument('--layout', default=None,
+                   help='process layout of the node set (config/nodeset.yaml layouts: composed, separate; '
+                        'default: the node set\'s)')
     p.add_argument('--only', default='', help='comma-separated node names to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated node names not to run')
     p.add_argument('--log-dir', default=None, help='write each node\'s output to DIR/<node>.log '
@@ -115,7 +133,8 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
         ns = nodeset_mod.load(args.nodeset)
         ns = select(ns, args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
-        programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir)
+        programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir,
+                                           layout=args.layout)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
         return 2

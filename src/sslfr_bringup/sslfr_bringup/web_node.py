@@ -43,8 +43,8 @@ def _srv_class(type_name: str):
 class WebNode(Node):
     """Live view, day plots, commands through services, recorded days."""
 
-    def __init__(self):
-        super().__init__('web')
+    def __init__(self, **kwargs):
+        super().__init__('web', **kwargs)
         self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))

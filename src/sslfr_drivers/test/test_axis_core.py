@@ -317,3 +317,56 @@ def test_sensor_fault_bit_drops_the_sensor():
     assert board_state(st).sensor is None
     st = m.Status(100, 100, 0.0, 0, 0, 0, float('nan'), 1)
     assert board_state(st).sensor is None
+
+
+def test_next_tick_fast_while_under_way_else_at_the_safety_deadline():
+    sup = _sup()                                     # safety/state received at steady 0.0
+    assert sup.next_tick(0.0, 0.1, None, 1.0, 0.05, 0.5) == 0.05                 # no board
+    assert sup.next_tick(0.0, 0.1, _board(moving=True), 1.0, 0.05, 0.5) == 0.05
+    assert sup.next_tick(0.0, 0.1, _board(homed=False), 1.0, 0.05, 0.5) == 0.05
+    assert sup.next_tick(0.0, 0.1, _board(), 1.0, 0.05, 0.5) == 0.5                # idle poll
+    assert sup.next_tick(0.0, 0.7, _board(), 1.0, 0.05, 0.5) == pytest.approx(0.301)  # STOP deadline
+    assert sup.next_tick(0.0, 1.6, _board(), 1.0, 0.05, 0.5) == pytest.approx(0.401)  # then STOW
+    assert sup.next_tick(0.0, 1.98, _board(), 1.0, 0.05, 0.5) == 0.05              # never below fast
+    offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
+    assert sup.tick(150.0, 0.2, _board(), True).kind == 'move'
+    assert sup.next_tick(150.0, 0.2, _board(), 1.0, 0.05, 0.5) == 0.05             # MOVE not reached yet
+
+
+def test_next_tick_follows_the_sun_one_step_at_a_time():
+    """A real-time tracking minute: the supervisor, polled only when next_tick says,
+    sends one MOVE per step the setpoint crosses, never lags it by a step, and polls
+    far less than the 20 Hz control rate."""
+    sup = _sup()
+    sup.safety.timeout = 1e9
+    cal = Calibration()
+    rate = 1.1 * cal.joint_per_step / 1.5            # about one step every 1.4 s (the sun)
+    offer(sup.store, [0.0, 600.0], [0.1, 0.1 + 600.0 * rate], None, 0.0, MIRRORS)
+    steps, t, ticks, moves, worst = cal.steps(0.1), 10.0, 0, 0, 0
+    while t < 70.0:
+        act = sup.tick(t, t, _board(steps=steps, sensor=cal.angle(steps)), True)
+        ticks += 1
+        if act.kind == 'move':
+            moves += 1
+            steps = act.steps                         # the board gets there within the tick
+            act = sup.tick(t, t, _board(steps=steps, sensor=cal.angle(steps)), True)
+            assert act.kind == 'none'
+        worst = max(worst, abs(cal.steps(sup.store.setpoint(t + sup.cfg.lead)[0]) - steps))
+        t += sup.next_tick(t, t, _board(steps=steps, sensor=cal.angle(steps)), 1.0, 0.05, 0.5)
+    assert worst <= 1 and 38 <= moves <= 46, (worst, moves)
+    assert ticks < 60 * 3, ticks                      # 20 Hz would be 1200
+    # 90x faster than real time (a simulated day): a step every 17 ms, the control rate
+    board = _board(steps=steps, sensor=cal.angle(steps))
+    assert sup.next_tick(t, t, board, 90.0, 0.05, 0.5) == 0.05
+
+
+def test_time_rate_ignores_a_step_right_after_a_clock_jump():
+    from sslfr_drivers.axis.core import TimeRate
+    r = TimeRate()
+    t_ros, t_st = 1000.0, 0.0
+    for _ in range(40):                   # 90x, /clock every 50 ms wall
+        t_ros, t_st = t_ros + 4.5, t_st + 0.05
+        r.update(t_ros, t_st)
+    assert 80 < r.rate < 100
+    r.update(t_ros + 4.5, t_st + 0.002)   # an event-woken step 2 ms later, after a jump
+    assert 80 < r.rate < 100, r.rate

@@ -142,6 +142,17 @@ def test_sample_queue_keeps_order_and_counts_what_it_drops():
     assert len(q) == 0 and list(q.drain()) == []
 
 
+def test_sample_queue_asks_for_a_wake_only_when_it_stops_being_empty():
+    q = SampleQueue(4)
+    assert q.put('a', 1.0) is True             # was empty: wake the consumer
+    assert q.put('b', 2.0) is False            # a wake is already pending
+    drained = q.drain()
+    assert next(drained) == ('a', 1.0)
+    assert q.put('c', 3.0) is False            # drained in the same pass
+    assert list(drained) == [('b', 2.0), ('c', 3.0)]
+    assert q.put('d', 4.0) is True             # empty again: a new wake
+
+
 # ------------------------------------------------------------------ diagnostics
 class ManualClock:
     def __init__(self, t=100.0):

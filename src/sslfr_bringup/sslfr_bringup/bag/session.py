@@ -25,6 +25,8 @@ from .policy import DiskGuard, DiskStatus, bag_name
 from .schema import DefinitionCache
 from .writer import BagWriter, WriterOptions
 
+_DAY_NS = 86_400 * 1_000_000_000      # one UTC day [ns] (Unix time has no leap seconds)
+
 
 def probe_output_dir(root: str | Path) -> str:
     """Why bags cannot be written under ``root`` ('' when they can).
@@ -100,6 +102,7 @@ class RecordingSession:
         self._decls: dict[str, _Decl] = {}
         self.writer: BagWriter | None = None
         self.bag_dir: Path | None = None
+        self._day: tuple[int, int] | None = None     # [start, end) ns of the open per-day bag
         self._current_key: str | None = None
         self.stats = SessionStats()
         self.disk: DiskStatus | None = None
@@ -144,6 +147,8 @@ class RecordingSession:
             self.writer.add_topic(topic, d.type_name, d.qos, type_hash=d.type_hash)
         self.bag_dir = directory
         self._current_key = name if self.per_day else None
+        day = log_ns - log_ns % _DAY_NS                     # the UTC day of this bag [ns]
+        self._day = (day, day + _DAY_NS) if self.per_day else None
         self.stats.bags_opened += 1
 
     def _close(self) -> None:
@@ -157,6 +162,7 @@ class RecordingSession:
                 self.closed_bags.append(self.bag_dir)
         self.writer = None
         self._current_key = None
+        self._day = None
 
     def write(self, topic: str, data: bytes, log_ns: int, publish_ns: int | None = None,
               sequence: int = 0) -> bool:
@@ -166,8 +172,8 @@ class RecordingSession:
             self.stats.dropped_disk += 1
             return False
         try:
-            if self.writer is not None and self.per_day and \
-                    bag_name(self.prefix, log_ns, True) != self._current_key:
+            day = self._day          # no date formatting per message: the day's bounds [ns]
+            if self.writer is not None and day is not None and not day[0] <= log_ns < day[1]:
                 self._close()  # UTC day changed: close yesterday's bag
             if self.writer is None:
                 self._open(log_ns)

@@ -1,58 +1,54 @@
 """``axis_driver``: lifecycle node driving one SSLFR axis board (stepper + sensor).
 
-One instance per axis (parameter ``axis``; node names ``<axis>_driver`` by
-convention, ``-r __node:=mirrors_driver``). This file only wires ROS to pure code:
-parameters :mod:`.params`, decisions :class:`.core.AxisSupervisor`, trajectory
-:mod:`.trajectory`, lifecycle policy :mod:`.activation` (via :mod:`.managed_node`),
-board I/O :class:`.board_session.AxisBoardSession` (docs/architecture.md).
+One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This file
+only wires ROS to pure code: parameters :mod:`.params`, decisions
+:class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
+:mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
+:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md).
 
-Control tick (steady clock, ``control_rate``): read (board STATUS) -> update
-(``AxisSupervisor.tick``) -> write (one board command). Lifecycle: configure = open
-the board and read INFO (refused boards leave it unconfigured); activate = follow
-``tracker/trajectory``; deactivate = STOP; cleanup / shutdown = STOP + close. With
-``autostart`` (default) the node reaches and keeps ``active`` by itself, configure
-retried with back-off; outside requests still work and are respected, and every
-``change_state`` request gets an answer. ``axes/<axis>/status`` has its own timer and
-never waits for board I/O: 5 Hz in every lifecycle state.
+The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
+its own thread: at ``control_rate`` while something moves, else at the next setpoint
+step, the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at
+once on a trajectory, safety change, mode change, home / jog request or activation.
+No executor callback waits for the board (configure waits at most ``OPEN_WAIT``), so
+a single-threaded executor serves the node, alone or composed. With ``autostart`` the
+node reaches and keeps ``active`` by itself; every ``change_state`` request gets an
+answer. ``axes/<axis>/status`` (5 Hz, every lifecycle state) and ``joint_states``
+(10 Hz while the board answers) come from one publishing timer.
 """
 from __future__ import annotations
 
 import threading
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from sslfr_common.contract import LinkState
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
+from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused
+from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused, open_session
+from sslfr_drivers.axis.control_loop import BackgroundOpen, ControlLoop
 from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapshot, TimeRate,
                                      diagnostic_verdict, operator_mode)
 from sslfr_drivers.axis.managed_node import ManagedNode
+from sslfr_drivers.axis.msgs import diagnostics_msg, joint_msg, status_msg, trajectory_msg
 from sslfr_drivers.axis.params import PARAMS, board_port, params_for, port_problem, tuning_from
-from sslfr_drivers.axis.trajectory import TrajectoryMsg, TrajectoryPoint
-from sslfr_drivers.link.keys import KeyFileError, link_key
+from sslfr_drivers.link.keys import KeyFileError
 
 _SUCCESS = TransitionCallbackReturn.SUCCESS
-
-
-def trajectory_msg(msg: JointTrajectory) -> TrajectoryMsg:
-    """A ``JointTrajectory`` in numbers (seconds) for :mod:`.trajectory`."""
-    return TrajectoryMsg(tuple(msg.joint_names), to_sec(msg.header.stamp), tuple(
-        TrajectoryPoint(to_sec(p.time_from_start), tuple(p.positions), tuple(p.velocities),
-                        tuple(p.accelerations)) for p in msg.points))
+OPEN_WAIT = 0.25      # [s] longest wait of a configure for the board's INFO (the attempt goes on)
 
 
 class AxisDriver(ManagedNode):
     """Lifecycle node following ``tracker/trajectory`` on one axis board."""
+
+    #: Python loggers forwarded to its logger (main() and a composed process)
+    LOG_BRIDGE = ('sslfr_drivers',)
 
     def __init__(self, **kwargs):
         super().__init__('axis_driver', **kwargs)
@@ -72,7 +68,8 @@ class AxisDriver(ManagedNode):
         self.board: BoardState | None = None
         self.active = self.refused = False
         self._snap = Snapshot()
-        self._tick_n = 0
+        self._pub_n = 0
+        self._opening: BackgroundOpen | None = None
         self._stop_seen = False
         self.rate = TimeRate()
 
@@ -86,14 +83,13 @@ class AxisDriver(ManagedNode):
         self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, tl1)
         self.create_service(Trigger, f'axes/{self.axis}/home', self._on_home)
         self.create_service(Jog, f'axes/{self.axis}/jog', self._on_jog)
-        group = MutuallyExclusiveCallbackGroup
-        self.create_timer(1.0 / p['control_rate'], self._control_tick, group(), self.steady)
-        self._status_timer = self.create_timer(1.0 / p['status_rate'], self._publish_status, group(), self.steady)
+        self._status_timer = self.create_timer(self._publish_period(p), self._publish, clock=self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         if p['autostart']:
             self.start_self_activation(p['retry_period'], p['retry_period_max'])
         self.get_logger().info(f'axis {self.axis}: port {board_port(p)}, '
                                f'{"autostart" if p["autostart"] else "waiting for configure"}')
+        self._loop = ControlLoop(self._control_step, name=f'{self.axis} control').start()
 
     def _apply(self, p: dict) -> None:
         """A run-time parameter change that passed the table (ValueError refuses it)."""
@@ -106,21 +102,23 @@ class AxisDriver(ManagedNode):
             self.p, self.sup.cfg, self.sup.stall = p, cfg, stall
             self.sup.safety.timeout = p['safety_timeout']
             self.sup.safety.silent_stow_after = p['safety_silent_stow_after']
-            self._status_timer.timer_period_ns = int(1e9 / p['status_rate'])
+            self._status_timer.timer_period_ns = int(1e9 * self._publish_period(p))
             self.activation.set_retry(p['retry_period'], p['retry_period_max'])
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
-        """Open the board link and read INFO (outside the lock: status and control go
-        on); FAILURE, logged once per distinct error, when the board cannot be reached
-        or is refused. The position counts as lost until re-referenced."""
-        port = board_port(self.p)
-        try:
-            session = AxisBoardSession(port, self.p['baudrate'], self.p['request_timeout'],
-                                       self.p['link_timeout'], self.p['heartbeat_period'],
-                                       key=link_key(self.p['key_file']))
-            info = session.open()
-        except Exception as exc:  # noqa: BLE001 - any link failure refuses configure
+        """Open the board and read INFO in a thread, waiting at most ``OPEN_WAIT``; FAILURE,
+        logged once per distinct error, when the board cannot be reached (yet) or is
+        refused. The position counts as lost until re-referenced."""
+        port, p = board_port(self.p), dict(self.p)
+        if self._opening is None or self._opening.key != port:
+            if self._opening is not None:
+                self._opening.discard(AxisBoardSession.close)
+            self._opening = BackgroundOpen(port, lambda: open_session(port, p))
+        res = self._opening.result(OPEN_WAIT)
+        self._opening = self._opening if res is None else None
+        session, exc = res or (None, ConnectionError('no INFO yet (still waiting for the board)'))
+        if exc is not None:
             refused = isinstance(exc, (BoardRefused, KeyFileError))   # wrong key, version, key file
             error = str(exc) if refused else f'cannot reach the board on {port}: {exc}'
             if error != self.last_error:
@@ -131,7 +129,7 @@ class AxisDriver(ManagedNode):
             self.session, self.refused = session, False
             self.last_error = self.sup.last_error = ''
             self.sup.position_lost()
-        self.get_logger().info(f'configured: board {info} on {port}')
+        self.get_logger().info(f'configured: board {session.board_info} on {port}')
         return _SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
@@ -139,6 +137,7 @@ class AxisDriver(ManagedNode):
         with self._lock:
             self.active = True
             self.sup.clear_fault()
+        self._loop.wake()
         self.get_logger().info('active: following tracker/trajectory')
         return super().on_activate(state)
 
@@ -163,7 +162,10 @@ class AxisDriver(ManagedNode):
     on_shutdown = on_cleanup
 
     def on_exit(self) -> None:
-        """Called by run_node once spinning ends, the context still valid."""
+        """run_node, spinning ended: the control loop ends, then STOP and close."""
+        self._loop.stop()
+        if self._opening is not None:
+            self._opening.discard(AxisBoardSession.close)
         self.on_cleanup(None)
 
     def _send_stop(self, why: str) -> None:
@@ -180,6 +182,8 @@ class AxisDriver(ManagedNode):
             reason = self.sup.store.offer(trajectory_msg(msg), self.axis, now, self.sup.cfg.limits)
         if reason:
             self.get_logger().warning(f'trajectory refused ({reason}); keeping the last good one')
+        else:
+            self._loop.wake()
 
     def _on_safety(self, msg: SafetyState) -> None:
         now = steady_now(self.steady)
@@ -190,8 +194,12 @@ class AxisDriver(ManagedNode):
             session.stop_now()      # before taking the lock: never wait behind a control tick
         self._stop_seen = stop_us
         with self._lock:
+            before = self.sup.safety.verdict(now)[0]
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
                                     msg.sequence, list(msg.reasons))
+            changed = self.sup.safety.verdict(now)[0] is not before
+        if changed:
+            self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 
     def _on_phase(self, msg: TrackerPhase) -> None:
         mode = operator_mode(msg.phase, msg.mode)
@@ -199,10 +207,13 @@ class AxisDriver(ManagedNode):
             old = self.sup.mode
             if self.sup.set_mode(mode):
                 self.get_logger().info(f'operator mode {old} -> {mode} ({msg.phase_name})')
+                self._loop.wake()
 
     def _on_home(self, request, response):
         with self._lock:
             response.success, response.message = self.sup.request_home(self.active and self.session is not None)
+        if response.success:
+            self._loop.wake()
         return response
 
     def _on_jog(self, request, response):
@@ -212,55 +223,53 @@ class AxisDriver(ManagedNode):
         response.success = ok
         if ok:
             response.target = target
+            self._loop.wake()
         return response
 
     # ------------------------------------------------------------ read -> update -> write
-    def _control_tick(self) -> None:
+    def _control_step(self) -> float:
+        """One read -> update -> write (control thread); returns the seconds until the
+        next one. The lock is held for the decisions only, never during board I/O."""
+        session, period = self.session, 1.0 / self.p['control_rate']
+        reading = session.read(steady_now(self.steady), period) if session else BoardReading(None)
         with self._lock:
-            session = self.session
-            reading = session.read(steady_now(self.steady), 1.0 / self.p['control_rate']) if session \
-                else BoardReading(None)
             now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())   # as read
             for line in self.sup.note_link_events(reading.reset, reading.reconnected):
                 self.get_logger().warning(line)
             self.board = board = reading.board
-            act = self.sup.tick(now_ros, now_steady, board, self.active, self.rate.update(now_ros, now_steady))
+            rate = self.rate.update(now_ros, now_steady)
+            act = self.sup.tick(now_ros, now_steady, board, self.active, rate)
             fault = self.sup.take_new_fault()
-            if fault:
-                self.get_logger().error(f'axis fault: {fault}')
-            if session is not None and board is not None and act.kind != 'none':
-                warning = self.sup.record_write(act, *session.write(act))
-                if warning:
-                    self.get_logger().warning(warning)
+        if fault:
+            self.get_logger().error(f'axis fault: {fault}')
+        result = session.write(act) if session is not None and board is not None and act.kind != 'none' else None
+        with self._lock:
+            warning = self.sup.record_write(act, *result) if result is not None else None
             self._snap = self.sup.snapshot(now_ros, board)
-            self._tick_n += 1
-            if board is not None and self._tick_n % max(1, round(self.p['control_rate'] / self.p['joint_state_rate'])) == 0:
-                js = JointState(name=[self.axis], position=[float(self._snap.measured)],
-                                velocity=[float(session.velocity(self.sup.cfg.calibration))])
-                js.header.stamp = stamp(now_ros)
-                self.pub_joint.publish(js)
+            wait = period if act.kind != 'none' else self.sup.next_tick(
+                now_ros, now_steady, board, rate, period, self.p['idle_poll_period'])
+        if warning:
+            self.get_logger().warning(warning)
+        return wait
 
     # ------------------------------------------------------------ outputs
-    def _publish_status(self) -> None:
-        """The 5 Hz heartbeat of every lifecycle state: no lock, no board I/O."""
-        snap, session, life = self._snap, self.session, self.lifecycle_state()
-        m = AxisStatus(axis=self.axis, state=snap.state if life == 'active' else life,
-                       commanded=snap.commanded, setpoint=snap.setpoint, measured=snap.measured,
-                       error=snap.measured - snap.setpoint)
-        # the time the board was read: measured, setpoint and error belong to it
-        m.header.stamp = stamp(snap.stamp) if snap.stamp > 0 else self.get_clock().now().to_msg()
-        if snap.board is not None:
-            b = snap.board
-            m.steps, m.moving, m.homed = int(b.steps), bool(b.moving), bool(b.homed)
-            m.limit_bits, m.fault_bits = int(b.limit_bits) & 0xFF, int(b.fault_bits) & 0xFFFF
-        if session is None:
-            m.link_state = int(LinkState.LINK_FAULT if self.refused else LinkState.LINK_DOWN)
-            m.board_info = f'refused: {self.last_error}' if self.refused else ''   # e.g. a wrong key
-        else:
-            m.link_state = int(session.link_state())
-            m.frames_lost, m.frames_bad = session.frames_lost() & 0xFFFFFFFF, session.frames_bad() & 0xFFFFFFFF
-            m.board_info = session.refusal() or session.board_info
-        self.pub_status.publish(m)
+    @staticmethod
+    def _publish_period(p: dict) -> float:
+        return 1.0 / max(p['status_rate'], p['joint_state_rate'])
+
+    def _publish(self) -> None:
+        """One timer at the faster of ``status_rate`` and ``joint_state_rate``: the
+        status heartbeat (every lifecycle state) and joint_states (while the board
+        answers) from the last tick's snapshot; no lock, no board I/O."""
+        p, snap, session = self.p, self._snap, self.session
+        fast = max(p['status_rate'], p['joint_state_rate'])
+        self._pub_n += 1
+        if snap.board is not None and session is not None and self._pub_n % max(1, round(fast / p['joint_state_rate'])) == 0:
+            self.pub_joint.publish(joint_msg(self.axis, snap, session, self.sup.cfg.calibration,
+                                             self.get_clock().now().to_msg()))
+        if self._pub_n % max(1, round(fast / p['status_rate'])) == 0:
+            self.pub_status.publish(status_msg(self.axis, snap, self.lifecycle_state(), session, self.refused,
+                                               self.get_clock().now().to_msg(), self.last_error))
 
     def _publish_diagnostics(self) -> None:
         now = steady_now(self.steady)
@@ -269,9 +278,7 @@ class AxisDriver(ManagedNode):
             last_error = self.last_error or self.sup.last_error
             level, message = diagnostic_verdict(life, self.sup, self.session is not None, last_error)
             pending = self.activation.pending(life, now)
-            st = DiagnosticStatus(level=bytes([level]), name=f'{self.get_name()}: axis {self.axis}',
-                                  message=f'{message}; {pending}' if pending else message,
-                                  hardware_id=self.session.board_info if self.session else board_port(self.p))
+            name, hw = f'{self.get_name()}: axis {self.axis}', self.session.board_info if self.session else board_port(self.p)
             values = {'lifecycle': life, 'state': self.sup.state, 'reason': self.sup.reason,
                       'port': board_port(self.p), 'mode': self.sup.mode,
                       'last_rejected_trajectory': self.sup.store.last_reason, 'last_error': last_error,
@@ -279,18 +286,14 @@ class AxisDriver(ManagedNode):
                       'parameter_changes_refused': self.params.refused,
                       'last_refused_parameter': self.params.last_refusal,
                       **(self.session.counters() if self.session is not None else {})}
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(arr)
+        self.pub_diag.publish(diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw,
+                                              values, self.get_clock().now().to_msg()))
 
 
 def main(args=None) -> int:
-    """``ros2 run sslfr_drivers axis_driver``: four executor threads (board I/O, status
-    heartbeat, lifecycle, everything else); the link's logs reach the node's logger."""
-    return run_node('axis_driver', AxisDriver, args=args,
-                    executor=lambda ctx: MultiThreadedExecutor(num_threads=4, context=ctx),
-                    log_bridge=('sslfr_drivers',))
+    """``ros2 run sslfr_drivers axis_driver``: a single-threaded executor (board I/O in
+    the driver's own threads); the link's logs reach the node's logger."""
+    return run_node('axis_driver', AxisDriver, args=args, log_bridge=AxisDriver.LOG_BRIDGE)
 
 
 if __name__ == '__main__':

@@ -28,6 +28,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.axis.core import Action, BoardState, Calibration
 from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackError
 from sslfr_drivers.link.protocol import ProtocolError
+from sslfr_drivers.link.keys import link_key
 from sslfr_drivers.link.transport import make_transport
 
 class BoardReading(NamedTuple):
@@ -264,3 +265,12 @@ class AxisBoardSession:
         except (LinkError, ProtocolError) as exc:
             return WriteResult(False, str(exc) or type(exc).__name__)
         return WriteResult(True)
+
+
+def open_session(port: str, p: dict) -> AxisBoardSession:
+    """A session on ``port`` with the driver's parameters ``p``, opened (INFO read);
+    the exceptions of :meth:`AxisBoardSession.open`."""
+    session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'],
+                               key=link_key(p['key_file']))
+    session.open()
+    return session

@@ -516,6 +516,47 @@ class AxisSupervisor:
         ahead = self.store.setpoint(now_ros + self.cfg.lead * max(0.0, time_rate))
         return self._move(board, ahead[0], 'following' if sp[2] == 'following' else 'waiting')
 
+    def next_tick(self, now_ros: float, now_steady: float, board: BoardState | None,
+                  time_rate: float, fast: float, slow: float) -> float:
+        """Steady seconds [s] until the next control tick (rates from the physics).
+
+        ``fast`` (the control period) while anything is under way: no board answer,
+        the board moving or homing or not homed, a command not yet reached, a homing
+        or re-referencing requested. Otherwise nothing needs the board before the
+        first of: ``slow`` (the idle STATUS poll), the safety watchdog's next deadline
+        (silence -> STOP, then -> STOW; :class:`SafetyWatch`), and, while following,
+        the instant the commanded setpoint (``lead * time_rate`` ahead) crosses to the
+        next step (from the trajectory's velocity; a trajectory, safety or mode event
+        wakes the tick at once anyway). While the setpoint moves a step or more per
+        ``slow`` (a simulation many times faster than real time, where ``time_rate`` is
+        estimated from a /clock that jumps) it stays at ``fast``. Never below ``fast``:
+        the previous fixed-rate behaviour is the fastest this gets.
+        """
+        if (board is None or board.moving or board.homing or not board.homed or self._cmd_steps is not None
+                or self.home_requested or self._ref):
+            return fast
+        wait = slow
+        w = self.safety
+        if w.last_rx is not None:
+            age = now_steady - w.last_rx
+            for deadline in (w.timeout, w.timeout + w.silent_stow_after):
+                if deadline >= age:
+                    wait = min(wait, deadline - age + 1e-3)
+        if self.state in ('following', 'waiting') and time_rate > 0.0:
+            t = now_ros + self.cfg.lead * time_rate
+            sp = self.store.setpoint(t)
+            cal = self.cfg.calibration
+            if sp is not None and sp[2] == 'waiting' and self.store.current is not None:
+                wait = min(wait, (self.store.current.start - t) / time_rate)
+            elif sp is not None and sp[2] == 'following' and sp[1] != 0.0:
+                x = (self.cfg.limits.clamp(sp[0]) - cal.offset) / cal.joint_per_step   # [steps]
+                v = sp[1] / cal.joint_per_step                                           # [steps/s ROS]
+                if abs(v) * time_rate * slow >= 1.0:
+                    return fast     # a step per idle period or more (a fast simulation): no prediction
+                boundary = round(x) + (0.5 if v > 0 else -0.5)
+                wait = min(wait, max(0.0, (boundary - x) / v) / time_rate + 1e-3)
+        return max(fast, wait)
+
     def _hold(self, board: BoardState, reason: str) -> Action:
         """Hold: finish nothing new; stop if the board is still moving."""
         self.state, self.reason = 'holding', reason
@@ -629,14 +670,19 @@ class TimeRate:
     faster than ``max_rate``: a replay restarting, the time being set) is ignored.
     """
 
-    def __init__(self, gain: float = 0.3, max_rate: float = 1e5) -> None:
+    def __init__(self, gain: float = 0.3, max_rate: float = 1e5, min_interval: float = 0.04) -> None:
         self.rate = 1.0
         self.gain = gain
         self.max_rate = max_rate
+        self.min_interval = min_interval
         self._last: tuple[float, float] | None = None
 
     def update(self, now_ros: float, now_steady: float) -> float:
-        """Feed ROS time [s] and steady time [s]; return the rate [-]."""
+        """Feed ROS time [s] and steady time [s]; return the rate [-]. A pair less than
+        ``min_interval`` [s] after the reference is not used (a control step woken by
+        an event just after a /clock jump would read a rate of thousands)."""
+        if self._last is not None and now_steady - self._last[1] < self.min_interval:
+            return self.rate
         last, self._last = self._last, (now_ros, now_steady)
         if last is None or now_steady - last[1] <= 0.0:
             return self.rate

@@ -41,6 +41,10 @@ _SPECS = [
        'wait doubles from retry_period up to the larger of the two)', 's', 0.1, 3600.0),
     _P('control_rate', 20.0, 'control loop and STATUS poll rate [Hz] (steady clock)', 'Hz', 1.0, 200.0,
        read_only=True),
+    _P('idle_poll_period', 0.2, 'longest wait between STATUS polls while nothing moves [s]: the '
+       'control tick runs at control_rate only while the board moves, homes or has a command under '
+       'way, else at the next setpoint step, safety deadline or this period (events: at once); '
+       'default one status period, so that every status carries a new reading', 's', 0.02, 5.0),
     _P('status_rate', 5.0, 'axes/<axis>/status rate [Hz]', 'Hz', 0.1, 50.0),
     _P('joint_state_rate', 10.0, 'joint_states rate [Hz]', 'Hz', 0.1, 100.0),
     _P('request_timeout', 0.25, 'board answer time-out per try [s] (STATUS polls use '

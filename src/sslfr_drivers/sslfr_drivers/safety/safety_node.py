@@ -78,8 +78,8 @@ class _Guard(ParameterGuard):
 class SafetyNode(Node):
     """The safety supervisor (see the module docstring)."""
 
-    def __init__(self):
-        super().__init__('safety')
+    def __init__(self, **kwargs):
+        super().__init__('safety', **kwargs)
         values = declare_parameters(self, TABLE)     # invalid start-up values: ValueError
         config = config_from(values)
         self._core_clock = _SteadyClock()

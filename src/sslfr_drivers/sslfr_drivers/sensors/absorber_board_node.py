@@ -40,8 +40,8 @@ from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
 class AbsorberBoardNode(SensorBoardNode):
     """See the module docstring; parameters: :data:`sensor_params.ABSORBER_BOARD`."""
 
-    def __init__(self):
-        super().__init__('absorber_board', ABSORBER_BOARD, queue_len=2000)
+    def __init__(self, **kwargs):
+        super().__init__('absorber_board', ABSORBER_BOARD, queue_len=2000, **kwargs)
         self._model = self._error_model(self._values)
         self._switches = SwitchTracker(self._values['debounce_time'])
         self._switch_meter = RateMeter()
@@ -51,7 +51,7 @@ class AbsorberBoardNode(SensorBoardNode):
         self._pub_t = {s: self.create_publisher(Temperature, f'absorber/{s}_temperature', 10)
                        for s in THERMOCOUPLES}
         self._pub_sw = self.create_publisher(LimitSwitches, 'limit_switches', 10)
-        self._start_board(drain_period=0.01)
+        self._start_board()
         self._sw_timer = self.create_timer(1.0 / self._values['switch_rate'], self._publish_switches,
                                            clock=self._steady)
         self.get_logger().info(f'absorber_board: port {self._values["port"] or "(none)"}')

@@ -38,8 +38,8 @@ assert nmea.COVARIANCE_TYPE_APPROXIMATED == NavSatFix.COVARIANCE_TYPE_APPROXIMAT
 class GpsNode(SensorBoardNode):
     """See the module docstring; parameters: :data:`sensor_params.GPS`."""
 
-    def __init__(self):
-        super().__init__('gps', GPS, queue_len=1000)
+    def __init__(self, **kwargs):
+        super().__init__('gps', GPS, queue_len=1000, **kwargs)
         self._stream = nmea.NmeaStream(self._error_model(self._values),
                                        self._values['time_jump_threshold'])
         self._last_jump = 0.0
@@ -47,7 +47,7 @@ class GpsNode(SensorBoardNode):
         self._last_fix: nmea.FixRecord | None = None
         self._fix_pub = self.create_publisher(NavSatFix, 'gps/fix', 10)
         self._time_pub = self.create_publisher(TimeReference, 'gps/time_reference', 10)
-        self._start_board(drain_period=0.02)
+        self._start_board()
         self.get_logger().info(
             f'gps: port {self._values["port"] or "(none)"} framing {self._values["framing"]}')
 

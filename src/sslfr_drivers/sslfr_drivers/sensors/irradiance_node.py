@@ -29,15 +29,15 @@ from sslfr_drivers.sensors.sensor_params import IRRADIANCE
 class IrradianceNode(SensorBoardNode):
     """See the module docstring; parameters: :data:`sensor_params.IRRADIANCE`."""
 
-    def __init__(self):
-        super().__init__('irradiance', IRRADIANCE, queue_len=1000)
+    def __init__(self, **kwargs):
+        super().__init__('irradiance', IRRADIANCE, queue_len=1000, **kwargs)
         self._saturated = False
         self._saturated_count = 0
         self._invalid = 0
         self._last: veml7700.Sample | None = None
         self._pub_lux = self.create_publisher(Illuminance, 'irradiance/illuminance', 10)
         self._pub_beam = self.create_publisher(Irradiance, 'irradiance/beam', 10)
-        self._start_board(drain_period=0.02)
+        self._start_board()
         self.get_logger().info(f'irradiance: port {self._values["port"] or "(none)"}, '
                                f'efficacy {self._values["luminous_efficacy"]:.1f} lm/W')
 

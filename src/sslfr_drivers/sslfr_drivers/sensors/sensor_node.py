@@ -9,7 +9,8 @@ What it wires, and where the logic lives:
 - the board: :class:`~sslfr_drivers.sensors.source.BoardSource` (reconnecting reader),
   reopened when ``port``/``baudrate``/``heartbeat``/``framing`` change;
 - samples: reader thread -> :class:`~sslfr_drivers.sensors.source.SampleQueue` (with
-  the ROS receive time) -> the subclass's ``_drain`` on a steady-clock timer;
+  the ROS receive time) -> the subclass's ``_drain``, woken by a guard condition when
+  the queue stops being empty (no polling timer);
 - diagnostics: :func:`~sslfr_drivers.sensors.health.board_report` every second;
 - clean-up: :meth:`SensorBoardNode.on_exit` stops the board (called by ``run_node``).
 """
@@ -49,8 +50,8 @@ class SensorBoardNode(Node):
     ``_drain()`` and ``_diagnostics()``.
     """
 
-    def __init__(self, name: str, table: ParamTable, queue_len: int):
-        super().__init__(name)
+    def __init__(self, name: str, table: ParamTable, queue_len: int, **kwargs):
+        super().__init__(name, **kwargs)
         self._table = table
         self._values = declare_parameters(self, table)
         self._queue = SampleQueue(queue_len)
@@ -62,12 +63,12 @@ class SensorBoardNode(Node):
         self._guard: ParameterGuard | None = None
 
     # -------------------------------------------------------------- board
-    def _start_board(self, drain_period: float) -> None:
-        """Open the board, accept run-time parameter changes and start the drain
-        (every ``drain_period`` [s]) and diagnostics (1 s) steady-clock timers."""
+    def _start_board(self) -> None:
+        """Open the board, accept run-time parameter changes, drain samples as they
+        arrive (guard condition) and publish diagnostics (1 s steady-clock timer)."""
+        self._wake = self.create_guard_condition(self._drain)
         self._source = self._make_source(self._values).start()
         self._guard = _LoggingGuard(self, self._table, self._values, self._change)
-        self.create_timer(drain_period, self._drain, clock=self._steady)
         self.create_timer(1.0, self._diagnostics, clock=self._steady)
 
     def _make_source(self, v: dict) -> BoardSource:
@@ -94,7 +95,8 @@ class SensorBoardNode(Node):
 
     def _enqueue(self, item) -> None:
         """Queue a sample (reader thread) with its ROS receive time."""
-        self._queue.put(item, self.get_clock().now())
+        if self._queue.put(item, self.get_clock().now()):
+            self._wake.trigger()
 
     # -------------------------------------------------------------- diagnostics
     def _publish_diagnostics(self, faults: list[str], extra: dict,

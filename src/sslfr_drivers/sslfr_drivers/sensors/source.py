@@ -145,11 +145,14 @@ class SampleQueue:
         self._q: collections.deque = collections.deque(maxlen=maxlen)
         self.dropped = 0
 
-    def put(self, item: Any, received: Any) -> None:
-        """Queue ``item`` received at ``received`` (reader thread)."""
+    def put(self, item: Any, received: Any) -> bool:
+        """Queue ``item`` received at ``received`` (reader thread); True when the queue
+        held only this item afterwards: the consumer must be woken (a consumer that
+        drains until empty never misses an item woken this way)."""
         if len(self._q) == self._q.maxlen:
             self.dropped += 1
         self._q.append((item, received))
+        return len(self._q) == 1
 
     def drain(self):
         """Yield ``(item, received)`` in arrival order until the queue is empty."""
