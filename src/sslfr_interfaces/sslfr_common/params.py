@@ -269,6 +269,6 @@ def writable_directory(value: str, *, empty_ok: bool = True) -> str | None:
         else:
             os.rmdir(tempfile.mkdtemp(dir=probe))
     except OSError as exc:
-        what = 'cannot write in' if probe == path else 'cannot create directories in'
+        what = 'cannot write in' if probe == path else 'cannot write there: cannot create directories in'
         return f'{value!r}: {what} {probe} ({exc.strerror or exc})'
     return None
