@@ -475,7 +475,7 @@ def test_lifecycle_transitions_stall_fault_and_old_protocol(rig, ros):
     out = old.driver.output()
     assert 'configure refused: board speaks protocol version 0, this host speaks version 2' in out, out
     assert out.count('configure refused') == 1          # autostart keeps retrying, logs once
-    assert old.driver.running() and old.status
+    assert old.driver.running() and old.status, out
     assert old.status[-1].state == 'unconfigured' and old.status[-1].link_state == 3   # LINK_FAULT
     assert old.board()['homed'] is False and old.board()['counter'] == 0    # never driven
 

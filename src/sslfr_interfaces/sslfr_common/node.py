@@ -152,9 +152,12 @@ class _StopRequest:
                 pass
 
     def ignore_further(self) -> None:
-        """From now on SIGINT/SIGTERM are ignored (the stop is under way)."""
+        """From now on SIGINT/SIGTERM are ignored (the stop is under way). A handler
+        that does nothing, not SIG_IGN: a signal that arrived just before (pending in
+        the interpreter, its handler not run yet) would otherwise be reported on stderr
+        as "OSError: Signal 2 ignored due to race condition" with a traceback."""
         for sig in self._old:
-            signal.signal(sig, signal.SIG_IGN)
+            signal.signal(sig, _ignore_signal)
 
     def close(self) -> None:
         signal.set_wakeup_fd(self._old_wakeup if self._old_wakeup is not None else -1)
@@ -163,6 +166,10 @@ class _StopRequest:
                 os.close(fd)
             except OSError:
                 pass
+
+
+def _ignore_signal(signum, frame) -> None:
+    """A signal during the stop: nothing more to do."""
 
 
 def spin_until_stopped(node, executor, stop: _StopRequest | None = None,
