@@ -158,7 +158,8 @@ def test_operator_page_in_chromium_against_the_simulated_tracker(browser, sim):
     n = _wait(browser, lambda: browser.execute_script('return page.history && page.history.t.length'), 30,
               'day-plot samples')
     browser.refresh()
-    _wait(browser, lambda: browser.execute_script('return page.history && page.history.t.length') >= n, 30,
+    # right after the reload `page.history` is null until the page has fetched it
+    _wait(browser, lambda: (browser.execute_script('return page.history && page.history.t.length') or 0) >= n, 30,
           'the day plots after a reload')
     assert browser.find_elements('css selector', '#plot-angles path'), 'no angle curves after the reload'
     _wait(browser, lambda: text('phase-name') == 'STOW', 15, 'phase STOW after the reload')

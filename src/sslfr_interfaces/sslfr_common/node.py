@@ -160,6 +160,11 @@ class _StopRequest:
             signal.signal(sig, _ignore_signal)
 
     def close(self) -> None:
+        # the stop is done: from here to the end of the process signals are ignored at
+        # the C level (Python's finalisation resets handlers written in Python to the
+        # default, so a late SIGINT would otherwise kill the process with -2)
+        for sig in self._old:
+            signal.signal(sig, signal.SIG_IGN)
         signal.set_wakeup_fd(self._old_wakeup if self._old_wakeup is not None else -1)
         for fd in (self._wfd, self._rfd):
             try:
