@@ -99,7 +99,10 @@ def test_killed_and_restarted_driver_keeps_safety_stowed_until_active_and_homed(
         print(f'driver after 3 s: {new()[-1].state}' + (' (the test configures and activates it)' if idle else ''))
         if idle:
             assert level() == SafetyState.STOW, (list(states[-1][1].reasons), logs())
-            assert f'{AXIS} axis not ready: its driver is unconfigured, not active' in states[-1][1].reasons
+            # the safety node judges the driver from its own subscription (its discovery
+            # of the new driver may lag the test's): wait for the reason, not a sample
+            reason = f'{AXIS} axis not ready: its driver is unconfigured, not active'
+            assert ros.spin_until(lambda: reason in states[-1][1].reasons, 10.0), (list(states[-1][1].reasons), logs())
             assert not any('heartbeat watchdog' in r for r in states[-1][1].reasons), 'heard'
             for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
                 res = ros.call(ChangeState, f'{NODE}/change_state',
