@@ -470,17 +470,25 @@ def format_param(value: Any) -> str:
     return str(value)
 
 
+def checked_params(ns: NodeSet, config: str | os.PathLike, namespace: str | None = None) -> dict:
+    """The parsed site config, judged by :func:`check_config` for ``ns``: NodeSetError
+    listing every problem ("nothing started")."""
+    params = read_params(config)
+    problems = check_config(ns, params, namespace, where=str(config))
+    if problems:
+        raise NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
+    return params
+
+
 def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike,
-                ns: NodeSet | None = None) -> tuple[Path, dict]:
+                ns: NodeSet | None = None, params: Mapping[str, Any] | None = None) -> tuple[Path, dict]:
     """The params file to hand the nodes and its parsed content: ``config`` itself
     in the root namespace; under a namespace, a copy moved there
     (:func:`for_namespace`) written to ``write_dir/site.params.yaml``. With ``ns`` the
-    config is checked first (:func:`check_config`): NodeSetError listing every problem."""
-    params = read_params(config)
-    if ns is not None:
-        problems = check_config(ns, params, namespace, where=str(config))
-        if problems:
-            raise NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
+    config is checked first (:func:`checked_params`), unless ``params`` is the
+    content a caller has already checked."""
+    if params is None:
+        params = checked_params(ns, config, namespace) if ns is not None else read_params(config)
     if not namespace.strip('/'):
         return Path(config), params
     params = for_namespace(params, namespace)

@@ -253,10 +253,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
         ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
-        params = nodeset_mod.read_params(config)
-        problems = nodeset_mod.check_config(ns, params, where=str(config))
-        if problems:
-            raise nodeset_mod.NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
+        params = nodeset_mod.checked_params(ns, config)
         simcfg = ns.sim
         date = args.date or str(simcfg.get('date', '2026-06-21'))
         start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))
@@ -354,7 +351,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     for node in no_sim:
         missing.append(f'{node.name}: its board {node.board} has no simulator, node not started')
     node_progs, missing_nodes = _node_programs(ns.without(n.name for n in no_sim) if no_sim else ns,
-                                               config, sim_ports, extra, run, args.layout)
+                                               config, sim_ports, extra, run, args.layout, params)
     missing += missing_nodes
     for m in missing:
         print(f'sslfr sim: MISSING {m}', file=sys.stderr)
@@ -522,10 +519,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ros.shutdown()
 
 
-def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None):
+def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None):
     from sslfr_bringup.up import build_programs
     return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra, run_dir=run_dir,
-                          layout=layout)
+                          layout=layout, params=params)
 
 
 def _report(bag_root: Path, out: Path) -> int:

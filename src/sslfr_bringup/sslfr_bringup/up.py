@@ -30,7 +30,8 @@ from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
                    sim_ports: dict | None = None, use_sim_time: bool = False,
                    extra: dict | None = None, namespace: str | None = None,
-                   finder=find_executable, layout: str | None = None) -> tuple[list[Program], list[str]]:
+                   finder=find_executable, layout: str | None = None,
+                   params: dict | None = None) -> tuple[list[Program], list[str]]:
     """Programs for every process of ``layout`` (default: the node set's) whose
     executable is installed, and the list of missing ``package/executable`` (reported,
     never replaced by anything else).
@@ -48,7 +49,7 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     namespace = ns.namespace if namespace is None else namespace
-    config, params = nodeset_mod.site_config(config, namespace, run_dir, ns)
+    config, params = nodeset_mod.site_config(config, namespace, run_dir, ns, params)
     programs, missing = [], []
 
     def node_args(node):

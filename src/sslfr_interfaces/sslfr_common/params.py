@@ -16,7 +16,10 @@ No rclpy here: tables are importable by the CLI and by tests without ROS.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
 
@@ -248,10 +251,6 @@ def writable_directory(value: str, *, empty_ok: bool = True) -> str | None:
     directory, removed at once), so pseudo file systems (``/proc/x``), read-only
     mounts and permissions are judged as the node would meet them; nothing is left
     behind. ``''`` means "disabled" when ``empty_ok``."""
-    import os
-    import tempfile
-    from pathlib import Path
-
     if value == '':
         return None if empty_ok else 'an empty path is not a directory'
     path = Path(os.path.expanduser(value))
