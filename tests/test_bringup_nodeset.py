@@ -53,6 +53,17 @@ def test_default_node_set_is_the_tracker():
             assert board.device.startswith('/dev/sslfr/') and board.sim_executable
 
 
+def test_every_node_class_builds_its_entities_without_qos_event_handlers():
+    """Issue 16: rclpy's default QoS-event handlers (two per publisher/subscription) were
+    most of the executor's work at every wake-up; every node class of the set drops them."""
+    from sslfr_bringup.composed import node_class
+    from sslfr_common.node import LeanEvents
+    classes = {n.component for n in nodeset.load().nodes}
+    assert len(classes) >= 8
+    for component in classes:
+        assert issubclass(node_class(component), LeanEvents), component
+
+
 def test_overrides_port_precedence_sim_time_and_args(site):
     ns = nodeset.load()
     params = nodeset.read_params(site)

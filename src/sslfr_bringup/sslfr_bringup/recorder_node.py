@@ -21,13 +21,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from sslfr_common.node import ParameterGuard, declare_parameters, message_class, run_node
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, message_class, run_node
 
 from .bag import recorder_config as rc
 from .bag.schema import DefinitionNotFoundError
 
 
-class Recorder(Node):
+class Recorder(LeanEvents, Node):
     """Record topics to per-day MCAP bags."""
 
     def __init__(self, **kwargs):

@@ -12,18 +12,16 @@ from __future__ import annotations
 import asyncio
 import importlib
 import sys
-from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase
 from sslfr_common.contract import JOINTS
-from sslfr_common.node import CONFIG_ERRORS, declare_parameters, run_node, steady_now, to_sec
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now, to_sec
 
 from .web import commands, remote
 from .web.app import OperatorApp, Server
@@ -40,7 +38,7 @@ def _srv_class(type_name: str):
     return getattr(importlib.import_module(f'{pkg}.srv'), name)
 
 
-class WebNode(Node):
+class WebNode(LeanEvents, Node):
     """Live view, day plots, commands through services, recorded days."""
 
     def __init__(self, **kwargs):
@@ -50,9 +48,7 @@ class WebNode(Node):
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         st = self.state
-        # no QoS-event handlers: each is one more entity for the executor at every wake-up
-        sub = partial(self.create_subscription, event_callbacks=SubscriptionEventCallbacks(
-            use_default_callbacks=False))
+        sub = self.create_subscription        # no QoS-event handlers: LeanEvents
         sub(TrackerPhase, 'tracker/phase', st.on_phase, latched)
         sub(SafetyState, 'safety/state', st.on_safety, 10)
         sub(SunPosition, 'tracker/sun', st.on_sun, 10)

@@ -51,6 +51,34 @@ CONFIG_ERRORS: tuple[type[BaseException], ...] = (
 SPIN_TIMEOUT_S = 0.5
 
 
+class LeanEvents:
+    """Node mixin: publishers and subscriptions without rclpy's default QoS-event handlers.
+
+    rclpy gives every publisher and subscription two event handlers by default (they
+    only log "incompatible QoS" / "incompatible type" warnings), and the executor adds
+    each one to its wait set in Python at every wake-up: in the recorder (16
+    subscriptions) they were most of its CPU at real time (issue 16). Callers that pass
+    their own ``event_callbacks`` keep them. Put it first in the bases:
+    ``class Recorder(LeanEvents, Node)``. It also covers the entities rclpy's ``Node``
+    makes itself through these methods (``/parameter_events``, ``/clock``). What is
+    lost: the two warnings above; a QoS mismatch on a topic of the graph shows as a
+    silent topic, which every consumer of the tracker already treats as a fault
+    (watchdogs).
+    """
+
+    def create_publisher(self, *args, event_callbacks=None, **kwargs):
+        from rclpy.event_handler import PublisherEventCallbacks
+        return super().create_publisher(
+            *args, event_callbacks=event_callbacks or PublisherEventCallbacks(use_default_callbacks=False),
+            **kwargs)
+
+    def create_subscription(self, *args, event_callbacks=None, **kwargs):
+        from rclpy.event_handler import SubscriptionEventCallbacks
+        return super().create_subscription(
+            *args, event_callbacks=event_callbacks or SubscriptionEventCallbacks(use_default_callbacks=False),
+            **kwargs)
+
+
 class SpinStats:
     """What :func:`run_node` dropped: ``errors`` [-] and the ``last`` error text."""
 

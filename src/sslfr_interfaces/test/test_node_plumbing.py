@@ -14,7 +14,7 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
-from sslfr_common.node import SpinStats, spin_until_stopped
+from sslfr_common.node import LeanEvents, SpinStats, spin_until_stopped
 
 NODE = textwrap.dedent('''
     import logging, os, sys, time
@@ -186,6 +186,38 @@ def test_runtime_errors_are_counted_not_fatal(ros_domain):
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         ex.shutdown()
+
+
+def test_lean_events_drops_the_default_qos_event_handlers_only(ros_domain):
+    from rclpy.event_handler import PublisherEventCallbacks
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+
+    class Lean(LeanEvents, Node):
+        pass
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=ros_domain)
+    lean = Lean('lean', context=ctx, parameter_overrides=[Parameter('use_sim_time', value=True)])
+    plain = Node('plain', context=ctx)
+    try:
+        assert len(plain.create_publisher(String, 'x', 1).event_handlers) == 2     # rclpy's default
+        assert len(plain.create_subscription(String, 'x', lambda m: None, 1).event_handlers) == 2
+        assert lean.create_publisher(String, 'x', 1).event_handlers == []
+        assert lean.create_subscription(String, 'x', lambda m: None, 1).event_handlers == []
+        # the entities rclpy's Node makes itself: /parameter_events, /clock (sim time)
+        assert all(p.event_handlers == [] for p in lean.publishers)
+        assert all(s.event_handlers == [] for s in lean.subscriptions)
+        assert any(s.topic_name == '/clock' for s in lean.subscriptions)
+        # callbacks a caller asks for are kept
+        own = lean.create_publisher(String, 'y', 1, event_callbacks=PublisherEventCallbacks(
+            incompatible_qos=lambda e: None))
+        assert len(own.event_handlers) >= 1
+    finally:
+        lean.destroy_node()
+        plain.destroy_node()
+        rclpy.try_shutdown(context=ctx)
 
 
 COMPOSED = textwrap.dedent('''

@@ -35,7 +35,7 @@ from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from sslfr_common.contract import PHASE_NAMES
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, to_sec
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
 from sslfr_planner.messages import phase_msg, sun_msg, trajectory_msg
@@ -53,7 +53,7 @@ ERROR_SHOWN_FOR = 60.0  # [s] steady: diagnostics stay ERROR this long after the
 DIAG_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}
 
 
-class PlannerNode(Node):
+class PlannerNode(LeanEvents, Node):
     """The planner: ephemeris + day cycle -> sun, phase and trajectory."""
 
     def __init__(self, **kwargs):

@@ -22,12 +22,12 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn
 from rclpy.node import Node
-from sslfr_common.node import steady_now
+from sslfr_common.node import LeanEvents, steady_now
 
 from sslfr_drivers.axis.activation import SelfActivation, check_request
 
 
-class ManagedNode(LifecycleNodeMixin, Node):
+class ManagedNode(LeanEvents, LifecycleNodeMixin, Node):
     """Lifecycle node with answered requests and optional self-activation."""
 
     def __init__(self, node_name: str, **kwargs):

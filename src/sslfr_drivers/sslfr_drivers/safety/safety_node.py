@@ -39,7 +39,7 @@ from trajectory_msgs.msg import JointTrajectory
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
 
 from sslfr_common.contract import JOINTS, SWITCHES, THERMOCOUPLES, Level
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
 from sslfr_drivers.safety.core import SafetyCore
 from sslfr_drivers.safety.params import TABLE, config_from
 
@@ -75,7 +75,7 @@ class _Guard(ParameterGuard):
         return super()._refuse(reason)
 
 
-class SafetyNode(Node):
+class SafetyNode(LeanEvents, Node):
     """The safety supervisor (see the module docstring)."""
 
     def __init__(self, **kwargs):

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from sslfr_common.node import ParameterGuard, declare_parameters
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters
 from sslfr_common.params import ParamTable
 from sslfr_drivers.sensors.health import RateMeter, Report, board_report
 from sslfr_drivers.sensors.sensor_params import SOURCE_KEYS
@@ -39,7 +39,7 @@ class _LoggingGuard(ParameterGuard):
         return super()._refuse(reason)
 
 
-class SensorBoardNode(Node):
+class SensorBoardNode(LeanEvents, Node):
     """What the gps, absorber_board and irradiance nodes share (module docstring).
 
     ``__init__`` declares ``table`` (``ValueError`` on a bad start-up value), creates
