@@ -71,16 +71,16 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros
                              QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     live_status = ros.collect(AxisStatus, 'axes/mirrors/status')
     text, summary, day = _run_live(ros, ros_env, tmp_path / 'out',
-                                   ['--start', '09:45', '--end', '10:30', '--speed', str(speed), '--layout', layout])
+                                   ['--start', '09:50', '--end', '10:20', '--speed', str(speed), '--layout', layout])
     # live: the phase was TRACKING and the mirrors driver was following
     assert any(m.phase_name == 'TRACKING' for m in live_phase), [m.phase_name for m in live_phase]
     assert any(abs(m.error) < 1e-3 and m.link_state == AxisStatus.LINK_UP for m in live_status)
-    # bag: every axis within one step + sensor noise of the ideal, 10:00-10:30
+    # bag: every axis within one step + sensor noise of the ideal, 10:00-10:20
     lat, lon, elev = _site(day)
     ref = scenario.reference(_config(), lat, lon, elev)
     # the ordered stop at the window's end deactivates the axes first, so safety stows
     # (issue 21) and the planner's phase follows: the last 30 sim s belong to the stop
-    t0, t1 = DAY0 + 10 * 3600, DAY0 + 10.5 * 3600 - 30
+    t0, t1 = DAY0 + 10 * 3600, DAY0 + (10 + 20 / 60) * 3600 - 30
     assert np.all(day.phase.between(t0, t1)['phase'] == 2), ('TRACKING all through the window', _why(tmp_path))
     lag = speed * WALL_LATENCY
     report = {}
@@ -117,8 +117,10 @@ def _ref_changes(ref, t0, t1, step=10.0):
 
 
 @pytest.mark.parametrize('window,expected,mirrors_end', [
-    (('04:00', '05:25'), ['PRE_DAWN', 'TRACKING'], None),
-    (('19:00', '20:00'), ['STOWING', 'NIGHT'], math.pi / 2),
+    # reference at Almeria on the date: PRE_DAWN 04:40:50, TRACKING 04:50:50,
+    # STOWING 19:32:10, NIGHT 19:42:10 UTC
+    (('04:25', '05:10'), ['PRE_DAWN', 'TRACKING'], None),
+    (('19:20', '19:55'), ['STOWING', 'NIGHT'], math.pi / 2),
 ])
 def test_sunrise_and_sunset_phase_changes(ros, ros_env, tmp_path, window, expected, mirrors_end):
     speed = 300.0
