@@ -203,9 +203,16 @@ def rays(sun, beta_0, beta_m, geometry: FieldGeometry, offsets=None) -> Rays:
     n, b = mirror_normals(np.broadcast_to(np.asarray(beta_0, dtype=float), shape), bm, geometry, offsets)
     r, _ = structure_vectors(bm)
     vv = v[..., None, :]
-    cos_i = np.sum(vv * n, axis=-1)
+    cos_i = _dot(vv, n)
     w = 2.0 * cos_i[..., None] * n - vv
     return Rays(n, b, np.broadcast_to(r[..., None, :], n.shape), w, cos_i, bm)
+
+
+def _dot(p, q):
+    """Dot product over the last axis (length 3) of broadcastable arrays: three
+    multiply-adds instead of ``np.sum(p * q, axis=-1)`` (numpy reduces a length-3 last
+    axis slowly; the seed 001 tilt search spent half its time there)."""
+    return p[..., 0] * q[..., 0] + p[..., 1] * q[..., 1] + p[..., 2] * q[..., 2]
 
 
 def trace(sun, beta_0, beta_m, beta_a, geometry: FieldGeometry, offsets=None, reflected: Rays | None = None) -> Trace:
@@ -234,8 +241,8 @@ def trace(sun, beta_0, beta_m, beta_a, geometry: FieldGeometry, offsets=None, re
     ba = np.broadcast_to(np.asarray(beta_a, dtype=float), np.broadcast_shapes(ry.beta_m.shape, np.shape(beta_a)))
     a, nr = tube_vectors(ba)
     a, nr = a[..., None, :], nr[..., None, :]
-    w_nr = np.sum(w * nr, axis=-1)
-    w_a = np.sum(w * a, axis=-1)
+    w_nr = _dot(w, nr)
+    w_a = _dot(w, a)
     x = geometry.mirror_positions()
     h = geometry.aim_height
     going_up = w_nr > 1e-9
@@ -245,11 +252,11 @@ def trace(sun, beta_0, beta_m, beta_a, geometry: FieldGeometry, offsets=None, re
     t0 = h * nr[..., 2] / safe
     e0 = x + t0 * w[..., 0]
     u0 = t0 * w_a + h * np.sin(ba)[..., None]
-    b_nr, r_nr = np.sum(b * nr, axis=-1), np.sum(r * nr, axis=-1)
+    b_nr, r_nr = _dot(b, nr), _dot(r, nr)
     e_q = b[..., 0] - b_nr * w[..., 0] / safe
     e_s = -r_nr * w[..., 0] / safe                     # r has no x component
-    u_q = np.sum(b * a, axis=-1) - b_nr * w_a / safe
-    u_s = np.sum(r * a, axis=-1) - r_nr * w_a / safe
+    u_q = _dot(b, a) - b_nr * w_a / safe
+    u_s = _dot(r, a) - r_nr * w_a / safe
     cross = np.sqrt(np.clip(1.0 - w_a ** 2, 1e-300, None))  # |w x a|
     scale = cross / safe                                # e per unit distance across the ray
     valid = (cos_i > 0.0) & going_up & (t0 > 0.0)
