@@ -85,6 +85,17 @@ def test_tracking_window_on_firmware_boards(ros_env, tmp_path):
     print('tracking error on firmware boards, (p95, max) [deg]:', report)
 
 
+def _explain(day, axis: str, t0: float, t1: float) -> dict:
+    """What the bag says about ``axis`` in [t0, t1] (sim s): for a failing tracking check."""
+    a, sf = day.axes[axis].between(t0 - 120, t1), day.safety.between(t0 - 120, t1)
+    return {'states': sorted(set(a['state'])), 'homed': sorted(set(a['homed'].tolist())),
+            'first/last (t, setpoint, commanded, measured)': [
+                (round(float(a.t[i]) - t0), *(round(float(a[c][i]), 4) for c in ('setpoint', 'commanded', 'measured')))
+                for i in (0, -1)] if len(a) else [],
+            'safety levels': sorted(set(sf['level'].tolist())),
+            'safety reasons': sorted({r for rs in sf['reasons'] for r in rs})[:8]}
+
+
 def _applied(summary, spec) -> tuple[float, float | None]:
     """Sim times [s] at which ``sslfr sim`` actually started (and ended) the fault: on a
     loaded machine a tick of the fault schedule may come a wall second late, so the
@@ -117,14 +128,15 @@ def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
     after = day.axes['mirrors'].between(d1 + 300, min(d1 + 780, r0 - 60))
     assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=lag)
-    assert np.max(err) <= track, np.degrees(np.max(err))
+    assert np.max(err) <= track, (np.degrees(np.max(err)), _explain(day, 'mirrors', d1 + 300, min(d1 + 780, r0 - 60)))
     # board reset: the driver saw it, re-homed (HOME: no position sensor on these boards)
     resets = day.counter('mobile_structure_driver', 'board_resets')
     assert np.all(resets.between(r0 + 360, min(r0 + 840, h0))['value'] >= 1), 'the driver saw the reset'
     back = day.axes['mobile_structure'].between(r0 + 480, min(r0 + 840, h0))
     assert len(back) and np.all(back['homed'])
     err = scenario.tracking_error(back.t, back['measured'], lambda t: ref(t).mobile_structure, lag=lag)
-    assert np.max(err) <= track, np.degrees(np.max(err))
+    assert np.max(err) <= track, (np.degrees(np.max(err)), _explain(day, 'mobile_structure', r0 + 480,
+                                                                    min(r0 + 840, h0)))
     # over-temperature: STOW latched, mirrors asleep (+pi/2)
     sf = day.safety.between(h0, T('11:23'))
     hot_ = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
