@@ -35,6 +35,7 @@ import time
 from typing import Callable
 
 import rclpy
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, \
     ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -67,13 +68,11 @@ class LeanEvents:
     """
 
     def create_publisher(self, *args, event_callbacks=None, **kwargs):
-        from rclpy.event_handler import PublisherEventCallbacks
         return super().create_publisher(
             *args, event_callbacks=event_callbacks or PublisherEventCallbacks(use_default_callbacks=False),
             **kwargs)
 
     def create_subscription(self, *args, event_callbacks=None, **kwargs):
-        from rclpy.event_handler import SubscriptionEventCallbacks
         return super().create_subscription(
             *args, event_callbacks=event_callbacks or SubscriptionEventCallbacks(use_default_callbacks=False),
             **kwargs)
