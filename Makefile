@@ -9,7 +9,7 @@ setup:
 	@bash $(ROOT)/scripts/setup.sh
 
 test: setup
-	@. $(ROOT)/scripts/env.sh && cd $(ROOT) && python -m pytest $(PYTEST_ARGS)
+	@bash $(ROOT)/scripts/test.sh $(PYTEST_ARGS)
 
 # make soak N=5 [BUSY=1]: the topic-level tests N times, per-test runs/failures/slowest
 N ?= 5
