@@ -55,7 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--busy', action='store_true', help='keep one core busy during the soak')
     ap.add_argument('--logs', default=str(ROOT / 'out' / 'soak'),
                     help='directory for each round\'s pytest output (default out/soak)')
-    ap.add_argument('paths', nargs='*', default=['tests'], help='test paths (default tests/)')
+    ap.add_argument('paths', nargs='*', default=['tests', '--ignore-glob=tests/test_fw_*'],
+                    help='test paths (default: tests/ without the firmware-in-the-loop tests '
+                         'test_fw_*, which `make test` runs alone after the others)')
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error('--rounds must be >= 1')
