@@ -190,38 +190,52 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
                end_ns=None, clock_hz=100.0, progress=True, node_name='sslfr_replay',
                domain_id=None, wait_subscribers: float = 0.0, wait_for: list[str] | None = None,
                before_play=None) -> Player:
-    """Create a node, play the bag (blocking until done or Ctrl-C), return the Player."""
+    """Create a node, play the bag (blocking until done or Ctrl-C), return the Player.
+
+    SIGINT/SIGTERM set a flag (:class:`sslfr_common.node.StopRequest`) that the loop
+    below checks at every turn, and wake the executor: the stop never depends on a
+    KeyboardInterrupt reaching this loop (one raised inside a finaliser or a callback
+    of the ROS client library is swallowed, and the replay then played on to its end)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from sslfr_common.node import StopRequest
+    stop = StopRequest()
     context = rclpy.Context()
-    kwargs = {'context': context}
+    kwargs = {'context': context, 'signal_handler_options': SignalHandlerOptions.NO}
     if domain_id is not None:
         kwargs['domain_id'] = int(domain_id)
     rclpy.init(**kwargs)
     node = rclpy.create_node(node_name, context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
+    stop.executor = executor
     player = Player(node, reader, topics, remaps, rate, start_ns, end_ns, clock_hz, progress)
     try:
-        if before_play is not None:
+        if before_play is not None and not stop.requested.is_set():
             before_play(node, executor)
         deadline = time.monotonic() + wait_subscribers
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not stop.requested.is_set():
             player.publish_start_clock()  # sim-time subscribers get a clock before any data
             pubs = [p for t, p in player.publishers.items() if wait_for is None or t in wait_for]
             if pubs and all(p.get_subscription_count() > 0 for p in pubs):
                 break
             executor.spin_once(timeout_sec=0.05)
-        player.start()
-        while not player.done.is_set():
+        if not stop.requested.is_set():
+            player.start()
+        while not player.done.is_set() and not stop.requested.is_set():
             executor.spin_once(timeout_sec=0.05)
-    except KeyboardInterrupt:
-        player.interrupted = True
-        player.stop()
-        sys.stderr.write('\nreplay: interrupted\n')
+    except KeyboardInterrupt:        # raised by code that installed its own handler
+        stop.requested.set()
     finally:
+        stop.ignore_further()
+        if stop.requested.is_set():
+            player.interrupted = True
         player.stop()
+        if player.interrupted:
+            sys.stderr.write('\nreplay: interrupted\n')
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+        stop.close()
     return player

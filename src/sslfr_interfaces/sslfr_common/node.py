@@ -132,7 +132,7 @@ class LogBridge(logging.Handler):
             lg.propagate = True
 
 
-class _StopRequest:
+class StopRequest:
     """SIGINT/SIGTERM -> a flag and an executor wake-up, immediately.
 
     The Python-level handler runs only when the main thread returns to the
@@ -204,7 +204,7 @@ def _ignore_signal(signum, frame) -> None:
     """A signal during the stop: nothing more to do."""
 
 
-def spin_until_stopped(node, executor, stop: _StopRequest | None = None,
+def spin_until_stopped(node, executor, stop: StopRequest | None = None,
                        stats: SpinStats | None = None) -> SpinStats:
     """Spin ``node`` in ``executor`` until ``stop`` is requested or the context ends.
 
@@ -289,7 +289,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
     A node that refuses its configuration stops the whole process (exit 2, one line
     naming it), after the nodes already built have run their ``on_exit()``."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = _StopRequest()
+    stop = StopRequest()
     built: list = []
     ex = bridge = stats = None
     code = 0
