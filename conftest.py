@@ -248,6 +248,13 @@ def _become_subreaper() -> None:
 
 _become_subreaper()
 
+# pytest started in the background by a non-interactive shell (`make soak &` in a
+# script) inherits SIGINT ignored, and so would every process a test starts, which
+# changes what Ctrl-C does to them (Python then raises no KeyboardInterrupt). The tests
+# see what a terminal gives; test_replay_ctrl_c_stops_cleanly[ignored] covers the other.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 # A private temporary directory per pytest run (inherited by every child through
 # TMPDIR), so the check below sees only what this run's tests left, never the files
 # of another run on the same machine. Short: UNIX socket paths must stay < 108 bytes.

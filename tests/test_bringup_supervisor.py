@@ -27,7 +27,11 @@ CHILD = textwrap.dedent('''
         time.sleep(0.3 if name.startswith('axis') else 0.05)   # the axes take a while to stop
         log('exit')
         sys.exit(0)
-    signal.signal(signal.SIGINT, on_int if mode != 'stubborn' else signal.SIG_IGN)
+    # like the tracker's nodes (sslfr_common.node.run_node): SIGINT and SIGTERM handled
+    # alike once started; the stubborn child ignores both
+    handler = on_int if mode != 'stubborn' else (lambda signum, frame: None)
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
     log('start')
     if mode == 'crash':
         time.sleep(0.2)
@@ -160,3 +164,38 @@ def test_sslfr_up_on_sigterm_stops_everything_it_started(tmp_path, ros_env):
     for name in installed[:3]:
         log = (tmp_path / 'logs' / f'{name}.log')
         assert log.exists()
+
+
+def test_stop_signal_is_sigterm_while_a_node_starts_and_sigint_once_it_handles_stops(tmp_path):
+    """SIGINT inside a starting interpreter is a KeyboardInterrupt in Python's own start-up
+    (a "Fatal Python error" traceback on the console); until a node has installed its
+    stop handlers (it then catches SIGTERM) the ordered stop sends SIGTERM instead."""
+    from sslfr_bringup.supervisor import catches, stop_signal
+    ready = tmp_path / 'ready'
+    code = ('import signal, sys, time\n'
+            'time.sleep(1.0)\n'
+            'signal.signal(signal.SIGINT, lambda s, f: sys.exit(0))\n'
+            'signal.signal(signal.SIGTERM, lambda s, f: sys.exit(0))\n'
+            f'open({str(ready)!r}, "w").close()\n'
+            'time.sleep(30)\n')
+    p = Program(name='n', argv=[sys.executable, '-c', code])
+    p.proc = subprocess.Popen(p.argv)
+    try:
+        time.sleep(0.2)                 # past the exec (the forked child has pytest's handlers)
+        assert not catches(p.proc.pid, signal.SIGTERM)
+        assert stop_signal(p) == signal.SIGTERM
+        deadline = time.monotonic() + 20
+        while not ready.exists():
+            assert time.monotonic() < deadline and p.proc.poll() is None
+            time.sleep(0.02)
+        assert catches(p.proc.pid, signal.SIGTERM)
+        assert stop_signal(p) == signal.SIGINT
+        board = Program(name='b', argv=[], kind='board')
+        board.proc = p.proc
+        assert stop_signal(board) == signal.SIGINT
+        p.proc.send_signal(stop_signal(p))
+        assert p.proc.wait(10) == 0
+    finally:
+        if p.proc.poll() is None:
+            p.proc.kill()
+            p.proc.wait()

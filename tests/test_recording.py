@@ -343,15 +343,22 @@ def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     assert (tmp_path / 'wi' / 'whatif.md').exists()
 
 
-def test_replay_ctrl_c_stops_cleanly(ros_env, tmp_path):
+@pytest.mark.parametrize('inherited', ['default', 'ignored'])
+def test_replay_ctrl_c_stops_cleanly(inherited, ros_env, tmp_path):
+    """Ctrl-C stops a replay. 'ignored': started with SIGINT ignored, as everything started
+    in the background by a non-interactive shell is (`cmd &` in a script): Python then
+    raises no KeyboardInterrupt, and a replay that relied on one played on to its end."""
     w = BagWriter(tmp_path / 'b', WriterOptions(fsync=False))
     w.add_topic('/absorber/inlet_temperature', 'sensor_msgs/msg/Temperature', [profile()])
     data = bytes(serialize_message(Temperature(temperature=3.0)))
     for k in range(600):                        # 60 s at 10 Hz
         w.write('/absorber/inlet_temperature', data, 1_782_000_000 * 10**9 + k * 10**8)
     w.close()
+    def ignore_sigint():                            # in the child, before its exec
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'replay', str(tmp_path / 'b'), '--rate', '1'],
-                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=ignore_sigint if inherited == 'ignored' else None)
     seen = ''
     while '%' not in seen and proc.poll() is None:   # replaying: the progress bar is drawn
         seen += proc.stderr.read(1)

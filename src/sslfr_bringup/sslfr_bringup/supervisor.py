@@ -97,6 +97,19 @@ def _orphan_guard(argv: list[str]) -> list[str]:
 EXIT_CONFIG_REFUSED = 2
 
 
+def catches(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler installed for ``sig`` (Linux
+    /proc/PID/status ``SigCgt``; False when it cannot be read)."""
+    try:
+        with open(f'/proc/{pid}/status') as f:
+            for line in f:
+                if line.startswith('SigCgt:'):
+                    return bool(int(line.split()[1], 16) >> (sig - 1) & 1)
+    except (OSError, ValueError, IndexError):
+        pass
+    return False
+
+
 @dataclass
 class Program:
     """A supervised process."""
@@ -144,6 +157,19 @@ class Program:
 def _journal_prefix(priority: int) -> str:
     """sd-daemon priority prefix when stderr goes to the journal (systemd)."""
     return f'<{priority}>' if os.environ.get('JOURNAL_STREAM') else ''
+
+
+def stop_signal(p: 'Program') -> int:
+    """The signal of the ordered stop for program ``p``: SIGINT (the ROS convention)
+    once a node has installed its stop handlers - every node of the tracker handles
+    SIGINT and SIGTERM alike from :func:`sslfr_common.node.run_node` on, so it catches
+    SIGTERM from then - and SIGTERM while its interpreter is still starting: SIGINT
+    there raises KeyboardInterrupt inside Python's own start-up ("Fatal Python error:
+    init_import_site" and a traceback on the console), SIGTERM ends it quietly before
+    it has opened anything. Simulated boards always get SIGINT."""
+    if p.kind == 'node' and p.proc is not None and not catches(p.proc.pid, signal.SIGTERM):
+        return signal.SIGTERM
+    return signal.SIGINT
 
 
 class Supervisor:
@@ -352,7 +378,7 @@ class Supervisor:
                 self.ros.deactivate(lifecycle, timeout=min(1.0, max(0.1, deadline - time.monotonic() - 1.5)))
             for p in progs:
                 try:
-                    os.killpg(p.proc.pid, signal.SIGINT)
+                    os.killpg(p.proc.pid, stop_signal(p))
                 except ProcessLookupError:
                     pass
             # the first groups get a share, the last one what is left
