@@ -194,8 +194,9 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
 
     SIGINT/SIGTERM set a flag (:class:`sslfr_common.node.StopRequest`) that the loop
     below checks at every turn, and wake the executor: the stop never depends on a
-    KeyboardInterrupt reaching this loop (one raised inside a finaliser or a callback
-    of the ROS client library is swallowed, and the replay then played on to its end)."""
+    KeyboardInterrupt, which Python does not raise at all in a process started with
+    SIGINT ignored (anything run in the background by a non-interactive shell); the
+    replay then played on to its end."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -225,8 +226,6 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
             player.start()
         while not player.done.is_set() and not stop.requested.is_set():
             executor.spin_once(timeout_sec=0.05)
-    except KeyboardInterrupt:        # raised by code that installed its own handler
-        stop.requested.set()
     finally:
         stop.ignore_further()
         if stop.requested.is_set():
