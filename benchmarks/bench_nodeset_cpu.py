@@ -26,7 +26,11 @@ STOW -> mirrors status ``stowing``) and, after a killed safety supervisor, the l
 runs at 20 Hz instead of 5 Hz: the observation adds at most 50 ms, and costs CPU). Load averages at start and end are printed:
 CPU figures taken while other jobs load the machine must say so.
 
-    python benchmarks/bench_nodeset_cpu.py [--window 140] [--confine 0.4] [--layout NAME]
+``--executor rclpy`` runs the nodes with rclpy's SingleThreadedExecutor instead of
+sslfr_common's LeanExecutor; ``--peer`` runs both at once (two node sets, own domains,
+same window) and prints the ratio, so that a loaded or throttled machine affects both.
+
+    python benchmarks/bench_nodeset_cpu.py [--window 140] [--confine 0.4] [--layout NAME] [--peer]
 """
 from __future__ import annotations
 
@@ -213,7 +217,18 @@ def main(argv=None) -> int:
     ap.add_argument('--nodeset', default=None, help='node-set description for the sim (e.g. another sim.clock_rate)')
     ap.add_argument('--layout', default=None, help='process layout of the node set (composed, separate; '
                                                    'default: the node set\'s)')
+    ap.add_argument('--executor', choices=('lean', 'rclpy'), default='lean',
+                    help="the nodes' executor (SSLFR_EXECUTOR): sslfr_common's LeanExecutor or rclpy's")
+    ap.add_argument('--peer', action='store_true',
+                    help="also run, at the same time and in its own domain, the same node set with rclpy's "
+                         "SingleThreadedExecutor (the peer), and print the ratio of the two totals")
     args = ap.parse_args(argv)
+    peer = None
+    if args.peer:
+        rest = [a for a in (sys.argv[1:] if argv is None else argv) if a != '--peer']
+        peer_json = Path(tempfile.mkdtemp(prefix='bench-cpu-peer-')) / 'peer.json'
+        peer = subprocess.Popen([sys.executable, __file__, *rest, '--executor', 'rclpy', '--json', str(peer_json)],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     minutes = int(args.window // 60) + 3
     h, m = (int(x) for x in args.start.split(':'))
     end = f'{(h + (m + minutes) // 60) % 24:02d}:{(m + minutes) % 60:02d}'
@@ -236,7 +251,7 @@ def main(argv=None) -> int:
     import threading
     done = threading.Event()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+                            start_new_session=True, env=dict(os.environ, SSLFR_EXECUTOR=args.executor))
     lines: list[str] = []
     try:
         for line in proc.stdout:
@@ -295,7 +310,7 @@ def main(argv=None) -> int:
     total = sum(v for v in cpu.values() if v == v)
     load1 = os.getloadavg()
     print(f'node set at real time (sslfr sim --speed 1, {args.start} UTC Almeria, layout '
-          f'{args.layout or "default"}), {len(cpu)} processes, {wall:.0f} s window, load average (1/5/15 min) '
+          f'{args.layout or "default"}, executor {args.executor}), {len(cpu)} processes, {wall:.0f} s window, load average (1/5/15 min) '
           f'{load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at start, {load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at end'
           + (f', confined to {args.confine:.2f} core ({group.how}; {throttled})' if group else ''))
     for n in sorted(cpu, key=lambda k: -cpu[k]):
@@ -303,6 +318,17 @@ def main(argv=None) -> int:
     print(f'total CPU {total:.1f} % of one core (goal <= 15 %); before: {BEFORE_TOTAL:.0f} % '
           f'-> ratio {BEFORE_TOTAL / total:.1f}x' if total else 'no CPU measured')
     print(f'PSS sum {sum(pss.values()):.0f} MB (goal <= 200 MB), RSS sum {sum(rss.values()):.0f} MB')
+    if peer is not None:
+        text, _ = peer.communicate(timeout=args.window + 300)
+        try:
+            other = json.loads(peer_json.read_text())
+        except (OSError, ValueError):
+            print('peer run failed:\n' + text[-3000:])
+            return 1
+        po = other['total_cpu_percent']
+        print(f"peer in the same window (rclpy's SingleThreadedExecutor, own domain): total CPU {po:.1f} % "
+              f'({", ".join(f"{k} {v:.2f}" for k, v in sorted(other["cpu_percent"].items(), key=lambda kv: -kv[1]))}); '
+              f'LeanExecutor / rclpy = {total / po:.2f}' if po else 'peer: no CPU measured')
     print(f'status heartbeat, largest gap [s]: {deadlines["status_gap_max_s"]}')
     print(f'tracking error while following [motor steps] (bound: 1 step + sensor noise): '
           f'{deadlines["tracking_error_steps"]}')
@@ -319,7 +345,8 @@ def main(argv=None) -> int:
         Path(args.json).write_text(json.dumps({'cpu_percent': cpu, 'total_cpu_percent': total,
                                                'pss_mb': pss, 'rss_mb': rss, 'window_s': wall,
                                                'confine': args.confine, 'throttled': throttled,
-                                               'layout': args.layout, 'load_start': load0, 'load_end': load1,
+                                               'layout': args.layout, 'executor': args.executor,
+                                               'load_start': load0, 'load_end': load1,
                                                'deadlines': deadlines,
                                                'out': str(out), 'sim': sim}, indent=2))
     if not args.keep and not args.json:

@@ -9,8 +9,8 @@ Each ``--node`` names its node class (``component:`` in the node set) and its ow
 ``cli_args`` = those arguments and ``use_global_arguments=False``, so each node has its
 own name and parameters exactly as it would in its own process. The life of the
 process is :func:`sslfr_common.node.run_nodes` (signals, ``on_exit`` of each node in
-order, exit 2 naming a node that refuses its configuration) with one
-SingleThreadedExecutor: no node of the tracker waits in a callback (the axis drivers do
+order, exit 2 naming a node that refuses its configuration) with one single-threaded
+executor (``sslfr_common.executor.LeanExecutor``): no node of the tracker waits in a callback (the axis drivers do
 their board I/O in their own threads). The Python loggers of every class's
 ``LOG_BRIDGE`` reach the first node's logger.
 `sslfr up`, `sslfr sim` and tracker.launch.py build this command line

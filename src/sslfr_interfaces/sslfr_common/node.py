@@ -41,6 +41,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from .executor import LeanExecutor
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_sec  # noqa: F401 - re-exported
 
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
@@ -266,7 +267,7 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
     make_node : callable
         Builds the node (rclpy is initialised). May raise one of ``config_errors``.
     executor : callable, optional
-        ``executor(context) -> Executor``; default a SingleThreadedExecutor.
+        ``executor(context) -> Executor``; default :func:`default_executor`.
     log_bridge : tuple of str
         Python logger names whose records are forwarded to the node's logger
         (:class:`LogBridge`) until the node is destroyed.
@@ -276,6 +277,20 @@ def run_node(name: str, make_node: Callable[[], object], *, args: list[str] | No
     """
     return run_nodes([(name, make_node)], args=args, executor=executor, config_errors=config_errors,
                      log_bridge=log_bridge)
+
+
+def default_executor():
+    """The executor factory of every node process, ``context -> Executor``:
+    :class:`~sslfr_common.executor.LeanExecutor` (rclpy's single-threaded semantics,
+    cheap wake-ups), or rclpy's own ``SingleThreadedExecutor`` when the environment has
+    ``SSLFR_EXECUTOR=rclpy`` (a fallback for the field, and the peer that
+    benchmarks/bench_nodeset_cpu.py measures against). ValueError for another value."""
+    choice = os.environ.get('SSLFR_EXECUTOR', 'lean')
+    if choice == 'rclpy':
+        return lambda context: SingleThreadedExecutor(context=context)
+    if choice != 'lean':
+        raise ValueError(f"SSLFR_EXECUTOR={choice!r}: expected 'lean' (the default) or 'rclpy'")
+    return lambda context: LeanExecutor(context=context)
 
 
 def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] | None = None,
@@ -288,6 +303,11 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
     called in that order (put the axis drivers first: they stop their motors first).
     A node that refuses its configuration stops the whole process (exit 2, one line
     naming it), after the nodes already built have run their ``on_exit()``."""
+    try:
+        make_executor = executor or default_executor()
+    except ValueError as exc:
+        print(f'{nodes[0][0]}: not starting: {exc}', file=sys.stderr, flush=True)
+        return 2
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopRequest()
     built: list = []
@@ -305,7 +325,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
                 return code
         if log_bridge:
             bridge = LogBridge(built[0], log_bridge)
-        ex = executor(built[0].context) if executor is not None else SingleThreadedExecutor(context=built[0].context)
+        ex = make_executor(built[0].context)
         stop.executor = ex
         for node in built:
             ex.add_node(node)
