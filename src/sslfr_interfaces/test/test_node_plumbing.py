@@ -40,6 +40,9 @@ NODE = textwrap.dedent('''
             print('ready', flush=True)
 
         def _tick(self):
+            if not getattr(self, 'said', False):
+                self.said = True
+                print('executor', type(self.executor).__name__, flush=True)
             if SLOW_CB_S:                         # a callback still running at the stop
                 print('cb start', flush=True)
                 time.sleep(SLOW_CB_S)
@@ -101,6 +104,29 @@ def test_one_signal_orderly_stop_exit_0(ros_env, sig):
     _clean(out)
     assert time.monotonic() - t0 < 5.0
     assert 'stopped cleanly' in out      # logged while the context is still valid
+
+
+@pytest.mark.parametrize('choice, name', [(None, 'LeanExecutor'), ('lean', 'LeanExecutor'),
+                                          ('rclpy', 'SingleThreadedExecutor')])
+def test_executor_chosen_by_the_environment(ros_env, choice, name):
+    env = dict(ros_env)
+    env.pop('SSLFR_EXECUTOR', None)
+    if choice:
+        env['SSLFR_EXECUTOR'] = choice
+    proc = _start(env)
+    _wait_line(proc, f'executor {name}')
+    proc.send_signal(signal.SIGINT)
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+
+
+def test_unknown_executor_choice_is_one_line_exit_2(ros_env):
+    proc = _start(ros_env, SSLFR_EXECUTOR='multi')
+    code, out = _finish(proc)
+    assert code == 2, out
+    assert out.strip() == ("plumbing_demo: not starting: SSLFR_EXECUTOR='multi': "
+                           "expected 'lean' (the default) or 'rclpy'"), out
 
 
 def test_second_sigint_50ms_later_during_the_stop_is_ignored(ros_env):
