@@ -117,6 +117,9 @@ def test_runner_xbee_process(tmp_path):
             # (protocol 2: the power-up BOOT is of no session and proves nothing; the
             # reset is seen in the authenticated boot count of the next session)
             assert wait_for(lambda: link.resets >= 1, 3)
+            # the reset ends the session (requests meanwhile end with NoSession, by
+            # contract): ask once the link is UP again in a new session
+            assert link.wait_up(5), link.state
             assert not link.get_status().homed
             boards = SimControl(ctl).cmd('status')['boards']
             assert [b['resets'] for b in boards] == [0, 1]
