@@ -46,17 +46,16 @@ __all__ = ['LeanExecutor']
 class _Entities:
     """The entity lists of a set of nodes, with their handles and pointer maps."""
 
-    __slots__ = ('key', 'subs', 'timers', 'clients', 'services', 'guards', 'own_guards',
+    __slots__ = ('key', 'subs', 'timers', 'clients', 'services', 'guards',
                  'by_sub', 'by_timer', 'by_client', 'by_service', 'by_guard')
 
-    def __init__(self, key: tuple, nodes, own_guards) -> None:
+    def __init__(self, key: tuple, nodes) -> None:
         self.key = key
         self.subs = [(s, n) for n in nodes for s in n._subscriptions]
         self.timers = [(t, n) for n in nodes for t in n._timers]
         self.clients = [(c, n) for n in nodes for c in n._clients]
         self.services = [(s, n) for n in nodes for s in n._services]
         self.guards = [(g, n) for n in nodes for g in n._guards]
-        self.own_guards = own_guards
         self.by_sub = {s.handle.pointer: (s, n) for s, n in self.subs}
         self.by_timer = {t.handle.pointer: (t, n) for t, n in self.timers}
         self.by_client = {c.handle.pointer: (c, n) for c, n in self.clients}
@@ -64,9 +63,9 @@ class _Entities:
         self.by_guard = {g.handle.pointer: g for g, _ in self.guards}
 
 
-def _key(nodes, own_guards) -> tuple:
+def _key(nodes) -> tuple:
     """Identity of every entity (a node's lists are mutated in place by create/destroy)."""
-    ids = [id(g) for g in own_guards]
+    ids = []
     for n in nodes:
         ids.append(id(n))
         ids.append(-1)
@@ -162,10 +161,10 @@ class LeanExecutor(SingleThreadedExecutor):
             if nodes is None:
                 nodes_to_use = self.get_nodes()
             own = (self._guard, self._sigint_gc)
-            key = _key(nodes_to_use, own)
+            key = _key(nodes_to_use)
             ents = self._lean
             if ents is None or ents.key != key:
-                ents = self._lean = _Entities(key, nodes_to_use, own)
+                ents = self._lean = _Entities(key, nodes_to_use)
             # a guard triggered but not handled yet (its callback group was busy) is
             # triggered again so that this wait returns for it (as rclpy does)
             for gc, _ in ents.guards:
