@@ -235,6 +235,23 @@ def test_supervisor_never_moves_when_position_lost():
     assert sup3.state == 'fault'
 
 
+def test_published_position_is_unknown_until_the_axis_is_referenced():
+    """A board after power-up or a reset counts steps from 0 wherever the axis is: without
+    a position sensor the published angle is NaN until homed (the safety supervisor
+    once judged the mirrors' sleeping switch, closed at dawn, 90 deg from that 0);
+    while homing the relative step count is published (stuck-switch travel)."""
+    sup = _sup(use_sensor=False)
+    cal = Calibration()
+    assert math.isnan(sup.snapshot(1.0, None).measured)
+    assert math.isnan(sup.snapshot(1.0, _board(steps=0, homed=False, sensor=None)).measured)
+    homing = BoardState(120, 0, True, False, True, None)
+    assert sup.snapshot(1.0, homing).measured == pytest.approx(cal.angle(120))
+    assert sup.snapshot(1.0, _board(steps=300, homed=True, sensor=None)).measured == pytest.approx(cal.angle(300))
+    # an absolute sensor knows the angle before referencing
+    assert _sup(use_sensor=True).snapshot(1.0, _board(homed=False, sensor=0.25)).measured == 0.25
+    assert math.isnan(_sup(use_sensor=False).snapshot(1.0, _board(homed=False, sensor=0.25)).measured)
+
+
 def test_supervisor_stops_on_safety_silence_and_stows():
     sup = _sup()
     offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)

@@ -220,6 +220,52 @@ def test_switch_closure_with_unknown_axis_position_is_judged_once_a_position_is_
     assert [r.split(' (')[0] for r in state.reasons] == ['limit switch last tripped outside homing']
 
 
+def test_dawn_mirrors_asleep_on_their_switch_then_homed_is_not_a_trip():
+    """Power-up at dawn: the mirrors rest on the sleeping switch, the driver publishes an
+    unknown position (not referenced) before it starts homing: no trip, then homing
+    and tracking away from the switch."""
+    clock = FakeClock()
+    core = SafetyCore(SafetyConfig(watchdogs={}, require_site_and_time=False), clock)
+    core.on_axis_status('mirrors', False, math.nan)            # stopped, not referenced
+    core.on_limit_switches({**OPEN, 'sleeping': True})
+    clock.advance(0.2)
+    core.on_axis_status('mirrors', False, math.nan)
+    assert core.evaluate().level == Level.OK
+    core.on_axis_status('mirrors', True, 0.0)                  # homing: relative steps
+    clock.advance(0.2)
+    core.on_axis_status('mirrors', False, math.pi / 2, commanded=math.pi / 2)   # homed there
+    core.on_limit_switches(OPEN)
+    core.on_axis_status('mirrors', False, 0.3, commanded=0.3)
+    assert core.evaluate().level == Level.OK
+
+
+def test_stow_switch_reached_before_the_status_says_stow_is_expected():
+    """A link drop of the mirrors makes this core require a stow; the secondary
+    reflector runs to its stow switch (0 rad) faster than its 5 Hz status reports the
+    new command (seen on the firmware rig at 120x: a trip with 'secondary_reflector at
+    0.098 rad, commanded 0.098 rad'). Its stow position is on its path for the
+    look-back after a stow verdict, not later."""
+    core, clock = make()
+    pos = {'secondary_reflector': 0.098}
+    feed(core, clock, steps=20, positions=pos)
+    assert core.state.level == Level.OK
+    clock.advance(0.1)
+    core.on_driver_state('mirrors', 'link_down', LinkState.LINK_CONNECTING, False)
+    assert core.evaluate().stow_required
+    clock.advance(0.15)                       # no new secondary status yet: 0.098 / 0.098
+    core.on_limit_switches({**OPEN, 'longitudinal_2': True})
+    assert core.evaluate().level == Level.STOW, core.state.reasons
+    # the same closure long after the last stow verdict is a trip
+    core2, clock2 = make()
+    feed(core2, clock2, steps=20, positions=pos)
+    core2.on_driver_state('mirrors', 'link_down', LinkState.LINK_CONNECTING, False)
+    core2.evaluate()
+    feed(core2, clock2, steps=15, positions=pos)          # ready again: OK for 1.5 s
+    assert core2.state.level == Level.OK
+    core2.on_limit_switches({**OPEN, 'longitudinal_2': True})
+    assert core2.evaluate().level == Level.ESTOP
+
+
 def test_switch_on_the_commanded_path_is_expected_even_with_a_stale_measurement():
     """Stowing at 2 rad/s (sim speed): the 5 Hz status lags, but the sleeping switch
     (the target) and the last switch (passed on the way) are on the path."""

@@ -93,6 +93,33 @@ def test_world_publisher_and_reader(tmp_path):
     assert read_axis_angles(None) == {}
 
 
+def _write_many(path, axis, n):
+    for k in range(n):
+        write_axis_angle(path, axis, float(k))
+
+
+def test_world_writers_in_several_processes_lose_no_update(tmp_path):
+    """Three runner processes rewrite their own axis concurrently: every file read in
+    between holds each axis' latest value or an older one, never a lost update at the end
+    (before the lock a writer could put back another's older angle for a period)."""
+    import multiprocessing
+    path = str(tmp_path / 'world.json')
+    n = 300
+    procs = [multiprocessing.get_context('fork').Process(target=_write_many, args=(path, axis, n))
+             for axis in ('mirrors', 'mobile_structure', 'secondary_reflector')]
+    for p in procs:
+        p.start()
+    seen = {}
+    while any(p.is_alive() for p in procs):
+        for axis, angle in read_axis_angles(path).items():
+            assert angle >= seen.get(axis, 0.0), (axis, angle, seen)   # never back in time
+            seen[axis] = angle
+    for p in procs:
+        p.join()
+        assert p.exitcode == 0
+    assert read_axis_angles(path) == {'mirrors': n - 1, 'mobile_structure': n - 1, 'secondary_reflector': n - 1}
+
+
 def test_gps_sim_protocol_and_raw_framing():
     b = GpsSim({'start_utc': NOON, 'ttff': 0.0})
     chunks = [x for x in _run(b, 2.5) if isinstance(x, NmeaChunk)]

@@ -335,9 +335,24 @@ class AxisSupervisor:
             return board.sensor
         return self.cfg.calibration.angle(board.steps)
 
+    def known_position(self, board: BoardState | None) -> float:
+        """The measured joint angle [rad] as published: NaN while the position is
+        unknown, i.e. no board, or a board that is not referenced (not homed, after power-up
+        or a reset: its step counter starts from 0 wherever the axis is) without a used
+        position sensor. While homing the step count is published (relative travel: the
+        safety supervisor judges stuck switches on it). A step count published as an
+        angle before referencing once made the safety supervisor judge the mirrors'
+        sleeping switch, closed at dawn, as tripped 90 deg away from the mirrors."""
+        if board is None:
+            return math.nan
+        if not board.homed and not board.homing and self.state != 'homing' \
+                and not (self.cfg.use_sensor and board.sensor is not None):
+            return math.nan
+        return self.measured(board)
+
     def snapshot(self, now_ros: float, board: BoardState | None) -> Snapshot:
         """The :class:`Snapshot` after the tick at ROS time ``now_ros`` [s] that saw ``board``."""
-        measured = self.measured(board) if board is not None else math.nan
+        measured = self.known_position(board)
         return Snapshot(now_ros, self.state, float(self.commanded), float(self.setpoint), float(measured), board)
 
     def counts(self) -> dict[str, int]:

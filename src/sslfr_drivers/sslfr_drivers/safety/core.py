@@ -48,8 +48,11 @@ The rules (keys ``kind:name``; texts and clearing in rules.py)
     while its axis is not homing and its nominal angle (``switch_positions``) is not
     on the axis' path, i.e. not within the span of the angles measured over the last
     ``switch_lookback`` [s] and the commanded angle (+/- ``switch_window`` [rad], from
-    a fresh axis status), is a trip. The look-back absorbs the different delays of
-    the switch and status messages of a moving axis. The seed's switches are position
+    a fresh axis status), plus the axis' stow position (STOW_POSITION) when a verdict
+    of this core required it to stow (not stopped) within the look-back, is a trip. The look-back
+    absorbs the different delays of the switch and status messages of a moving axis
+    (a fast axis may reach its stow switch before its next 5 Hz status says it was
+    commanded there). The seed's switches are position
     references the mechanism reaches or passes in normal operation (mirrors on the
     sleeping switch every night, passing the ``last`` switch on the way), hence the
     path test. With the position unknown (no fresh status, or NaN: no board, the axis
@@ -85,7 +88,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, SWITCHES, THERMOCOUPLES, Level,
+from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, STOW_POSITION, SWITCH_AXIS, SWITCHES, THERMOCOUPLES, Level,
                                    LinkState, Phase, driver_node)
 
 from sslfr_drivers.safety.config import WATCHABLE, FakeClock, SafetyConfig, SystemClock, with_changes
@@ -194,6 +197,7 @@ class SafetyCore:
         self.switch_closed: dict[str, bool | None] = {s: None for s in SWITCHES}
         self.switch_ack: set[str] = set()        # acknowledged trips, re-armed when open
         self.pending_switches: set[str] = set()   # closed while the axis position was unknown
+        self.stow_verdict_at: dict[str, float] = {}   # axis -> last verdict stowing it [steady s]
         self.heard: dict[str, float] = {}        # node -> last arrival [steady s]
         self.phase: int | None = None
         self.tracking_since: float | None = None
@@ -382,6 +386,10 @@ class SafetyCore:
         ends = [a for t, a in ax.recent if t >= horizon] + [ax.measured]
         if ax.commanded is not None:
             ends.append(ax.commanded)
+        if self.stow_verdict_at.get(axis, -math.inf) >= horizon:
+            # this supervisor required a stow within the look-back: the driver may already
+            # be there before a status says so (a fast axis, a 5 Hz status)
+            ends.append(STOW_POSITION[axis])
         w = self.config.switch_window
         if min(ends) - w <= nominal <= max(ends) + w:
             return
@@ -517,6 +525,10 @@ class SafetyCore:
         self.on_time(now)
         new, old = self.verdict(now), self._state
         self._state = new
+        if new.stow_required:
+            for axis in JOINTS:
+                if axis not in new.stopped_axes:
+                    self.stow_verdict_at[axis] = now
         if new.level != old.level or set(new.reasons) != set(old.reasons):
             self.counters['transitions'] += 1
             self._pending.append(Transition(now, self.clock.wall(), old.level, new.level,

@@ -48,6 +48,7 @@ Fault injection (:meth:`control` of each class, the runner's control channel):
 from __future__ import annotations
 
 import datetime as _dt
+import fcntl
 import json
 import math
 import os
@@ -82,23 +83,35 @@ def _utc_option(value) -> float | None:
         return t.timestamp()
 
 
+def write_axis_angles(path: str, angles: dict[str, float]) -> None:
+    """Record joint angles [rad] (axis -> angle) in the shared world file: one
+    read-modify-write under an exclusive ``flock`` of ``<path>.lock`` (several runner
+    processes share the file: without the lock one could write back another's older
+    angle), then an atomic replace (readers take no lock and never see a torn file)."""
+    with open(f'{path}.lock', 'a') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            with open(path) as fh:
+                world = json.load(fh)
+        except (OSError, ValueError):
+            world = {}
+        if not isinstance(world.get('axes'), dict):
+            world['axes'] = {}
+        for axis, angle in angles.items():
+            world['axes'][axis] = {'angle': float(angle)}
+        atomic_write(path, json.dumps(world), fsync=False)
+
+
 def write_axis_angle(path: str, axis: str, angle: float) -> None:
-    """Record ``axis``' joint angle [rad] in the shared world file (atomic replace)."""
-    try:
-        with open(path) as fh:
-            world = json.load(fh)
-    except (OSError, ValueError):
-        world = {}
-    world.setdefault('axes', {})[axis] = {'angle': float(angle)}
-    atomic_write(path, json.dumps(world), fsync=False)
+    """Record ``axis``' joint angle [rad] in the shared world file (:func:`write_axis_angles`)."""
+    write_axis_angles(path, {axis: angle})
 
 
 class WorldPublisher:
     """Writes the joint angle of the simulated axis boards of one runner process to the
     world file every ``period`` seconds (the runner calls :meth:`update` after each
-    tick). Several processes share the file: each rewrites only its own axes
-    (read-modify-write with atomic replace: a reader never sees a torn file; a
-    concurrent update lost by a race is restored at the next period)."""
+    tick). Several processes share the file: each rewrites only its own axes, in one
+    locked read-modify-write (:func:`write_axis_angles`)."""
 
     def __init__(self, path: str, period: float = 0.2):
         self.path = path
@@ -111,14 +124,17 @@ class WorldPublisher:
         if now < self._next:
             return
         self._next = now + self.period
+        angles = {}
         for board in boards:
             axis = getattr(getattr(board, 'cfg', None), 'axis', None)
             angle = getattr(board, 'angle', None)
             if axis and isinstance(angle, (int, float)):
-                try:
-                    write_axis_angle(self.path, axis, angle)
-                except OSError:
-                    pass
+                angles[axis] = angle
+        if angles:
+            try:
+                write_axis_angles(self.path, angles)
+            except OSError:
+                pass
 
 
 def read_axis_angles(path: str | None) -> dict[str, float]:
