@@ -131,3 +131,13 @@ def test_cli_help():
     out = subprocess.run([sys.executable, '-m', 'sslfr_drivers.sim.runner', '--help'],
                          capture_output=True, text=True, timeout=20)
     assert out.returncode == 0 and '--control' in out.stdout and 'disconnect' in out.stdout
+
+
+def test_split_frames_survives_garbage_and_a_short_tail():
+    """The fault injector cuts the board's output at frame lengths; injected garbage
+    ending in fewer than 4 bytes once raised IndexError in the simulator's serve thread."""
+    from sslfr_drivers.sim.base import _split_frames
+    garbage = b'\xa5\x5a\x01\x05garbage-not-a-frame\x00\xff' * 3
+    for k in range(len(garbage) + 1):
+        pieces = _split_frames(garbage[:k])
+        assert b''.join(pieces) == garbage[:k]

@@ -509,8 +509,15 @@ class FaultInjector:
 
 
 def _split_frames(data: bytes) -> list[bytes]:
+    """The board's output cut at frame lengths (header byte 3 = payload length). Bytes
+    that are not whole frames (the tests inject garbage) end up in the last piece: a
+    tail shorter than a header is one piece, never an IndexError (that once ended the
+    simulator's serve thread in a soak)."""
     out, i = [], 0
     while i < len(data):
+        if len(data) - i < 4:
+            out.append(data[i:])
+            break
         n = data[i + 3]
         size = 12 + n
         out.append(data[i:i + size])
