@@ -342,7 +342,7 @@ def test_layouts_compose_hardware_and_keep_safety_alone():
     sep = ns.processes('separate')
     assert [p.name for p in sep] == [n.name for n in ns.start_order()] and not any(p.composed for p in sep)
     comp = {p.name: [n.name for n in p.nodes] for p in ns.processes('composed')}
-    assert comp['safety'] == ['safety'] and comp['recorder'] == ['recorder']
+    assert comp['safety'] == ['safety'] and comp['operations'] == ['planner', 'web', 'recorder']
     assert comp['hardware'][:3] == list(AXES), 'the drivers stop their motors first'
     assert {'gps', 'absorber_board', 'irradiance'} <= set(comp['hardware'])
     assert sorted(n for names in comp.values() for n in names) == sorted(n.name for n in ns.nodes)

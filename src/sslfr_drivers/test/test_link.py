@@ -297,6 +297,74 @@ def test_reader_survives_a_failing_protocol_and_stops_cleanly():
         reader.write(b'x')
 
 
+class _CountingTransport:
+    """Wraps a transport and counts its reads (each read is one reader wake-up)."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.name = inner.name
+        self.reads = 0
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def read(self, timeout):
+        self.reads += 1
+        return self.inner.read(timeout)
+
+
+def test_idle_link_reader_sleeps_until_its_deadlines(sim):
+    """The reader wakes for a frame or the link's next deadline (here the 0.2 s
+    heartbeat), not every 20 ms: an idle link over 1.5 s costs about 8-16 reads, where
+    the former fixed 20 ms poll cost 75 (issue 16). Its heartbeats keep the board's
+    1 s watchdog quiet and it stays UP."""
+    t = _CountingTransport(SerialTransport(sim.path))
+    lk = BoardLink(t, timeout=0.15, retries=3, heartbeat=0.2).start()
+    try:
+        assert lk.wait_up(3)
+        time.sleep(0.3)
+        r0, sent0 = t.reads, lk.frames_sent
+        time.sleep(1.5)
+        reads, pings = t.reads - r0, lk.frames_sent - sent0
+        assert lk.state == BoardLinkState.UP
+        assert 5 <= pings <= 9, pings                 # a PING per 0.2 s of silence
+        assert reads <= 4 * pings + 4, (reads, pings)  # PING, its answer, the deadline
+    finally:
+        lk.stop()
+
+
+def test_a_request_deadline_is_kept_while_the_reader_sleeps(sim, link):
+    """A request submitted while the reader sleeps (up to its 0.25 s read_timeout)
+    with a shorter time-out than that pokes the read: the unanswered request is retried
+    and ends at its own deadline, not at the end of the reader's sleep."""
+    sim.command('disconnect 3')
+    time.sleep(0.1)
+    t0 = time.monotonic()
+    fut = link.submit(m.Ping(1), timeout=0.05, retries=0)
+    with pytest.raises(Exception, match='no answer'):
+        fut.result(timeout=2.0)
+    took = time.monotonic() - t0
+    assert took < 0.2, f'time-out seen after {took:.3f} s (deadline 0.05 s)'
+
+
+def test_reader_stop_interrupts_a_long_read():
+    """stop() ends a read under way at once (pyserial's abort pipe), not at its
+    time-out: closing a session does not wait for the reader's sleep."""
+    from sslfr_drivers.link.reader import Protocol, ReaderThread
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        reader = ReaderThread(SerialTransport(os.ttyname(slave)), Protocol(), read_timeout=5.0).start()
+        assert wait_for(lambda: reader.connected, 2)
+        time.sleep(0.1)                       # the reader is now in its 5 s read
+        t0 = time.monotonic()
+        reader.stop()
+        assert time.monotonic() - t0 < 0.5
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
 def test_link_and_sensor_modules_never_import_the_simulators():
     """Production code (board link, xbee_hub, sensor nodes) runs without sim/."""
     import ast

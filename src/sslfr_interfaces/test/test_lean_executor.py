@@ -156,3 +156,53 @@ def test_a_node_with_waitables_is_served_by_rclpys_path(lean):
     node.create_timer(0.02, lambda: n.__setitem__(0, n[0] + 1))
     assert _spin(ex, lambda: n[0] >= 5)
     assert ex.lean_wakeups == 0 and ex.fallback_wakeups >= 5
+
+
+def test_sync_callbacks_are_called_directly(lean):
+    """A plain (not async) callback runs without rclpy's Task/coroutine machinery."""
+    node, ex = lean('lean_direct')
+    n = [0]
+    node.create_timer(0.02, lambda: n.__setitem__(0, n[0] + 1))
+    assert _spin(ex, lambda: n[0] >= 5)
+    assert ex.direct_callbacks >= 5 and not ex._tasks
+
+
+def test_management_services_are_served_but_not_in_every_wait(lean, ctx):
+    """Parameter and type-description services (and a lifecycle node's) are waited on
+    at most every MANAGEMENT_PERIOD: a get_parameters request is answered within about
+    that period, while a busy timer wakes the executor far more often; the node's own
+    services are in every wait."""
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.lifecycle import LifecycleNode
+    from sslfr_common.executor import MANAGEMENT_PERIOD, _is_management
+
+    node, ex = lean('lean_mgmt')
+    node.declare_parameter('answer', 42)
+    own = node.create_service(Trigger, 'lean_mgmt/get_state', lambda q, r: r)   # not rclpy's
+    assert not _is_management(own)
+    assert {s.srv_name.rpartition('/')[2] for s in node._services if _is_management(s)} == {
+        'describe_parameters', 'get_parameters', 'get_parameter_types', 'list_parameters',
+        'set_parameters', 'set_parameters_atomically', 'get_type_description'}
+    life = LifecycleNode('lean_mgmt_life', context=ctx)
+    try:
+        assert sum(_is_management(s) for s in life._services) == 12
+    finally:
+        life.destroy_node()
+
+    ticks = [0]
+    node.create_timer(0.005, lambda: ticks.__setitem__(0, ticks[0] + 1))      # a busy process
+    asker = Lean('lean_mgmt_asker', context=ctx)
+    try:
+        cli = asker.create_client(GetParameters, 'lean_mgmt/get_parameters')
+        ex.add_node(asker)
+        assert _spin(ex, lambda: cli.service_is_ready())
+        for _ in range(5):
+            t0 = time.monotonic()
+            fut = cli.call_async(GetParameters.Request(names=['answer']))
+            ex.spin_until_future_complete(fut, timeout_sec=5.0)
+            took = time.monotonic() - t0
+            assert fut.done() and fut.result().values[0].integer_value == 42
+            assert took < MANAGEMENT_PERIOD + 0.4, took        # a period + a loaded machine
+    finally:
+        ex.remove_node(asker)
+        asker.destroy_node()

@@ -285,3 +285,55 @@ def test_a_composed_node_refusing_its_config_stops_the_process(ros_env):
     assert code == 2, out
     assert 'second: invalid parameters, not starting: second: bad value' in out
     assert 'first on_exit' in out and 'third' not in out
+
+
+def test_composed_nodes_share_one_clock_subscription(ros_domain):
+    """share_time_source: the nodes of one process on sim time take /clock once (the
+    first node's subscription), every node's ROS clock follows it, and use_sim_time can
+    no longer be changed at run time (refused with the reason)."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+    from sslfr_common.executor import LeanExecutor
+    from sslfr_common.node import share_time_source
+
+    class Lean(LeanEvents, Node):
+        pass
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=ros_domain)
+    sim = [Parameter('use_sim_time', value=True)]
+    nodes = [Lean(f'clock_user_{i}', context=ctx, parameter_overrides=sim) for i in range(3)]
+    wall = Lean('wall_clock_user', context=ctx)                # system time: left alone
+    src = Lean('clock_source', context=ctx)
+    ex = LeanExecutor(context=ctx)
+    try:
+        assert share_time_source([*nodes, wall]) == 2
+        clock_subs = [s for n in (*nodes, wall) for s in n.subscriptions if s.topic_name == '/clock']
+        assert len(clock_subs) == 1 and clock_subs[0] in nodes[0].subscriptions
+        for n in (*nodes, wall, src):
+            ex.add_node(n)
+        pub = src.create_publisher(Clock, '/clock', 10)
+        deadline = time.monotonic() + 5.0
+        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        for sec in (100, 200):
+            msg = Clock()
+            msg.clock.sec = sec
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and any(
+                    n.get_clock().now().nanoseconds != sec * 10**9 for n in nodes):
+                pub.publish(msg)
+                ex.spin_once(timeout_sec=0.05)
+            assert [n.get_clock().now().nanoseconds for n in nodes] == [sec * 10**9] * 3
+        assert wall.get_clock().now().nanoseconds > 1e18                 # still the system time
+        for n in nodes:
+            res = n.set_parameters([Parameter('use_sim_time', value=False)])[0]
+            assert not res.successful and 'shared by the nodes of this process' in res.reason
+            assert n.get_clock().ros_time_is_active
+        assert share_time_source(nodes[:1]) == 0                         # alone: nothing to share
+    finally:
+        ex.shutdown()
+        for n in (*nodes, wall, src):
+            n.destroy_node()
+        rclpy.try_shutdown(context=ctx)

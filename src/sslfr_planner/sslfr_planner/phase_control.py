@@ -2,7 +2,8 @@
 
 The planner node (:mod:`sslfr_planner.planner_node`) feeds a :class:`PhaseControl`
 with its inputs (operator mode requests, the safety verdict, replan requests) and
-calls :meth:`PhaseControl.tick` at every ROS-time update; this module decides
+calls :meth:`PhaseControl.tick` every 0.2 s of ROS time and at once on a ROS-time
+step of :func:`immediate_step` or more; this module decides
 
 * **the phase in force** (:func:`sslfr_planner.modes.resolve_phase`: safety stow >
   commanded stow > maintenance > manual hold > the automatic day cycle);
@@ -187,6 +188,17 @@ class PhaseControl:
         if self.phase == Phase.STOW:
             return ramp(t, *self.stow_start, cfg['stow.speeds'])
         return hold(t, self.hold_pose)
+
+
+def immediate_step(cfg: dict, tick_period: float) -> float:
+    """Shortest forward step of ROS time [s] that runs a tick at once, not at the
+    node's ``tick_period`` timer: the tick period or the shortest publication period
+    (``phase_period``, ``sun_period``), whichever is shorter. A simulation faster than
+    real time moves ROS time in such steps and must be followed step by step; the
+    small steps of /clock at real time (20 Hz) are left to the timer (issue 16: a
+    tick per /clock message cost a tick 20 times a second for nothing). Any step back,
+    a change of clock source and a jump beyond ``time_jump_threshold`` run it too."""
+    return min(tick_period, cfg['phase_period'], cfg['sun_period'])
 
 
 def diagnostic_summary(phase: int | None, site_source: str, last_error: str,

@@ -2,14 +2,13 @@
 
 Thin ROS 2 shell around pure cores:
 
-* :mod:`sslfr_planner.day_cycle` -- the day's schedule (sunrise, noon, sunset and the
-  per-second table of seed 000 Step 1.2, computed by the ephemeris core), the
-  automatic phase and setpoints at any instant;
+* :mod:`sslfr_planner.day_cycle` -- the day's schedule (seed 000 Step 1.2, by the
+  ephemeris core), the automatic phase and setpoints at any instant;
 * :mod:`sslfr_planner.phase_control` -- the phase in force (operator modes and the
-  safety override), the stow ramp and hold poses, when to replan and to publish;
-* :mod:`sslfr_planner.site_source` -- GPS fix / persisted fix / parameters;
-* :mod:`sslfr_planner.timejump` -- ROS-time jumps against the steady clock;
-* :mod:`sslfr_planner.planner_params` -- every parameter, declared in one table.
+  safety override), the stow ramp and hold poses, when to tick, replan and publish;
+* :mod:`sslfr_planner.site_source` (GPS fix / persisted fix / parameters),
+  :mod:`sslfr_planner.timejump` (ROS-time jumps against the steady clock),
+  :mod:`sslfr_planner.planner_params` (every parameter, in one table).
 
 Interface (docs/architecture.md): publishes ``tracker/sun`` (SunPosition, R10,
 ``sun_period``), ``tracker/phase`` (TrackerPhase, TL1, on change and every
@@ -39,7 +38,8 @@ from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, ru
 
 from sslfr_planner.day_cycle import DayCycle
 from sslfr_planner.messages import phase_msg, sun_msg, trajectory_msg
-from sslfr_planner.phase_control import PHASE, SUN, TRAJECTORY, PhaseControl, diagnostic_summary
+from sslfr_planner.phase_control import (PHASE, SUN, TRAJECTORY, PhaseControl, diagnostic_summary,
+                                         immediate_step)
 from sslfr_planner.planner_params import PLANNER_PARAMS
 from sslfr_planner.site_source import SiteSelector, distance_m
 from sslfr_planner.timejump import ClockJumpDetector
@@ -82,19 +82,25 @@ class PlannerNode(LeanEvents, Node):
         self.create_service(Trigger, 'planner/replan', self._srv_replan)
         self.create_service(SetMode, 'planner/set_mode', self._srv_set_mode)
 
-        # Every ROS-time update (each /clock message with use_sim_time) runs the tick at
-        # once: simulated days advance in steps of any size and the ROS-time timer
-        # below alone would see them late; jumps beyond time_jump_threshold replan.
-        self._jump_handle = self.get_clock().create_jump_callback(
-            JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=Duration(nanoseconds=-1),
-                          on_clock_change=True),
-            post_callback=self._on_ros_jump)
+        self._jump_step, self._jump_handle = None, None
+        self._watch_ros_time()
         self.create_timer(TICK_PERIOD, self._tick)                 # ROS time
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0, self._steady_tick, clock=steady)    # diagnostics, jumps
         self.get_logger().info(
             f'planner ready: mode {self.control.mode}, site {self.selector.current().describe()}, '
             f'law {self.cfg["collector.law"]}, horizon {self.cfg["horizon"]} s at {self.cfg["step"]} s')
+
+    def _watch_ros_time(self) -> None:
+        """(Re)register the ROS-time jump callback (:func:`phase_control.immediate_step`)."""
+        step = immediate_step(self.cfg, TICK_PERIOD)
+        if step != self._jump_step:
+            if self._jump_handle is not None:
+                self._jump_handle.unregister()
+            self._jump_step, self._jump_handle = step, self.get_clock().create_jump_callback(
+                JumpThreshold(min_forward=Duration(nanoseconds=int(step * 1e9)),
+                              min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+                post_callback=self._on_ros_jump)
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, cfg: dict) -> None:
@@ -105,6 +111,7 @@ class PlannerNode(LeanEvents, Node):
         if not changed:
             return
         self._jump.threshold = float(cfg['time_jump_threshold'])
+        self._watch_ros_time()
         if any(k.startswith(('site.', 'gps.', 'state_dir')) for k in changed):
             self.selector = SiteSelector.from_params(cfg, self.selector.gps)
             self._selector_errors_seen = 0   # e.g. a corrupt persisted file in a new state_dir
@@ -149,13 +156,10 @@ class PlannerNode(LeanEvents, Node):
         self.control.request_replan('planner/replan service')
         self._tick()
         schedule = self.cycle.current_schedule
-        if schedule is None or self.control.pending_replan is not None:
-            response.success = False
-            response.message = f'no plan: {self._last_error or "ROS time not available yet"}'
-            return response
-        response.success = True
+        response.success = schedule is not None and self.control.pending_replan is None
         response.message = (f'planned {schedule.describe()} for {self.cycle.site_fix.describe()} '
-                            f'in {self._last_plan_ms:.1f} ms')
+                            f'in {self._last_plan_ms:.1f} ms' if response.success else
+                            f'no plan: {self._last_error or "ROS time not available yet"}')
         return response
 
     def _srv_set_mode(self, request, response):

@@ -196,3 +196,13 @@ def test_messages(cycle):
     s = sun_msg(sun, now)
     assert (s.zenith, s.azimuth, s.transversal, s.longitudinal) == sun[:4]
     assert s.above_horizon and s.algorithm == 'spa'
+
+
+def test_immediate_step_is_the_tick_or_the_shortest_publication_period():
+    """/clock at real time (20 Hz: 0.05 s steps) is left to the 0.2 s tick timer; a
+    faster simulation's steps, and steps as long as a publication period, tick at once."""
+    from sslfr_planner.phase_control import immediate_step
+    assert immediate_step({'phase_period': 1.0, 'sun_period': 1.0}, 0.2) == 0.2
+    assert immediate_step({'phase_period': 0.1, 'sun_period': 1.0}, 0.2) == 0.1
+    assert immediate_step({'phase_period': 5.0, 'sun_period': 0.15}, 0.2) == 0.15
+    assert 0.05 < immediate_step({'phase_period': 1.0, 'sun_period': 1.0}, 0.2)     # 20 Hz /clock at 1x

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import os
 import threading
 import time
@@ -141,7 +142,11 @@ class BoardLink(Protocol):
         Reopen / re-read back-off bounds [s] (doubling between them; default the
         reader's policy, 0.1 s to 2 s).
     read_timeout : float
-        Reader thread poll period [s]; bounds timer resolution.
+        Longest wait of the reader thread [s]. It wakes for a frame or for the
+        link's next deadline (:meth:`next_tick`: a request's time-out, the heartbeat,
+        the silence check, a re-read); this only bounds how long an idle link sleeps.
+        Keep it at most the request ``timeout``: a request submitted during a read
+        then never waits past its deadline without a poke.
     clock : callable
         Monotonic clock [s] (steady; never ROS time).
     key : bytes or None
@@ -153,7 +158,7 @@ class BoardLink(Protocol):
     def __init__(self, transport: Transport, *, name: str | None = None, timeout: float = 0.25,
                  retries: int = 2, heartbeat: float | None = None, silence: float = 1.0,
                  backoff_min: float = BACKOFF_MIN, backoff_max: float = BACKOFF_MAX,
-                 read_timeout: float = 0.02, clock: Callable[[], float] = time.monotonic,
+                 read_timeout: float = 0.25, clock: Callable[[], float] = time.monotonic,
                  key: bytes | None = None):
         self.name = name or getattr(transport, 'name', 'board')
         self.key = bytes(key) if key is not None else NULL_KEY
@@ -403,6 +408,8 @@ class BoardLink(Protocol):
             self._reader.write(data)
             self.frames_sent += 1
             self._last_tx = self.clock()
+            if pending is not None:           # a deadline the reader may sleep past
+                self._reader.poke(pending.timeout)
         except TransmitError as exc:
             self.tx_failures += 1
             self.last_error = str(exc)
@@ -448,6 +455,7 @@ class BoardLink(Protocol):
             if self._state == state:
                 self._shown = state
                 self._state_cv.notify_all()
+        self._reader.poke()                   # the deadlines depend on the state
 
     # ------------------------------------------------- reader protocol (reader thread)
     def connection_made(self, reader: ReaderThread) -> None:
@@ -483,6 +491,25 @@ class BoardLink(Protocol):
     def tick(self) -> None:
         """Retries, time-outs, heartbeat, silence and re-read timers."""
         self._service(self.clock())
+
+    def next_tick(self) -> float | None:
+        """Seconds until :meth:`_service` has something to do (the reader sleeps until
+        then unless a frame comes): the first of the pending requests' deadlines, the
+        next heartbeat, the silence check and the next re-read; None when none."""
+        now = self.clock()
+        due = math.inf
+        with self._lock:
+            for p in self._pending.values():
+                due = min(due, p.deadline)
+        state, hb = self._state, self.heartbeat
+        if hb and self._session is not None and state != BoardLinkState.REFUSED:
+            due = min(due, self._last_tx + hb)
+        if state == BoardLinkState.UP and hb:
+            due = min(due, self._last_rx + max(self.silence, 2 * hb) + 1e-3)
+        if state in (BoardLinkState.CONNECTING, BoardLinkState.SILENT, BoardLinkState.REFUSED) \
+                and not self._refreshing:
+            due = min(due, self._next_refresh)
+        return None if due == math.inf else max(0.0, due - now)
 
     # ------------------------------------------------------- frames (reader thread)
     def _on_frame(self, frame: Frame, now: float) -> None:
@@ -800,5 +827,7 @@ class BoardLink(Protocol):
             if self._reader.connected and self._state == BoardLinkState.UP:
                 self._set_state(BoardLinkState.SILENT, str(exc))
         finally:
-            self._next_refresh = self.clock() + self._refresh_backoff.next()
+            delay = self._refresh_backoff.next()
+            self._next_refresh = self.clock() + delay
             self._refreshing = False
+            self._reader.poke(delay)

@@ -19,11 +19,21 @@ Protocol calls, all from the reader thread, in this order over a connection::
 
 and ``open_failed(exc)`` after each failed open attempt. ``stop()`` closes the port
 without calling the protocol.
+
+The reader sleeps until data arrives or the protocol's next deadline
+(``next_tick()``), at most ``read_timeout``: an idle board costs a wake-up per
+deadline (a heartbeat, a request's time-out), not a poll every few milliseconds
+(issue 16: six readers polling at 50 Hz were a third of the ``hardware`` process's
+CPU). Another thread that adds an earlier deadline calls :meth:`ReaderThread.poke`,
+which interrupts the read on transports that can be interrupted
+(``Transport.interrupt``: pyserial ports and ptys, XBee boards); on the others the
+reader keeps waking every :data:`UNINTERRUPTIBLE_WAIT`.
 """
 from __future__ import annotations
 
 import logging
 import threading
+import time
 
 from sslfr_drivers.link.transport import Transport, TransportError
 
@@ -33,6 +43,11 @@ _log = logging.getLogger(__name__)
 #: up to BACKOFF_MAX (a board plugged back is seen within 2 s).
 BACKOFF_MIN = 0.1
 BACKOFF_MAX = 2.0
+
+#: [s] shortest wait of one read when a deadline is due (no busy loop on a deadline
+#: that a tick cannot clear), and the longest on a transport a poke cannot interrupt.
+MIN_WAIT = 0.002
+UNINTERRUPTIBLE_WAIT = 0.02
 
 
 class Backoff:
@@ -76,6 +91,11 @@ class Protocol:
     def tick(self) -> None:
         """After every read or read time-out (at least every ``read_timeout`` s)."""
 
+    def next_tick(self) -> float | None:
+        """Seconds until :meth:`tick` next has something to do (0 when overdue);
+        None when nothing is timed. Called from the reader thread before each read."""
+        return None
+
     def connection_lost(self, exc: BaseException) -> None:
         """The port failed with ``exc``; it is closed and will be reopened."""
 
@@ -97,7 +117,7 @@ class ReaderThread:
     name : str, optional
         Thread name and log prefix.
     read_timeout : float
-        Longest wait of one read [s]: bounds the period of ``protocol.tick()``.
+        Longest wait of one read [s]; the protocol's ``next_tick()`` shortens it.
     backoff : Backoff, optional
         Reopen policy (default ``Backoff()``: 0.1 s doubling to 2 s).
 
@@ -118,6 +138,7 @@ class ReaderThread:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._wlock = threading.Lock()
+        self._wake_at = 0.0           # [s, monotonic] end of the read under way
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> 'ReaderThread':
@@ -132,6 +153,7 @@ class ReaderThread:
     def stop(self) -> None:
         """Stop the thread (joined unless called from it) and close the port."""
         self._stop.set()
+        self.transport.interrupt()        # end a read under way now, not at its time-out
         t, self._thread = self._thread, None
         if t is not None and t is not threading.current_thread():
             t.join(timeout=2.0)
@@ -152,6 +174,15 @@ class ReaderThread:
         :class:`~sslfr_drivers.link.transport.TransportError` (or ``TransmitError``)."""
         with self._wlock:
             self.transport.write(data)
+
+    def poke(self, within: float = 0.0) -> None:
+        """The protocol has a deadline ``within`` [s] from now: end the read under way
+        if it would wait past it (safe from any thread; from the reader thread itself
+        nothing is needed: it asks ``next_tick()`` before every read)."""
+        if threading.current_thread() is self._thread:
+            return
+        if time.monotonic() + within < self._wake_at:
+            self.transport.interrupt()
 
     # ------------------------------------------------------------------ the loop
     def _close(self) -> None:
@@ -174,8 +205,17 @@ class ReaderThread:
                 self.backoff.reset()
                 self.opens += 1
                 proto.connection_made(self)
+            timeout = self.read_timeout if t.interruptible else min(self.read_timeout, UNINTERRUPTIBLE_WAIT)
             try:
-                data = t.read(self.read_timeout)
+                due = proto.next_tick()
+            except Exception:  # noqa: BLE001 - the reader must survive a protocol bug
+                _log.exception('%s: protocol next_tick failed', self.name)
+                due = None
+            if due is not None:
+                timeout = min(timeout, max(MIN_WAIT, due))
+            self._wake_at = time.monotonic() + timeout
+            try:
+                data = t.read(timeout)
             except TransportError as exc:
                 self.last_error = str(exc)
                 self._close()

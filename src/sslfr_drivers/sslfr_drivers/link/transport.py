@@ -16,8 +16,9 @@
 (coordinators are shared per serial port inside a process); anything else is a
 pyserial URL or device path.
 
-Every transport has ``open()``, ``close()``, ``is_open``, ``write(data)`` and
-``read(timeout) -> bytes`` (returns ``b''`` on timeout). Port loss raises
+Every transport has ``open()``, ``close()``, ``is_open``, ``write(data)``,
+``read(timeout) -> bytes`` (returns ``b''`` on timeout) and ``interrupt()`` (ends a
+read under way early, from another thread, where ``interruptible``). Port loss raises
 :class:`TransportError` from ``read``/``write``; the reader that owns the transport
 then closes it and reopens it with back-off.
 """
@@ -74,6 +75,15 @@ class Transport:
         """Frames the transport could not deliver (XBee transmit status)."""
         return 0
 
+    @property
+    def interruptible(self) -> bool:
+        """True when :meth:`interrupt` can end a read under way."""
+        return False
+
+    def interrupt(self) -> None:
+        """End the read under way (or the next one) early with ``b''``; a no-op where
+        not :attr:`interruptible`. Safe from any thread."""
+
 
 class SerialTransport(Transport):
     """pyserial port (URL or device path).
@@ -120,6 +130,19 @@ class SerialTransport(Transport):
     @property
     def is_open(self) -> bool:
         return self._ser is not None
+
+    @property
+    def interruptible(self) -> bool:
+        # pyserial's POSIX ports (devices, ptys) wait in select() on an abort pipe too
+        return hasattr(self._ser, 'pipe_abort_read_w')
+
+    def interrupt(self) -> None:
+        ser = self._ser
+        if ser is not None and hasattr(ser, 'pipe_abort_read_w'):
+            try:
+                ser.cancel_read()
+            except (OSError, TypeError):
+                pass
 
     def write(self, data: bytes) -> None:
         ser = self._ser
@@ -380,6 +403,13 @@ class XBeeBoardTransport(Transport):
 
     def _deliver(self, data: bytes) -> None:
         self._rx.put(data)
+
+    @property
+    def interruptible(self) -> bool:
+        return True
+
+    def interrupt(self) -> None:
+        self._rx.put(b'')           # read() returns what it has, possibly nothing
 
     def write(self, data: bytes) -> None:
         if not self._open:

@@ -5,7 +5,9 @@ the absorber tube's inlet and outlet (the safety limit, 150 degC, is the safety 
 business), and five limit switches (initial, last, sleeping, longitudinal 1 and 2).
 The board sends raw MAX6675 words and raw switch bits; decoding
 (:mod:`sslfr_drivers.sensors.max6675`) and debouncing (:mod:`sslfr_drivers.sensors.debounce`) are
-done here, in the pure cores.
+done here, in the pure cores. The raw switch samples (20 Hz) are debounced in the
+reader thread as they arrive; only a debounced change wakes the executor (issue 16: a
+wake-up per sample was most of this node's CPU), the temperatures always do.
 
 Publishes
     ``absorber/inlet_temperature``, ``absorber/outlet_temperature`` (sensor_msgs/
@@ -22,6 +24,8 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
+from dataclasses import dataclass
 
 from sensor_msgs.msg import Temperature
 
@@ -37,6 +41,13 @@ from sslfr_drivers.sensors.sensor_node import SensorBoardNode
 from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
 
 
+@dataclass(frozen=True)
+class _SwitchChange:
+    """Debounced switch changes found by the reader thread, for the executor."""
+    names: tuple
+    first: bool          # the first sample: every switch's initial state (not logged)
+
+
 class AbsorberBoardNode(SensorBoardNode):
     """See the module docstring; parameters: :data:`sensor_params.ABSORBER_BOARD`."""
 
@@ -45,6 +56,7 @@ class AbsorberBoardNode(SensorBoardNode):
         self._model = self._error_model(self._values)
         self._switches = SwitchTracker(self._values['debounce_time'])
         self._switch_meter = RateMeter()
+        self._sw_lock = threading.Lock()     # the tracker: reader thread and executor
         self._faults = {w: max6675.FAULT_NONE for w in THERMOCOUPLES}
         self._fault_counts = {w: 0 for w in THERMOCOUPLES}
         self._last_temp = {w: math.nan for w in THERMOCOUPLES}
@@ -63,7 +75,8 @@ class AbsorberBoardNode(SensorBoardNode):
 
     def _apply(self, new: dict) -> None:
         self._model = self._error_model(new)
-        self._switches.debouncer.hold_time = float(new['debounce_time'])
+        with self._sw_lock:
+            self._switches.debouncer.hold_time = float(new['debounce_time'])
         if new['switch_rate'] != self._values['switch_rate']:
             self._sw_timer.cancel()
             self.destroy_timer(self._sw_timer)
@@ -71,8 +84,18 @@ class AbsorberBoardNode(SensorBoardNode):
                                                clock=self._steady)
 
     def _on_message(self, msg) -> None:
-        if isinstance(msg, (ThermocoupleSample, SwitchSample)):
+        """Reader thread: temperatures are queued; switch samples are debounced here and
+        only a debounced change is queued (with the receive time of its sample)."""
+        if isinstance(msg, ThermocoupleSample):
             self._enqueue(msg)
+        elif isinstance(msg, SwitchSample):
+            received = self.get_clock().now()
+            with self._sw_lock:
+                self._switch_meter.tick()
+                first = self._switches.states is None
+                changed = self._switches.update(msg.board_ms, msg.bits, to_sec(received))
+            if changed:
+                self._enqueue(_SwitchChange(tuple(changed), first))
 
     def _drain(self) -> None:
         for msg, received in self._queue.drain():
@@ -81,15 +104,12 @@ class AbsorberBoardNode(SensorBoardNode):
                 self._publish_temperature('inlet', msg.inlet, received)
                 self._publish_temperature('outlet', msg.outlet, received)
                 continue
-            self._switch_meter.tick()
-            first = self._switches.states is None
-            changed = self._switches.update(msg.board_ms, msg.bits, to_sec(received))
-            if not first:
-                for name in changed:
-                    closed = self._switches.states[name].closed
-                    self.get_logger().info(f'limit switch {name} {"closed" if closed else "open"}')
-            if changed:
-                self._publish_switches()
+            if not msg.first:
+                with self._sw_lock:
+                    closed = {name: self._switches.states[name].closed for name in msg.names}
+                for name in msg.names:
+                    self.get_logger().info(f'limit switch {name} {"closed" if closed[name] else "open"}')
+            self._publish_switches()
 
     def _publish_temperature(self, which: str, word: int, received) -> None:
         r = max6675.decode(word, self._model)
@@ -110,28 +130,35 @@ class AbsorberBoardNode(SensorBoardNode):
         self._pub_t[which].publish(msg)
 
     def _publish_switches(self) -> None:
-        states = self._switches.states
-        if states is None:
-            return
+        with self._sw_lock:
+            states = self._switches.states
+            if states is None:
+                return
+            closed = {name: bool(states[name].closed) for name in SWITCHES}
+            changed_at = dict(self._switches.changed_at)
         msg = LimitSwitches()
         msg.header.stamp = self.get_clock().now().to_msg()
         for name in SWITCHES:
-            setattr(msg, name, bool(states[name].closed))
-            t = self._switches.changed_at.get(name)
+            setattr(msg, name, closed[name])
+            t = changed_at.get(name)
             if t is not None:
                 setattr(msg, f'{name}_changed', stamp(t))
         self._pub_sw.publish(msg)
 
     def _diagnostics(self) -> None:
-        states = self._switches.states
+        with self._sw_lock:
+            states = self._switches.states
+            closed = [n for n in SWITCHES if states and states[n].closed]
+            bounces = self._switches.debouncer.bounces
+            switch_rate = self._switch_meter.rate()
         faults = [f'{w} thermocouple: {f}' for w, f in self._faults.items() if f != max6675.FAULT_NONE]
         extra = {'inlet_degC': f'{self._last_temp["inlet"]:.2f}',
                  'outlet_degC': f'{self._last_temp["outlet"]:.2f}',
                  'inlet_faults': self._fault_counts['inlet'],
                  'outlet_faults': self._fault_counts['outlet'],
-                 'switch_rate_hz': f'{self._switch_meter.rate():.1f}',
-                 'switches': ','.join(n for n in SWITCHES if states and states[n].closed) or 'none',
-                 'switch_bounces': self._switches.debouncer.bounces,
+                 'switch_rate_hz': f'{switch_rate:.1f}',
+                 'switches': ','.join(closed) or 'none',
+                 'switch_bounces': bounces,
                  'queue_dropped': self._queue.dropped}
         self._publish_diagnostics(faults, extra)
 
