@@ -26,6 +26,13 @@ STOW -> mirrors status ``stowing``) and, after a killed safety supervisor, the l
 runs at 20 Hz instead of 5 Hz: the observation adds at most 50 ms, and costs CPU). Load averages at start and end are printed:
 CPU figures taken while other jobs load the machine must say so.
 
+``--wall-clock`` measures the node set as it runs on a Pi: ``sslfr sim --wall-clock``
+(the nodes on the system clock, no ``/clock`` messages, which only a simulation or a
+replay publishes), at the latitude of Almeria and the longitude where the sun is near
+its noon at the time of the run (a copy of the site config), so that the mirrors track
+as at 12:00 UTC at Almeria. Fault times (``--fault kind@+SECONDS``) are then seconds
+from the start of the run.
+
 ``--executor rclpy`` runs the nodes with rclpy's SingleThreadedExecutor instead of
 sslfr_common's LeanExecutor; ``--peer`` runs both at once (two node sets, own domains,
 same window) and prints the ratio, so that a loaded or throttled machine affects both.
@@ -152,6 +159,27 @@ class Observer:
         return out
 
 
+def noon_site(out: Path) -> Path:
+    """A copy of the Almeria site config at the longitude where it is about solar noon
+    now (+-4 deg: the equation of time is left out), for ``--wall-clock``."""
+    utc_h = (time.time() % 86400) / 3600.0
+    lon = ((12.0 - utc_h) * 15.0 + 180.0) % 360.0 - 180.0
+    src = (ROOT / 'src/sslfr_bringup/config/almeria_sslfr.yaml').read_text()
+    text = re.sub(r'site\.longitude_deg: -?[0-9.]+', f'site.longitude_deg: {lon:.4f}', src, count=1)
+    path = out / 'noon_site.yaml'
+    path.write_text(text)
+    return path
+
+
+def wall_fault(spec: str) -> str:
+    """``kind@+SECONDS[+DURATION]`` -> ``kind@HH:MM:SS[+DURATION]`` (UTC, from now)."""
+    m = re.match(r'(.*)@\+(\d+(?:\.\d+)?)(\+.*)?$', spec)
+    if not m:
+        raise SystemExit(f'bench: with --wall-clock a fault is kind@+SECONDS[+DURATION], got {spec!r}')
+    at = time.strftime('%H:%M:%S', time.gmtime(time.time() + float(m.group(2))))
+    return f'{m.group(1)}@{at}{m.group(3) or ""}'
+
+
 def cpu_seconds(p: psutil.Process) -> float:
     t = p.cpu_times()
     return t.user + t.system
@@ -219,6 +247,9 @@ def main(argv=None) -> int:
                                                    'default: the node set\'s)')
     ap.add_argument('--executor', choices=('lean', 'rclpy'), default='lean',
                     help="the nodes' executor (SSLFR_EXECUTOR): sslfr_common's LeanExecutor or rclpy's")
+    ap.add_argument('--wall-clock', action='store_true',
+                    help='the node set on the system clock as on a Pi (sslfr sim --wall-clock, no /clock), '
+                         'at a longitude where it is near solar noon now')
     ap.add_argument('--peer', action='store_true',
                     help="also run, at the same time and in its own domain, the same node set with rclpy's "
                          "SingleThreadedExecutor (the peer), and print the ratio of the two totals")
@@ -230,11 +261,22 @@ def main(argv=None) -> int:
         peer = subprocess.Popen([sys.executable, __file__, *rest, '--executor', 'rclpy', '--json', str(peer_json)],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     minutes = int(args.window // 60) + 3
-    h, m = (int(x) for x in args.start.split(':'))
-    end = f'{(h + (m + minutes) // 60) % 24:02d}:{(m + minutes) % 60:02d}'
     out = Path(tempfile.mkdtemp(prefix='bench-cpu-'))
-    cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
-           '--no-report', '--anchor-margin', '3', '--out', str(out)]
+    if args.wall_clock:
+        t_end = time.gmtime(time.time() + 60 * minutes)
+        if t_end.tm_yday != time.gmtime().tm_yday:
+            print('bench: --wall-clock runs within one UTC day: start it before 23:' + f'{60 - minutes:02d}',
+                  file=sys.stderr)
+            return 2
+        end = time.strftime('%H:%M:%S', t_end)
+        cmd = [str(ROOT / 'sslfr'), 'sim', '--wall-clock', '--end', end, '--config', str(noon_site(out)),
+               '--no-report', '--out', str(out)]
+        args.fault = [wall_fault(f) for f in args.fault]
+    else:
+        h, m = (int(x) for x in args.start.split(':'))
+        end = f'{(h + (m + minutes) // 60) % 24:02d}:{(m + minutes) % 60:02d}'
+        cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
+               '--no-report', '--anchor-margin', '3', '--out', str(out)]
     if args.layout:
         cmd += ['--layout', args.layout]
     if args.nodeset:
@@ -309,7 +351,9 @@ def main(argv=None) -> int:
             group.remove()
     total = sum(v for v in cpu.values() if v == v)
     load1 = os.getloadavg()
-    print(f'node set at real time (sslfr sim --speed 1, {args.start} UTC Almeria, layout '
+    how = ('sslfr sim --wall-clock: system clock, no /clock, near solar noon at Almeria\'s latitude'
+           if args.wall_clock else f'sslfr sim --speed 1, {args.start} UTC Almeria')
+    print(f'node set at real time ({how}, layout '
           f'{args.layout or "default"}, executor {args.executor}), {len(cpu)} processes, {wall:.0f} s window, load average (1/5/15 min) '
           f'{load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at start, {load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at end'
           + (f', confined to {args.confine:.2f} core ({group.how}; {throttled})' if group else ''))

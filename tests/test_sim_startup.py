@@ -78,3 +78,31 @@ def test_up_ends_every_child_on_sigterm_during_start_up(marker, ros_env, tmp_pat
     text = ''.join(seen) + out
     assert proc.returncode == 0, text
     assert 'Traceback' not in text, text
+
+
+def test_sim_on_the_wall_clock_publishes_no_clock_and_runs_on_system_time(ros, ros_env, tmp_path):
+    """`sslfr sim --wall-clock` (the node set as on a Pi, issue 16's measurement): no
+    /clock message at all, the planner's messages stamped with the system time, and
+    the run ends at --end; --date/--start/--speed with it are refused."""
+    from rclpy.qos import qos_profile_sensor_data
+    from rosgraph_msgs.msg import Clock
+    from sslfr_interfaces.msg import SunPosition
+
+    refused = _sslfr(['sim', '--wall-clock', '--start', '12:00'], ros_env, tmp_path)
+    out, _ = refused.communicate(timeout=60)
+    assert refused.returncode == 2 and '--wall-clock runs from now' in out, out
+
+    clocks = ros.collect(Clock, '/clock', qos_profile_sensor_data)
+    suns = ros.collect(SunPosition, 'tracker/sun')
+    end = time.strftime('%H:%M:%S', time.gmtime(time.time() + 15))
+    proc = _sslfr(['sim', '--wall-clock', '--end', end, '--only', 'planner,safety', '--no-report',
+                   '--out', str(tmp_path / 'out')], ros_env, tmp_path)
+    seen = _wait_for(proc, 'nodes in the graph')
+    assert 'on the system clock' in seen[0], ''.join(seen)
+    assert ros.spin_until(lambda: len(suns) >= 3, 20), ''.join(seen)
+    stamp = suns[-1].header.stamp.sec + suns[-1].header.stamp.nanosec * 1e-9
+    assert abs(stamp - time.time()) < 5.0, stamp            # system time, not a simulated day
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 0, ''.join(seen) + out
+    assert 'end of the simulated window' in out, out
+    assert clocks == []

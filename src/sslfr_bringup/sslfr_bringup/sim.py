@@ -17,6 +17,12 @@ steppers on the steady clock: at ``--speed X`` a joint must move X times faster 
 in reality, so the drivers get a raised ``max_speed`` in simulation (nodeset.yaml
 ``sim.node_parameters``).
 
+``--wall-clock`` runs the node set as on the Pi: on the system clock (no ``/clock``,
+``use_sim_time`` false), at real time, from now until ``--end`` (UTC, today); the
+simulated boards' clock is the system clock too. It is how the node set's CPU is
+measured without the simulation's own ``/clock`` traffic (benchmarks/bench_nodeset_cpu.py
+``--wall-clock``), and a dry run of a deployment before its boards exist.
+
 Faults (``--fault SPEC``, grammar in :mod:`sslfr_bringup.faults`) fire at their
 simulated time through the simulators' control sockets (``kill:NODE`` through the
 supervisor). A fault duration is simulated seconds; a link drop lasts
@@ -199,6 +205,10 @@ def parser() -> argparse.ArgumentParser:
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
                         f'ahead of /clock, see sim.json sensor_lead_s)')
     p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
+    p.add_argument('--wall-clock', action='store_true',
+                   help='run on the system clock as on the Pi: from now (UTC) to --end (default: 10 min '
+                        'from now) at real time, no /clock, the nodes on system time (not with --date, '
+                        '--start or --speed)')
     return p
 
 
@@ -255,10 +265,23 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
         params = nodeset_mod.checked_params(ns, config)
         simcfg = ns.sim
-        date = args.date or str(simcfg.get('date', '2026-06-21'))
-        start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))
-        end_s = parse_hhmm(args.end or str(simcfg.get('end', '20:00')))
-        speed = float(args.speed if args.speed is not None else simcfg.get('speed', 400.0))
+        mono0 = time.monotonic()
+        if args.wall_clock:
+            if args.date or args.start or args.speed not in (None, 1.0):
+                raise ValueError('--wall-clock runs from now at real time: no --date, --start or --speed')
+            now = time.time() + (time.monotonic() - mono0)
+            date = dt.datetime.fromtimestamp(now, dt.timezone.utc).date().isoformat()
+            start_s = now - day_epoch(date)
+            end_s = parse_hhmm(args.end) if args.end else start_s + 600.0
+            speed = 1.0
+            if end_s <= start_s:
+                raise ValueError(f'--end {args.end} UTC is not after now ({_hhmm(start_s)} UTC): '
+                                 '--wall-clock runs within today')
+        else:
+            date = args.date or str(simcfg.get('date', '2026-06-21'))
+            start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))
+            end_s = parse_hhmm(args.end or str(simcfg.get('end', '20:00')))
+            speed = float(args.speed if args.speed is not None else simcfg.get('speed', 400.0))
         if end_s <= start_s:
             raise ValueError('--end must be after --start')
         if not 0 < speed <= 5000:
@@ -284,7 +307,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     if logs.exists():
         shutil.rmtree(logs)
     logs.mkdir()
-    clock = SimClock(day0 + start_s, speed)
+    # --wall-clock: simulated time is the system clock from the start (no anchor to wait for)
+    clock = SimClock(day0 + start_s, speed, anchor=mono0 if args.wall_clock else None)
     site = site_of(params)
     domain_lock = None
     if args.domain_id is None and not os.environ.get('ROS_DOMAIN_ID'):
@@ -297,8 +321,9 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     env['SSLFR_SIM_WORLD'] = str(run / 'world.json')
     domain = int(env['ROS_DOMAIN_ID'])
     say = print
-    say(f'sslfr sim: {date} {args.start or simcfg.get("start", "04:00")}-{args.end or simcfg.get("end", "20:00")} UTC '
-        f'at {speed:g}x, config {config.name}, site {site["latitude_deg"]:.4f}, {site["longitude_deg"]:.4f}, '
+    say(f'sslfr sim: {date} {_hhmm(start_s)}-{_hhmm(end_s)} UTC '
+        + ('on the system clock (no /clock, as on a Pi)' if args.wall_clock else f'at {speed:g}x')
+        + f', config {config.name}, site {site["latitude_deg"]:.4f}, {site["longitude_deg"]:.4f}, '
         f'ROS_DOMAIN_ID={domain}, out {out}')
 
     # ---- simulated boards
@@ -351,7 +376,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     for node in no_sim:
         missing.append(f'{node.name}: its board {node.board} has no simulator, node not started')
     node_progs, missing_nodes = _node_programs(ns.without(n.name for n in no_sim) if no_sim else ns,
-                                               config, sim_ports, extra, run, args.layout, params)
+                                               config, sim_ports, extra, run, args.layout, params,
+                                               use_sim_time=not args.wall_clock)
     missing += missing_nodes
     for m in missing:
         print(f'sslfr sim: MISSING {m}', file=sys.stderr)
@@ -360,7 +386,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         return 1
 
     watch = _watch_topics(ns)
-    ros = RosSide(domain, namespace=ns.namespace, clock_fn=clock.published,
+    ros = RosSide(domain, namespace=ns.namespace, clock_fn=(lambda: None) if args.wall_clock else clock.published,
                   clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim', watch=watch)
     ros.start()
     sup = None
@@ -414,7 +440,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             margin = max(margin, FIRMWARE_ANCHOR_MARGIN)
         try:
             # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
-            anchor = time.monotonic() + margin
+            anchor = mono0 if args.wall_clock else time.monotonic() + margin
             for b in sorted(timed):
                 board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
                 sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
@@ -438,7 +464,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         except RuntimeError as exc:
             print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
             return 1
-        clock.set_anchor(max(anchor, time.monotonic()))
+        if not args.wall_clock:
+            clock.set_anchor(max(anchor, time.monotonic()))
         url = _page_url(logs)
         if url:
             say(f'sslfr sim: operator page at {url} (docs/operator.md)')
@@ -519,10 +546,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         ros.shutdown()
 
 
-def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None):
+def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None, use_sim_time=True):
     from sslfr_bringup.up import build_programs
-    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=True, extra=extra, run_dir=run_dir,
-                          layout=layout, params=params)
+    return build_programs(ns, config, sim_ports=sim_ports, use_sim_time=use_sim_time, extra=extra,
+                          run_dir=run_dir, layout=layout, params=params)
 
 
 def _report(bag_root: Path, out: Path) -> int:
