@@ -2,12 +2,14 @@
 """Soak the topic-level tests: run them N times and print, per test, runs, failures
 and the slowest duration (``make soak N=5``; ``make soak N=3 BUSY=1``).
 
-With ``--busy`` a busy loop occupies one of the machine's cores for the whole soak
-(a process spinning in pure Python, pinned to the last CPU when the machine allows
-it), to show that the tests' deadlines follow from the graph's contract and not from
-an idle machine. Each round is a separate ``pytest`` process writing JUnit XML; a
-round that fails does not stop the soak. Exit status: 0 when every run of every test
-passed, 1 otherwise.
+The tests run as ``make test`` runs them: on two pytest-xdist workers, a test file
+per worker at a time (``--workers``). With ``--busy`` a busy loop occupies one of the
+machine's cores for the whole soak (a process spinning in pure Python, pinned to the
+last CPU when the machine allows it) and the tests run on one worker by default, i.e.
+on the one core left, to show that the tests' deadlines follow from the graph's
+contract and not from an idle machine. Each round is a separate ``pytest`` process
+writing JUnit XML; a round that fails does not stop the soak. Exit status: 0 when every
+run of every test passed, 1 otherwise.
 """
 from __future__ import annotations
 
@@ -53,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('-n', '--rounds', type=int, default=5, help='rounds of the test paths (default 5)')
     ap.add_argument('--busy', action='store_true', help='keep one core busy during the soak')
+    ap.add_argument('--workers', type=int, default=None,
+                    help='pytest-xdist workers (default 2 as in make test; 1 with --busy)')
     ap.add_argument('--logs', default=str(ROOT / 'out' / 'soak'),
                     help='directory for each round\'s pytest output (default out/soak)')
     ap.add_argument('paths', nargs='*', default=['tests', '--ignore-glob=tests/test_fw_*'],
@@ -61,6 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error('--rounds must be >= 1')
+    workers = args.workers or (1 if args.busy else 2)
+    if workers < 1:
+        ap.error('--workers must be >= 1')
+    parallel = ['-n', str(workers), '--dist', 'loadfile'] if workers > 1 else []
 
     busy = None
     if args.busy:
@@ -77,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             for k in range(1, args.rounds + 1):
                 xml = Path(tmp) / f'round{k}.xml'
                 t0 = time.monotonic()
-                proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:randomly',
+                proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:randomly', *parallel,
                                        f'--junitxml={xml}', *args.paths], cwd=ROOT,
                                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
                 summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else ''
@@ -106,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     for nodeid in sorted(runs):
         print(f'{nodeid:<{width}}  {runs[nodeid]:>4}  {fails[nodeid]:>8}  {slowest[nodeid]:>11.1f}')
     total_fail = sum(fails.values())
-    print(f'\n{len(runs)} tests x {args.rounds} rounds{" with one core busy" if args.busy else ""}: '
+    print(f'\n{len(runs)} tests x {args.rounds} rounds{" with one core busy" if args.busy else ""}, '
+          f'{workers} worker(s): '
           f'{sum(runs.values())} runs, {total_fail} failures, '
           f'{(time.monotonic() - t_start) / 60:.1f} min')
     return 1 if total_fail else 0
