@@ -629,3 +629,32 @@ def test_every_lifecycle_request_is_answered_and_bad_inputs_are_refused(rig, ros
     assert 'trajectory refused (duplicate joint names: mirrors)' in out
     assert 'trajectory refused (point 0 has 1 velocities for 2 joints)' in out
     assert r.diag()['trajectories_accepted'] == '0' and r.status[-1].state == 'holding'
+
+
+@pytest.mark.parametrize('signals', [('SIGINT',), ('SIGINT', 'SIGINT'), ('SIGTERM',)])
+def test_stop_signals_with_the_link_up_exit_0_and_print_no_error(rig, ros, signals):
+    """Issue 21: the axis driver, active with its board link UP (the link's reader and
+    its logs running), stopped by SIGINT (a terminal), two SIGINTs 50 ms apart (ros2
+    launch without a terminal) or SIGTERM (systemd): exit 0, its on_exit stops the
+    board, and nothing is printed as an error (no log forwarded to rosout after the
+    context is gone, no traceback)."""
+    import signal as sig
+    from sslfr_interfaces.msg import AxisStatus
+    r = rig()
+    assert ros.spin_until(lambda: bool(r.status) and r.status[-1].link_state == AxisStatus.LINK_UP
+                          and r.status[-1].state not in ('unconfigured', 'inactive'), 20), \
+        r.driver.output()
+    for k, name in enumerate(signals):
+        if k:
+            time.sleep(0.05)
+        r.driver.signal(getattr(sig, name))
+    try:
+        r.driver.proc.wait(10)
+    except Exception:  # noqa: BLE001 - reported below with the output
+        pass
+    out = r.driver.output()
+    assert r.driver.proc.returncode == 0, out
+    for bad in ('Traceback', 'Failed to publish log message to rosout', 'context is invalid',
+                'never retrieved', '[ERROR]'):
+        assert bad not in out, out
+    assert r.board()['speed'] == 0.0

@@ -156,6 +156,14 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     assert root['gps']['parameters'] == [str(site), {'use_sim_time': True}]
     with pytest.raises(ImportError):
         mod.generate_launch_description()   # needs ROS launch (on the Pi)
+    # a site config a node would refuse starts nothing: the launch file judges it as
+    # `sslfr up` does (the nodes' own parameter tables), naming the key
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('planner:\n  ros__parameters:\n    horizonn: 60.0\n'
+                   'safety:\n  ros__parameters:\n    publish_rate: "fast"\n')
+    with pytest.raises(nodeset.NodeSetError) as err:
+        mod._entries(str(bad), '', None)
+    assert 'horizonn' in str(err.value) and 'publish_rate' in str(err.value), err.value
 
 
 def test_launch_environment_defaults_env_and_arguments(monkeypatch):

@@ -107,21 +107,36 @@ def _applied(summary, spec) -> tuple[float, float | None]:
 
 
 def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
-    """link-drop -> recovery, board-reset -> re-home then tracking, overtemp -> STOW.
+    """The fault scenarios of the Python simulators (tests/test_system_faults.py) on the
+    firmware boards, through the same fault specs: gps-loss -> the planner keeps its
+    site and tracking goes on, link-drop -> recovery, board-reset -> re-home then
+    tracking, overtemp -> STOW, thermocouple-open -> NaN and a thermocouple reason.
     The faults are apart: since issue 21 an axis that is not ready (link connecting, not
-    referenced) makes the safety node stow every axis for a while."""
+    referenced) makes the safety node stow every axis for a while. (The killed host is
+    tests/test_fw_boards.py's: the board's own 1 s watchdog.)"""
+    from sensor_msgs.msg import NavSatStatus
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     speed = 120.0
-    drop, reset, hot = 'link-drop:mirrors@10:30+600', 'board-reset:mobile_structure@10:55', 'overtemp@11:10'
+    gps, drop, reset = 'gps-loss@10:17+480', 'link-drop:mirrors@10:30+600', 'board-reset:mobile_structure@10:55'
+    hot, tc = 'overtemp@11:10', 'thermocouple-open@11:14+240'
     args = ['--start', '10:15', '--end', '11:23', '--speed', str(speed)]
-    for f in (drop, reset, hot):
+    for f in (gps, drop, reset, hot, tc):
         args += ['--fault', f]
     text, summary, day = _run(ros_env, tmp_path / 'out', args)
     (d0, d1), (r0, _), (h0, _) = _applied(summary, drop), _applied(summary, reset), _applied(summary, hot)
-    assert d1 is not None
+    (g0, g1), (c0, c1) = _applied(summary, gps), _applied(summary, tc)
+    assert d1 is not None and g1 is not None and c1 is not None
     ref = _ref(day)
     lag = speed * 0.5
     track = 3 * TOL
+    # GPS loss: NO_FIX seen, the fix back; the planner keeps its site and the mirrors track
+    assert np.any(day.fix.between(g0, g1 + 60)['status'] == NavSatStatus.STATUS_NO_FIX)
+    assert np.any(day.fix.between(g1 + 60, d0)['status'] >= NavSatStatus.STATUS_FIX), 'the fix comes back'
+    ph = day.phase.between(g0, g1)
+    assert len(ph) and set(ph['name']) == {'TRACKING'} and np.ptp(ph['latitude']) < 1e-3
+    s = day.axes['mirrors'].between(g0 + 180, g1 - 60)
+    err = scenario.tracking_error(s.t, s['measured'], lambda t: ref(t).mirrors, lag=lag)
+    assert len(s) and np.max(err) <= track, _explain(day, 'mirrors', g0 + 180, g1 - 60)
     # link drop: seen, then UP and tracking again (reconnect back-off <= 5 s wall = 600 s)
     s = day.axes['mirrors'].between(d0, d1 + 180)
     assert np.any(s['link_state'] != AxisStatus.LINK_UP), 'the drop was seen'
@@ -138,9 +153,15 @@ def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
     assert np.max(err) <= track, (np.degrees(np.max(err)), _explain(day, 'mobile_structure', r0 + 480,
                                                                     min(r0 + 840, h0)))
     # over-temperature: STOW latched, mirrors asleep (+pi/2)
-    sf = day.safety.between(h0, T('11:23'))
+    sf = day.safety.between(h0, c0)
     hot_ = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
                      for lvl, rs in zip(sf['level'], sf['reasons'])])
     assert np.any(hot_) and np.all(hot_[np.argmax(hot_):])
     end = day.axes['mirrors'].between(h0 + 480, h0 + 720)       # the stow takes ~3 s wall
     assert len(end) and np.all(np.abs(end['measured'] - math.pi / 2) < 0.01), 'mirrors asleep'
+    # thermocouple open (outlet): NaN readings and a thermocouple reason, readings back after
+    o = day.outlet.between(c0 + 60, c1 - 30)
+    assert len(o) and np.all(np.isnan(o['value'])), o['value']
+    assert np.all(np.isfinite(day.outlet.between(c1 + 90, T('11:23'))['value'])), 'closed again: readings back'
+    s = day.safety.between(c0 + 60, c1)
+    assert any(any('thermocouple' in r for r in rs) for rs in s['reasons']), s['reasons'][:3]

@@ -106,3 +106,21 @@ def test_sim_on_the_wall_clock_publishes_no_clock_and_runs_on_system_time(ros, r
     assert proc.returncode == 0, ''.join(seen) + out
     assert 'end of the simulated window' in out, out
     assert clocks == []
+
+
+@pytest.mark.parametrize('command', [
+    [*SIM, '--only', 'planner,safety'],
+    ['up', '--only', 'planner,safety'],
+])
+def test_a_node_that_cannot_start_fails_the_run_naming_it(command, ros_env, tmp_path):
+    """A node that exits at start-up for a reason the site-config check cannot see (here
+    an unknown executor choice in its environment) ends `sslfr sim` / `sslfr up` with
+    exit 1 and the node's own one-line reason; nothing goes on without it and no
+    process is left (the leak check)."""
+    env = {**ros_env, 'SSLFR_EXECUTOR': 'multi'}
+    args = [*command, '--out', str(tmp_path / 'out')] if command[0] == 'sim' else command
+    proc = _sslfr(args, env, tmp_path)
+    out, _ = proc.communicate(timeout=90)
+    assert proc.returncode == 1, out
+    assert 'refused its configuration' in out and "SSLFR_EXECUTOR='multi'" in out, out
+    assert 'Traceback' not in out, out

@@ -14,7 +14,7 @@ the same description and applies it the same way:
   collectors, each with its own config, share one domain;
 - ``layout:=`` chooses the processes (default: the node set's, ``separate``: a process
   per node; ``composed``: the drivers and sensor nodes in one ``composed`` process,
-  planner and web in another, safety and recorder each alone: the choice for a Pi);
+  planner, web and recorder in another, safety alone: the choice for a Pi);
 - ``use_sim_time:=true`` reaches every node (replaying a day with ``ros2 bag play --clock``);
 - the axis drivers (lifecycle nodes) activate themselves, also after a respawn and when
   their board appears late; launch only starts them (an outside lifecycle command is

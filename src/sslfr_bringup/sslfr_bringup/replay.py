@@ -27,6 +27,7 @@ from sslfr_planner.cli_input import (CliError, OneLineParser, bounded_int, outpu
                                      read_text_file, ros_remap, ros_topic, run)
 
 from .bag.metadata import BagError
+from sslfr_common.timeconv import to_sec
 from .bag.playback import absolute, parse_time_spec
 from .bag.reader import BagReader
 from .player import run_player
@@ -120,7 +121,7 @@ def _body(argv: list[str]) -> int:
     if player.error:
         print(f'sslfr replay: {player.error}', file=sys.stderr)
         return 1
-    span = (player.last_ns - player.start_ns) / 1e9
+    span = to_sec(player.last_ns - player.start_ns)
     print(f'replayed {player.count} messages in {player.wall_elapsed:.2f} s'
           + (f' (x{span / player.wall_elapsed:.0f} real time)' if player.wall_elapsed > 0 else '')
           + (' - interrupted' if player.interrupted else ''))

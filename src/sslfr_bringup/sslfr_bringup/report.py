@@ -39,7 +39,8 @@ from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader, message_time
-from .nodeset import node_params
+from .nodeset import NodeSetError, checked_params, node_params
+from .nodeset import load as load_nodeset
 
 MAX_GAP_S = 120.0
 #: a setpoint moving faster than this is a deliberate move, not sun tracking [rad/s]: the
@@ -230,15 +231,14 @@ def beam_irradiation(t: np.ndarray, g: np.ndarray, max_gap: float | None = None)
 
 def planner_config(path: str | None) -> dict:
     """The planner's parameter values: its defaults, overlaid with the ``/**`` and
-    ``planner`` sections of a ROS params file (the site config) when given."""
+    ``planner`` sections of a ROS params file (the site config) when given. The file
+    is judged as ``sslfr up`` judges it (:func:`checked_params`, the nodes' own
+    parameter tables): NodeSetError naming the file and each bad key."""
     from sslfr_planner.planner_params import PLANNER_PARAMS
     cfg = PLANNER_PARAMS.defaults()
     if path:
-        import yaml
-        with open(path, encoding='utf-8') as fh:
-            doc = yaml.safe_load(fh) or {}
-        flat = node_params(doc, 'planner')
-        cfg.update({k: v for k, v in flat.items() if k in cfg})
+        flat = node_params(checked_params(load_nodeset(), path), 'planner')
+        cfg.update(PLANNER_PARAMS.coerce({k: v for k, v in flat.items() if k in cfg}))
     return cfg
 
 
@@ -273,7 +273,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         *(f'axes/{a}/status' for a in JOINTS))}
     have_status = any(names[f'axes/{a}/status'] for a in JOINTS)
     wanted = [t for k, t in names.items() if t and not (k == 'joint_states' and have_status)]
-    rep = DayReport(bag=str(reader.path), start=reader.start_ns / 1e9, end=reader.end_ns / 1e9)
+    rep = DayReport(bag=str(reader.path), start=to_sec(reader.start_ns), end=to_sec(reader.end_ns))
     by_topic = {t: k for k, t in names.items() if t}
     phase, safety, temps, beam, fix = Series(), Series(), {}, Series(), Series()
     status = {a: Series() for a in JOINTS}
@@ -634,8 +634,13 @@ def main(argv: list[str]) -> int:
                     help='site params file (collector geometry for the ideal commands)')
     try:
         ns = ap.parse_args(argv)
+        planner_config(ns.config)           # a bad site config: refused before any work
     except CliError as exc:
         print(f'sslfr report: error: {exc}', file=sys.stderr)
+        return 2
+    except NodeSetError as exc:
+        print(f'sslfr report: error: --config {ns.config}: '
+              + '; '.join(line.strip() for line in str(exc).splitlines()[1:] or [str(exc)]), file=sys.stderr)
         return 2
     try:
         reader = BagReader(ns.bag)

@@ -91,7 +91,7 @@ def _collect(reader, topic: str, fields: dict, log_time: bool = False) -> Series
     rows = []
     for raw, msg in reader.decoded([topic]):
         header = getattr(msg, 'header', None)
-        t = to_sec(header.stamp) if header is not None and not log_time else raw.log_time * 1e-9
+        t = to_sec(header.stamp) if header is not None and not log_time else to_sec(raw.log_time)
         rows.append((t, [f(msg) for f in fields.values()]))
     rows.sort(key=lambda r: r[0])
     cols = {}

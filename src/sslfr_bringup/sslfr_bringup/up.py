@@ -3,7 +3,7 @@
 Reads the one node-set description (config/nodeset.yaml) and a site config (ROS
 params file; default ``almeria_sslfr.yaml``), starts the nodes as processes of the node set's layout
 (default ``separate``: every node its own process; ``--layout composed``: drivers and
-sensors in one process, planner and web in another, safety and recorder each alone),
+sensors in one process, planner, web and recorder in another, safety alone),
 drives the axis drivers' lifecycle to ``active``, restarts a crashed node with backoff
 (a restart of the safety supervisor is reported loudly) and, on SIGINT/SIGTERM, stops
 the axes first, then the rest, within 5 s. This is what the systemd unit runs.

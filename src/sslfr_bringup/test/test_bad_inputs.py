@@ -66,6 +66,10 @@ CASES = [
     ('report {good} --out {file}', '--out'),
     ('report {good} --out {file}/sub', '--out'),
     ('report {good} --out /proc/x', '--out'),
+    ('report {good} --config {pngfile}', '--config'),
+    ('report {good} --config {tmp}/missing.yaml', '--config'),
+    ('report {good} --config {badsite}', 'horizonn'),
+    ('report {good} --config {badsite}', 'collector.n_per_side'),
     ('replay {png}', 'metadata.yaml'),
     ('replay {types}', 'topics_with_message_count'),
     ('replay {tmp}/missing', 'no such bag'),
@@ -175,6 +179,9 @@ def corpus(tmp_path_factory):
     paths['pngfile'] = tmp / 'picture.png'
     paths['pngfile'].write_bytes(PNG)
     paths['file'].write_text('I am a file')
+    paths['badsite'] = tmp / 'bad_site.yaml'     # a misspelt key and a wrong type
+    paths['badsite'].write_text('planner:\n  ros__parameters:\n    horizonn: 60.0\n'
+                                '    collector.n_per_side: 12.5\n')
     return paths
 
 

@@ -373,3 +373,52 @@ def test_playback_helpers():
         remap_table([('gps/fix', '/a')], ['/gps/fix', '/a'])
     tl = Timeline(s, 100.0, 1000.0)
     assert tl.due(s + 10**12) == pytest.approx(101.0) and tl.bag_time(101.0) == s + 10**12
+
+
+def test_bag_info_prints_what_ros2_bag_info_prints(tmp_path, monkeypatch, capsys):
+    """`sslfr bag info` against the text rosbag2 Jazzy prints (rosbag2_py
+    src/rosbag2_py/format_bag_metadata.cpp, ``format_bag_meta_data``: the field names
+    padded to 19 columns, ``format_file_size`` with one decimal in KiB, times as
+    ``%b %e %Y %H:%M:%S.<ns> (<s>.<ns>)`` in local time, continuation lines indented
+    19, then ``Service:`` and ``Service information:``), plus our QoS block."""
+    import time as _time
+    from sslfr_bringup import cli
+    from sslfr_bringup.bag.reader import format_size
+    from sensor_msgs.msg import Temperature
+    from rclpy.serialization import serialize_message
+
+    monkeypatch.setenv('TZ', 'UTC')
+    _time.tzset()
+    try:
+        bag = tmp_path / 'day'
+        w = BagWriter(bag, WriterOptions(fsync=False))
+        for t in ('/t', '/u2'):
+            w.add_topic(t, 'sensor_msgs/msg/Temperature', [profile()])
+        for k in range(20):
+            for t in ('/t', '/u2'):
+                w.write(t, bytes(serialize_message(Temperature(temperature=float(k)))), 10**18 + k * 10**8)
+        w.close()
+        assert cli.main(['bag', 'info', str(bag)]) == 0
+        out = capsys.readouterr().out
+    finally:
+        monkeypatch.delenv('TZ')
+        _time.tzset()
+    size = sum(p.stat().st_size for p in bag.rglob('*') if p.is_file())
+    assert out.splitlines() == [
+        '',
+        'Files:             day_0.mcap',
+        f'Bag size:          {format_size(size)}',
+        'Storage id:        mcap',
+        'ROS Distro:        jazzy',
+        'Duration:          1.900000000s',
+        'Start:             Sep  9 2001 01:46:40.000000000 (1000000000.000000000)',
+        'End:               Sep  9 2001 01:46:41.900000000 (1000000001.900000000)',
+        'Messages:          40',
+        'Topic information: Topic: /t | Type: sensor_msgs/msg/Temperature | Count: 20 | Serialization Format: cdr',
+        '                   Topic: /u2 | Type: sensor_msgs/msg/Temperature | Count: 20 | Serialization Format: cdr',
+        'Service:           0',
+        'Service information: ',
+        'Offered QoS:       /t: reliable volatile keep_last 10 (1 publisher(s))',
+        '                   /u2: reliable volatile keep_last 10 (1 publisher(s))',
+    ]
+    assert format_size(size).endswith(' KiB') and format_size(512) == '512 B' and format_size(1536) == '1.5 KiB'

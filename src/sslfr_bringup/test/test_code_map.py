@@ -128,5 +128,5 @@ def test_product_code_never_imports_the_simulators():
 
 def test_node_files_are_thin():
     fat = {str(p.relative_to(SRC)): n for p in SRC.glob('*/*/**/*_node.py')
-           if (n := len(p.read_text().splitlines())) > NODE_FILE_MAX_LINES}
+           if (n := len(p.read_text().splitlines())) >= NODE_FILE_MAX_LINES}      # under 300
     assert fat == {}

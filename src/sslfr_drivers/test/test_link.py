@@ -183,6 +183,24 @@ def test_old_protocol_version_refused():
             lk.stop()
 
 
+def test_version_1_board_is_read_for_info_and_refused_for_motion():
+    """Issue 19: a board of protocol version 1 (no authentication) still tells what it
+    is (INFO read with a version-1 request) and is refused for motion with the clear
+    version message, whose text names both versions."""
+    board = AxisSim(rng=random.Random(1), protocol_version=1)
+    with SimThread.plain(board) as sim:
+        lk = BoardLink(SerialTransport(sim.path), timeout=0.1, retries=1).start()
+        try:
+            assert wait_for(lambda: lk.state == BoardLinkState.REFUSED and lk.info is not None, 3)
+            assert lk.info.protocol == 1 and lk.info.board_kind == m.BoardKind.AXIS_STEPPER
+            assert lk.info.firmware == '1.0.0'
+            assert 'protocol version 1, this host speaks version 2' in str(lk.version_error)
+            with pytest.raises(Exception, match='protocol version 1'):
+                lk.move_to(1, 1)
+        finally:
+            lk.stop()
+
+
 def test_loss_counter_exact_across_board_sequence_wrap():
     """Board sequence numbers run across 65535 -> 0 (the session's frame count into its
     second epoch, which the tags cover) while 5 % of board frames are corrupted:

@@ -42,7 +42,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from .executor import LeanExecutor
-from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_sec  # noqa: F401 - re-exported
+from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
 
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
 CONFIG_ERRORS: tuple[type[BaseException], ...] = (

@@ -26,6 +26,13 @@ def to_sec(t) -> float:
     return t.sec + t.nanosec * 1e-9
 
 
+def to_ns(seconds: float) -> int:
+    """Nanoseconds (integer, rounded) of ``seconds`` [s]; ValueError for NaN/infinity."""
+    if not math.isfinite(seconds):
+        raise ValueError(f'{seconds} s is not a finite time')
+    return int(round(seconds * NS_PER_S))
+
+
 def stamp_from_ns(ns: int):
     """``builtin_interfaces/Time`` for an integer of nanoseconds since the epoch (exact)."""
     from builtin_interfaces.msg import Time

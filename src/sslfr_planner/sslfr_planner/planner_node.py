@@ -14,9 +14,8 @@ Interface (docs/architecture.md): publishes ``tracker/sun`` (SunPosition, R10,
 ``sun_period``), ``tracker/phase`` (TrackerPhase, TL1, on change and every
 ``phase_period``), ``tracker/trajectory`` (JointTrajectory, TL1, every
 ``republish_period`` and on every phase change or replan), ``diagnostics``;
-subscribes ``gps/fix`` and ``safety/state``; serves ``planner/replan`` and
-``planner/set_mode``. Control logic runs on ROS time (``use_sim_time`` days work);
-diagnostics and the system-clock jump check on the steady clock.
+subscribes ``gps/fix``, ``safety/state``; serves ``planner/replan``, ``planner/set_mode``.
+Control logic on ROS time (``use_sim_time`` days work); diagnostics on the steady clock.
 """
 from __future__ import annotations
 
@@ -34,7 +33,7 @@ from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from sslfr_common.contract import PHASE_NAMES
-from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_sec
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_ns, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
 from sslfr_planner.messages import phase_msg, sun_msg, trajectory_msg
@@ -98,7 +97,7 @@ class PlannerNode(LeanEvents, Node):
             if self._jump_handle is not None:
                 self._jump_handle.unregister()
             self._jump_step, self._jump_handle = step, self.get_clock().create_jump_callback(
-                JumpThreshold(min_forward=Duration(nanoseconds=int(step * 1e9)),
+                JumpThreshold(min_forward=Duration(nanoseconds=to_ns(step)),
                               min_backward=Duration(nanoseconds=-1), on_clock_change=True),
                 post_callback=self._on_ros_jump)
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import datetime as _dt
 import re
 
+from sslfr_common.timeconv import NS_PER_S, to_ns, to_sec
+
 
 def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None) -> int:
     """Resolve a ``--start``/``--end`` value to a log time [ns].
@@ -26,17 +28,17 @@ def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None)
     """
     s = spec.strip()
     if re.fullmatch(r'[+]?\d+(\.\d*)?', s):
-        return bag_start_ns + int(round(float(s) * 1e9))
+        return bag_start_ns + to_ns(float(s))
     if re.fullmatch(r'-\d+(\.\d*)?', s):
         if bag_end_ns is None:
             raise ValueError('a negative offset needs the bag end time')
-        return bag_end_ns + int(round(float(s) * 1e9))
+        return bag_end_ns + to_ns(float(s))
     m = re.fullmatch(r'(\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?', s)
     if m:
-        day = _dt.datetime.fromtimestamp(bag_start_ns / 1e9, tz=_dt.timezone.utc).replace(
+        day = _dt.datetime.fromtimestamp(to_sec(bag_start_ns), tz=_dt.timezone.utc).replace(
             hour=0, minute=0, second=0, microsecond=0)
         secs = int(m.group(1)) * 3600 + int(m.group(2)) * 60 + float(m.group(3) or 0)
-        return int(round(day.timestamp() * 1e9 + secs * 1e9))
+        return to_ns(day.timestamp() + secs)
     try:
         t = _dt.datetime.fromisoformat(s.replace('Z', '+00:00'))
     except ValueError as exc:
@@ -44,7 +46,7 @@ def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None)
                          'from the end, HH:MM[:SS] UTC or an ISO date-time') from exc
     if t.tzinfo is None:
         t = t.replace(tzinfo=_dt.timezone.utc)
-    return int(round(t.timestamp() * 1e9))
+    return to_ns(t.timestamp())
 
 
 def absolute(name: str) -> str:
@@ -68,13 +70,13 @@ class Timeline:
         """Wall time [s] at which a message logged at ``t_ns`` must be published."""
         if self.rate <= 0:
             return self.wall0
-        return self.wall0 + (t_ns - self.t0_ns) / 1e9 / self.rate
+        return self.wall0 + to_sec(t_ns - self.t0_ns) / self.rate
 
     def bag_time(self, wall: float) -> int:
         """Bag time [ns] that corresponds to wall time ``wall`` [s]."""
         if self.rate <= 0:
             return self.t0_ns
-        return self.t0_ns + int((wall - self.wall0) * self.rate * 1e9)
+        return self.t0_ns + int((wall - self.wall0) * self.rate * NS_PER_S)
 
 
 def progress_line(t_ns: int, start_ns: int, end_ns: int, count: int, wall_elapsed: float,
@@ -83,7 +85,7 @@ def progress_line(t_ns: int, start_ns: int, end_ns: int, count: int, wall_elapse
     span = max(1, end_ns - start_ns)
     frac = min(1.0, max(0.0, (t_ns - start_ns) / span))
     filled = int(round(frac * width))
-    stamp = _dt.datetime.fromtimestamp(t_ns / 1e9, tz=_dt.timezone.utc).strftime('%H:%M:%S')
-    speed = ((t_ns - start_ns) / 1e9 / wall_elapsed) if wall_elapsed > 0 else 0.0
+    stamp = _dt.datetime.fromtimestamp(to_sec(t_ns), tz=_dt.timezone.utc).strftime('%H:%M:%S')
+    speed = (to_sec(t_ns - start_ns) / wall_elapsed) if wall_elapsed > 0 else 0.0
     return (f'[{"#" * filled}{"." * (width - filled)}] {100 * frac:5.1f}% {stamp} UTC '
             f'x{speed:8.1f} {count} msgs')

@@ -9,10 +9,12 @@ import os
 import shutil
 from dataclasses import dataclass
 
+from sslfr_common.timeconv import NS_PER_S
+
 
 def utc_day(t_ns: int) -> str:
     """UTC calendar day ``YYYY-MM-DD`` of a time [ns since the Unix epoch]."""
-    return _dt.datetime.fromtimestamp(t_ns // 1_000_000_000, tz=_dt.timezone.utc).strftime('%Y-%m-%d')
+    return _dt.datetime.fromtimestamp(t_ns // NS_PER_S, tz=_dt.timezone.utc).strftime('%Y-%m-%d')
 
 
 def bag_name(prefix: str, t_ns: int, per_day: bool = True) -> str:
@@ -21,7 +23,7 @@ def bag_name(prefix: str, t_ns: int, per_day: bool = True) -> str:
     ``<prefix>_YYYY-MM-DD`` with one bag per UTC day (the "recorded mcap days"),
     else ``<prefix>_YYYY-MM-DD-HH-MM-SS`` of the first message (rosbag2 style).
     """
-    stamp = _dt.datetime.fromtimestamp(t_ns // 1_000_000_000, tz=_dt.timezone.utc)
+    stamp = _dt.datetime.fromtimestamp(t_ns // NS_PER_S, tz=_dt.timezone.utc)
     return f'{prefix}_{stamp:%Y-%m-%d}' if per_day else f'{prefix}_{stamp:%Y-%m-%d-%H-%M-%S}'
 
 
@@ -49,7 +51,7 @@ class SplitPolicy:
         if self.max_bytes and file_bytes >= self.max_bytes:
             return True
         if self.max_duration_s and file_start_ns is not None:
-            return (t_ns - file_start_ns) >= self.max_duration_s * 1e9
+            return (t_ns - file_start_ns) >= self.max_duration_s * NS_PER_S
         return False
 
 

@@ -19,7 +19,7 @@ from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
-from sslfr_common.timeconv import to_sec
+from sslfr_common.timeconv import NS_PER_S, to_sec
 
 from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError, TopicInfo,
                        read_metadata)
@@ -292,19 +292,19 @@ def message_time(header, log_time_ns: int) -> float:
     """When a recorded message happened [s since the epoch]: its ``header.stamp``, or
     its log time when the stamp is zero (never set by the publisher)."""
     t = to_sec(header.stamp)
-    return t if t != 0 else log_time_ns / 1e9
+    return t if t != 0 else to_sec(log_time_ns)
 
 
 def seconds_text(ns: int) -> str:
     """``S.NNNNNNNNN`` of a time or duration [ns] (rosbag2's time_in_sec)."""
-    return f'{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}'
+    return f'{ns // NS_PER_S}.{ns % NS_PER_S:09d}'
 
 
 def time_point_text(ns: int) -> str:
     """``Jun 21 2026 12:00:00.000000000 (1782043200.000000000)`` in local time, as rosbag2."""
     import time as _time
-    t = _time.localtime(ns // 1_000_000_000)
-    return (_time.strftime('%b %e %Y %H:%M:%S', t) + f'.{ns % 1_000_000_000:09d} '
+    t = _time.localtime(ns // NS_PER_S)
+    return (_time.strftime('%b %e %Y %H:%M:%S', t) + f'.{ns % NS_PER_S:09d} '
             f'({seconds_text(ns)})')
 
 

@@ -15,6 +15,7 @@ import os
 from typing import Any, Iterable
 
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
+from sslfr_common.timeconv import to_sec
 
 from .policy import DiskGuard, SplitPolicy
 from .qos import duration_dict
@@ -112,7 +113,7 @@ def qos_to_dict(qos) -> dict:
 
     def dur(d) -> dict:
         ns = getattr(d, 'nanoseconds', 0)
-        return duration_dict(None) if ns >= 0x7FFFFFFFFFFFFFFF else duration_dict(ns / 1e9) \
+        return duration_dict(None) if ns >= 0x7FFFFFFFFFFFFFFF else duration_dict(to_sec(ns)) \
             if ns >= 0 else duration_dict(0.0)
 
     return {'history': name(qos.history), 'depth': int(qos.depth),

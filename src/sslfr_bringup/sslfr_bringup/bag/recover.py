@@ -28,6 +28,8 @@ from pathlib import Path
 
 import yaml
 
+from sslfr_common.timeconv import to_sec
+
 from .mcapfile import McapFile, TopicEntry
 from .metadata import (METADATA_FILENAME, BagError, BagMetadata, FileInfo, MetadataError,
                        TopicInfo, decode_text, parse_metadata, parse_serialized, write_metadata)
@@ -85,7 +87,7 @@ class RecoveryReport:
             lines.append(self.metadata_note)
         m = self.metadata
         lines.append(f'bag: {m.message_count} messages in {len(m.files)} file(s), '
-                     f'{m.duration_ns / 1e9:.1f} s, '
+                     f'{to_sec(m.duration_ns):.1f} s, '
                      + ('metadata.yaml rewritten' if self.wrote else 'nothing changed (dry run)'))
         return '\n'.join(lines)
 

@@ -20,12 +20,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from sslfr_common.timeconv import NS_PER_S
+
 from .metadata import BagError
 from .policy import DiskGuard, DiskStatus, bag_name
 from .schema import DefinitionCache
 from .writer import BagWriter, WriterOptions
 
-_DAY_NS = 86_400 * 1_000_000_000      # one UTC day [ns] (Unix time has no leap seconds)
+_DAY_NS = 86_400 * NS_PER_S             # one UTC day [ns] (Unix time has no leap seconds)
 
 
 def probe_output_dir(root: str | Path) -> str:

@@ -17,6 +17,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterator
 
+from sslfr_common.timeconv import to_sec
+
 
 NAME_RE = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]{0,200}$')
 CHUNK = 1 << 20
@@ -64,7 +66,7 @@ def list_bags(root: str | os.PathLike) -> list[BagEntry]:
         try:
             meta = read_metadata(d)
             if meta.message_count:
-                entry.start, entry.end = meta.starting_time_ns / 1e9, meta.end_time_ns / 1e9
+                entry.start, entry.end = to_sec(meta.starting_time_ns), to_sec(meta.end_time_ns)
                 entry.date = dt.datetime.fromtimestamp(entry.start, dt.timezone.utc).strftime('%Y-%m-%d')
             entry.messages = meta.message_count
         except (BagError, OSError, ValueError) as exc:

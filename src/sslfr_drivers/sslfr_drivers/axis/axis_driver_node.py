@@ -11,10 +11,9 @@ its own thread: at ``control_rate`` while something moves, else at the next setp
 step, the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at
 once on a trajectory, safety change, mode change, home / jog request or activation.
 No executor callback waits for the board (configure waits at most ``OPEN_WAIT``), so
-a single-threaded executor serves the node, alone or composed. With ``autostart`` the
-node reaches and keeps ``active`` by itself; every ``change_state`` request gets an
-answer. ``axes/<axis>/status`` (5 Hz, every lifecycle state) and ``joint_states``
-(10 Hz while the board answers) come from one publishing timer.
+a single-threaded executor serves the node, alone or composed. With ``autostart`` it
+keeps ``active`` by itself; every ``change_state`` request gets an answer. One timer
+publishes ``axes/<axis>/status`` (every lifecycle state) and ``joint_states``.
 """
 from __future__ import annotations
 

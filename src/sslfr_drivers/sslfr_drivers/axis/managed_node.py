@@ -23,6 +23,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn
 from rclpy.node import Node
 from sslfr_common.node import LeanEvents, steady_now
+from sslfr_common.timeconv import to_ns
 
 from sslfr_drivers.axis.activation import SelfActivation, check_request
 
@@ -69,7 +70,7 @@ class ManagedNode(LeanEvents, LifecycleNodeMixin, Node):
         label = self.activation.next_transition(self.lifecycle_state(), now)
         if label is not None:
             self._transition(label, 'self')
-        period = int((0.1 if self.activation.pending(self.lifecycle_state(), now) else 1.0) * 1e9)
+        period = to_ns(0.1 if self.activation.pending(self.lifecycle_state(), now) else 1.0)
         if self._activation_timer.timer_period_ns != period:
             self._activation_timer.timer_period_ns = period
 

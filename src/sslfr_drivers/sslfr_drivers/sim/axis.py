@@ -47,9 +47,9 @@ class AxisConfig:
     """Physical parameters of one simulated axis (SI units, radians)."""
 
     axis: str = 'mirrors'
-    lo: float = -math.pi / 4            # [rad] LOW switch
-    hi: float = math.pi / 2             # [rad] HIGH switch
-    sleep: float = math.pi / 2          # [rad] SLEEP switch centre
+    lo: float = JOINT_RANGE['mirrors'][0]     # [rad] LOW switch
+    hi: float = JOINT_RANGE['mirrors'][1]     # [rad] HIGH switch
+    sleep: float = STOW_POSITION['mirrors']   # [rad] SLEEP switch centre
     step_rad: float = m.DEFAULT_STEP_RAD    # [rad/step]
     max_speed: float = 3000.0           # [steps/s]
     accel: float = 6000.0               # [steps/s^2]

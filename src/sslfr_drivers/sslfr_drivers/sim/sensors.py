@@ -55,7 +55,7 @@ import os
 import random
 import time
 
-from sslfr_common.contract import JOINT_RANGE, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
+from sslfr_common.contract import JOINT_RANGE, STOW_POSITION, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
 from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
@@ -342,8 +342,8 @@ class AbsorberSim(_SensorSim):
     def _ideal(self, utc: float) -> dict[str, float]:
         sun = self.sky.sun(utc)
         if not sun.above_horizon:
-            return {'mirrors': math.pi / 2}
-        return {'mirrors': max(math.radians(-45.0), min(math.radians(45.0), sun.transversal / 2))}
+            return {'mirrors': STOW_POSITION['mirrors']}
+        return {'mirrors': max(SWITCH_POSITION['initial'], min(SWITCH_POSITION['last'], sun.transversal / 2))}
 
     def update(self, dt):
         utc = self.utc()
