@@ -10,8 +10,8 @@ show its reaction and recover), so the node set starts once:
   11:05 thermocouple-open +600 s -> outlet NaN; safety raises a thermocouple reason
   11:25 kill:planner +500 s -> no trajectory; the drivers finish the horizon, then hold
                                (the safety's 5 s planner watchdog may stow meanwhile);
-                               tracking again after the restart
-  12:00 overtemp            -> safety STOW (latched), mirrors to the sleeping position
+                               tracking again within RESTART_WALL of the restart
+  12:10 overtemp            -> safety STOW (latched), mirrors to the sleeping position
 
 The safety supervisor kill (stow within 1.2 s, wall) is its own short run.
 """
@@ -40,6 +40,11 @@ TOL = STEP + 4 * math.radians(0.003)
 #: difference of degrees)
 TRACK = 3 * TOL
 LAG = SPEED * 0.5     # [s sim] a loaded 2-core machine: the axis may lag by 0.5 s wall
+#: [s wall] a released planner's process back to tracking: start (rclpy import, ~1-2.6 s
+#: loaded), discovery of /clock and the day plan (~2 s loaded), the safety's OK and the
+#: mirrors' way back from the stow (measured 4.9 s with two test workers and a browser
+#: test on this 2-core machine): twice that
+RESTART_WALL = 10.0
 
 
 def T(hhmm: str) -> float:
@@ -88,8 +93,8 @@ def morning(tmp_path_factory):
             'mirrors': ros.collect(AxisStatus, 'axes/mirrors/status'),
             'outlet': ros.collect(Temperature, 'absorber/outlet_temperature')}
     faults = ['gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
-              'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@12:00']
-    args = ['--start', '09:40', '--end', '12:12', '--speed', str(SPEED)]
+              'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@12:10']
+    args = ['--start', '09:40', '--end', '12:22', '--speed', str(SPEED)]
     for f in faults:
         args += ['--fault', f]
     try:
@@ -194,16 +199,23 @@ def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
     ref = _ref(day)
     moved = abs(ref(hold.t[-1]).mirrors[0] - ref(hold.t[0]).mirrors[0])
     assert moved > 4 * TOL, 'the sun moved meanwhile (the hold is visible)'
-    back = day.axes['mirrors'].between(T('11:54'), T('11:59'))
-    err = scenario.tracking_error(back.t, back['measured'], lambda t: ref(t).mirrors, lag=LAG)
-    assert len(back) and np.max(err) <= TRACK, 'tracking again after the restart'
+    # back to tracking within RESTART_WALL of the release, and tracking from then on until
+    # the over-temperature fault
+    t_over = _fired(morning, 'overtemp@12:10')['sim_time']
+    after = day.axes['mirrors'].between(t1, t_over)
+    err = scenario.tracking_error(after.t, after['measured'], lambda t: ref(t).mirrors, lag=LAG)
+    bad = np.flatnonzero(err > TRACK)
+    first = int(bad[-1]) + 1 if bad.size else 0          # tracking from this sample on
+    assert first < len(after) - 2, ('not tracking again after the restart', np.round(err, 4).tolist())
+    assert after.t[first] - t1 <= RESTART_WALL * SPEED, \
+        f'tracking again {(after.t[first] - t1) / SPEED:.1f} s (wall) after the restart'
 
 
 def test_overtemp_stows(morning):
     from sslfr_interfaces.msg import SafetyState
-    t0 = _fired(morning, 'overtemp@12:00')['sim_time']
+    t0 = _fired(morning, 'overtemp@12:10')['sim_time']
     day = morning['day']
-    s = day.safety.between(t0, T('12:12'))
+    s = day.safety.between(t0, T('12:22'))
     hot = np.array([lvl >= SafetyState.STOW and any('over-temperature' in r for r in rs)
                     for lvl, rs in zip(s['level'], s['reasons'])])
     assert np.any(hot), 'over-temperature STOW'
@@ -212,9 +224,9 @@ def test_overtemp_stows(morning):
     assert np.all(hot[np.argmax(hot):]), 'latched until the end'
     assert any(m.level >= SafetyState.STOW and any('over-temperature' in r for r in m.reasons)
                for m in morning['live']['safety'])
-    end = day.axes['mirrors'].between(T('12:07'), T('12:12'))
+    end = day.axes['mirrors'].between(t0 + 7 * 60, T('12:22'))
     assert len(end) and np.all(np.abs(end['measured'] - math.pi / 2) < 0.01), 'mirrors asleep'
-    ph = day.phase.between(T('12:05'), T('12:12'))
+    ph = day.phase.between(t0 + 5 * 60, T('12:22'))
     assert len(ph) and set(ph['name']) <= {'STOW', 'STOWING'}, set(ph['name'])
 
 

@@ -64,11 +64,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         module = importlib.import_module(entry[0])  # Ctrl-C while importing: no traceback
-        return int(module.main(rest) or 0)
+        code = int(module.main(rest) or 0)
     except KeyboardInterrupt:
-        return 130
+        code = 130
     except BrokenPipeError:
         return 0
+    supervisor = sys.modules.get('sslfr_bringup.supervisor')
+    if supervisor is not None:           # sslfr up / sim: never hang at exit on a stuck ROS side
+        supervisor.exit_if_stuck(code, f'sslfr {name}')
+    return code
 
 
 if __name__ == '__main__':

@@ -491,6 +491,9 @@ class RosSide(threading.Thread):
       published every ``1/clock_rate`` wall seconds on a steady timer.
     """
 
+    #: [s] shutdown's waits: the thread's own end, the context's shutdown, the end after it
+    SHUTDOWN_BOUNDS = (1.0, 5.0, 10.0)
+
     def __init__(self, domain_id: int, namespace: str = '', clock_fn: Callable[[], float | None] | None = None,
                  clock_rate: float = 20.0, node_name: str = 'sslfr_supervisor', watch: dict | None = None):
         super().__init__(daemon=True, name='ros-side')
@@ -531,21 +534,40 @@ class RosSide(threading.Thread):
         self._jobs.put(('deactivate', (names, timeout, done)))
         done.wait(timeout + 0.5)
 
-    def shutdown(self) -> None:
-        """End the thread (idempotent). A lifecycle call under way (up to 20 s) is cut
-        short by shutting its context down: the thread never outlives this call, so
-        the interpreter never exits under a running rclpy thread (which aborts it)."""
+    def shutdown(self) -> bool:
+        """End the thread (idempotent); True when it has ended. A lifecycle call under
+        way (up to 20 s) is cut short by shutting its context down. Bounded: at most
+        about 16 s, whatever rclpy does (the context's shutdown runs in a helper thread,
+        so a shutdown that blocks cannot block the caller). A thread still running then
+        is left to :func:`exit_if_stuck`, so the interpreter never tears down under a
+        running rclpy thread (which aborts or hangs it)."""
         self._halt.set()
         if not self.is_alive():
-            return
-        self.join(1.0)
+            return True
+        self.join(self.SHUTDOWN_BOUNDS[0])
         if self.is_alive() and self._ctx is not None:
             import rclpy
-            rclpy.try_shutdown(context=self._ctx)
-        self.join(10.0)
+            helper = threading.Thread(target=rclpy.try_shutdown, kwargs={'context': self._ctx},
+                                      daemon=True, name='ros-side-shutdown')
+            helper.start()
+            helper.join(self.SHUTDOWN_BOUNDS[1])
+        self.join(self.SHUTDOWN_BOUNDS[2])
+        if self.is_alive():
+            _STUCK.append(self)
+            return False
+        return True
 
     # the thread
-    def run(self) -> None:  # noqa: C901 - one loop owning every rclpy object
+    def run(self) -> None:
+        try:
+            self._run()
+        except BaseException as exc:  # noqa: BLE001 - reported to the supervisor, never a silent death
+            if self.error is None:
+                self.error = exc
+        finally:
+            self.ready.set()            # whoever waits for it is released, ready or failed
+
+    def _run(self) -> None:  # noqa: C901 - one loop owning every rclpy object
         try:
             import rclpy
             from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -663,3 +685,19 @@ class RosSide(threading.Thread):
             executor.shutdown()
             node.destroy_node()
             rclpy.try_shutdown(context=ctx)
+
+
+#: RosSide threads that did not end within their shutdown's bound
+_STUCK: list[RosSide] = []
+
+
+def exit_if_stuck(code: int, prog: str) -> None:
+    """After a command's work is done (bags closed, summary written): when a RosSide
+    thread did not end, say so and leave at once with ``code`` instead of tearing the
+    interpreter down under a running rclpy thread."""
+    if any(t.is_alive() for t in _STUCK):
+        print(f'{prog}: the ROS side did not end within 16 s of the stop: leaving without '
+              f'interpreter teardown (exit {code})', file=sys.stderr)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
