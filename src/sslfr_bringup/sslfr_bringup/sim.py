@@ -392,10 +392,9 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     ros.start()
     sup = None
     try:
-        while not ros.ready.is_set() and ros.is_alive():
-            stop.wait(0.05)
-        if ros.error is not None or not ros.ready.is_set():
-            print(f'sslfr sim: ROS side failed: {ros.error or "its thread ended before it was ready"}', file=sys.stderr)
+        failed = ros.wait_ready(stop)
+        if failed:
+            print(f'sslfr sim: ROS side failed: {failed}', file=sys.stderr)
             return 1
         log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
         sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,

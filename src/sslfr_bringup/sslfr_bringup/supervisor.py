@@ -515,6 +515,14 @@ class RosSide(threading.Thread):
         self._ctx = None
 
     # called from the supervisor thread
+    def wait_ready(self, stop: StopSignals) -> str | None:
+        """Wait (started thread) until the ROS side is ready: None, or why it failed."""
+        while not self.ready.is_set() and self.is_alive():
+            stop.wait(0.05)
+        if self.error is not None or not self.ready.is_set():
+            return str(self.error or 'its thread ended before it was ready')
+        return None
+
     def request_active(self, name: str) -> None:
         self._jobs.put(('active', name))
 

@@ -158,10 +158,9 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     ros = RosSide(domain, namespace=args.namespace or ns.namespace)
     ros.start()
     try:
-        while not ros.ready.is_set() and ros.is_alive():
-            stop.wait(0.05)
-        if ros.error is not None or not ros.ready.is_set():
-            print(f'sslfr up: ROS side failed: {ros.error or "its thread ended before it was ready"}', file=sys.stderr)
+        failed = ros.wait_ready(stop)
+        if failed:
+            print(f'sslfr up: ROS side failed: {failed}', file=sys.stderr)
             return 1
         sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
                          stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None,

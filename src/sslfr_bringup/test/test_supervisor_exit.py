@@ -70,6 +70,6 @@ def test_a_ros_side_that_fails_while_setting_up_releases_its_waiters_with_the_er
 
     ros = Broken(0)
     ros.start()
-    assert ros.ready.wait(5)
-    assert isinstance(ros.error, RuntimeError) and 'publisher refused' in str(ros.error)
+    failed = ros.wait_ready(supervisor.StopSignals())
+    assert failed == 'publisher refused' and isinstance(ros.error, RuntimeError)
     assert ros.shutdown() is True
