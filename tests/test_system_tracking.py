@@ -24,7 +24,10 @@ from sslfr_bringup.sim import day_epoch
 STEP = math.radians(0.006)            # seed 000 section 3.4: one motor step
 SENSOR_NOISE = math.radians(0.003)    # simulated position sensor, 1 sigma (sim/axis.py)
 TOL = STEP + 4 * SENSOR_NOISE         # one step + sensor noise (4 sigma)
-WALL_LATENCY = 0.25                   # [s wall] clock tick + control period + status period
+#: [s wall] the age a measured angle may have: /clock tick 0.05 + control period 0.05 +
+#: status period 0.2, plus 0.2 for a loaded 2-core machine running two test workers (a
+#: soak round saw about 0.4 s once: 0.021 deg at 90x, under 0.001 deg at real time)
+WALL_LATENCY = 0.5
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
 CONFIG = 'almeria_sslfr.yaml'
