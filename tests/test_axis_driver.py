@@ -27,6 +27,7 @@ import time
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.timeconv import to_sec
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -317,13 +318,22 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     ideal = lambda t: Rig.ideal(t, t0, sun_h, 40.0)  # noqa: E731
 
     def frozen_counts():
-        """Freeze traffic (radio cut) and read both ends' counters at rest."""
-        r.sim.cmd('disconnect 1.6')
-        ros.spin_for(1.3)
-        n_diag = len(r.diags)
-        ros.spin_until(lambda: len(r.diags) > n_diag, 2)
-        d = r.diag()
-        return r.board()['frames_out'], int(d['frames_received']) + int(d['frames_lost']), int(d['frames_lost'])
+        """Freeze traffic (a radio cut, ended only after both reads) and read both ends'
+        counters at rest: the host's from a diagnostics message (1 Hz) stamped at least
+        0.5 s into the cut, then the board's. (A fixed 1.6 s cut was not frozen when a
+        diagnostics message came late under load: the board's counters, read after the
+        cut had ended, held 4 frames more than the host's.)"""
+        r.sim.cmd('disconnect 60')
+        t_cut = time.time()
+
+        def in_cut():
+            return [a for a in r.diags if to_sec(a.header.stamp) >= t_cut + 0.5
+                    and any(r.axis in st.name for st in a.status)]
+        assert ros.spin_until(lambda: bool(in_cut()), 10), 'no diagnostics during the cut'
+        d = next({kv.key: kv.value for kv in st.values} for st in in_cut()[0].status if r.axis in st.name)
+        out = r.board()['frames_out']
+        r.sim.cmd('disconnect 0')
+        return out, int(d['frames_received']) + int(d['frames_lost']), int(d['frames_lost'])
 
     ros.spin_for(1.0)
     out0, host0, lost0 = frozen_counts()
