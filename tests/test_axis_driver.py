@@ -333,10 +333,10 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
         d = next({kv.key: kv.value for kv in st.values} for st in in_cut()[0].status if r.axis in st.name)
         out = r.board()['frames_out']
         r.sim.cmd('disconnect 0')
-        return out, int(d['frames_received']) + int(d['frames_lost']), int(d['frames_lost'])
+        return out, int(d['frames_received']) + int(d['frames_lost']), int(d['frames_lost']), int(d['sessions'])
 
     ros.spin_for(1.0)
-    out0, host0, lost0 = frozen_counts()
+    out0, host0, lost0, sess0 = frozen_counts()
     ros.spin_for(1.0)
     r.sim.cmd('corrupt 0.01')
     t_c = time.time()
@@ -348,15 +348,25 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     ahead = max(a - ideal(t) for t, a in truth)
     r.sim.cmd('corrupt 0')
     ros.spin_for(0.5)
-    out1, host1, lost1 = frozen_counts()
+    out1, host1, lost1, sess1 = frozen_counts()
     board = r.board()
     lost = lost1 - lost0
     print(f'\n1% byte corruption for 6 s: board sent {out1 - out0} frames, host counted '
-          f'{host1 - host0} received+lost, {lost} lost, {board["bytes_corrupted"]} bytes corrupted; '
+          f'{host1 - host0} received+lost, {lost} lost, {board["bytes_corrupted"]} bytes corrupted, '
+          f'{sess1 - sess0} new session(s); '
           f'truth lags the ideal by <= {lag / STEP:.1f} steps, ahead by <= {ahead / STEP:.1f} steps')
     assert board['bytes_corrupted'] > 10
     assert lost > 0
-    assert out1 - out0 == host1 - host0            # every board frame is received or counted lost
+    # every board frame is received or counted lost (sequence gaps): exactly, while one
+    # session lasts. Frames lost at the end of a session that corruption ended (no valid
+    # answer for link_timeout 1 s, then a reconnection: seen in the busy soak; at 4 %
+    # corruption 4-10 frames per new session) leave no gap to count. So: the host never
+    # counts more than the board sent; with no new session, exactly; per new session at
+    # most what the board answers in one link_timeout (20 Hz control + 4 Hz heartbeat)
+    # goes uncounted. (The cuts' own reconnections, when they happen, lose nothing.)
+    new_sessions = sess1 - sess0
+    assert new_sessions >= 0, (sess0, sess1)
+    assert 0 <= (out1 - out0) - (host1 - host0) <= 24 * new_sessions, (out1 - out0, host1 - host0, new_sessions)
     assert r.status[-1].frames_lost == lost1
     assert r.status[-1].frames_bad > 0
     # no wrong move: this morning trajectory only rises (~0.1 deg/s): the joint never
