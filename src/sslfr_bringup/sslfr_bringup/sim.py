@@ -550,8 +550,7 @@ class MemoryCensus(threading.Thread):
     """Peak memory of the node set and of the simulated boards, sampled every ``period``
     wall seconds in its own thread (``Supervisor.rss(full=True)``: PSS from each
     process's smaps_rollup). Not on the fault timer: on a loaded 2-core machine one
-    census took up to 4.3 s, which held back the next fault injection by as much
-    (860 sim s at 200x)."""
+    census took up to 7.7 s, which held back the next fault injection by as much."""
 
     def __init__(self, sup, period: float = 2.0):
         super().__init__(daemon=True, name='memory-census')

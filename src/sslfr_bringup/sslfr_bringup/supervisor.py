@@ -576,25 +576,21 @@ class RosSide(threading.Thread):
             self.ready.set()            # whoever waits for it is released, ready or failed
 
     def _run(self) -> None:  # noqa: C901 - one loop owning every rclpy object
-        try:
-            import rclpy
-            from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-            from lifecycle_msgs.msg import Transition
-            from lifecycle_msgs.srv import ChangeState
-            from rclpy.clock import Clock, ClockType
-            from rclpy.executors import SingleThreadedExecutor
-            from sslfr_drivers.axis.lifecycle_ctl import ActiveWatch
+        # a failure setting up ends the thread through run(): error set, waiters released
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+        from rclpy.clock import Clock, ClockType
+        from rclpy.executors import SingleThreadedExecutor
+        from sslfr_drivers.axis.lifecycle_ctl import ActiveWatch
 
-            ctx = self._ctx = rclpy.Context()
-            rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
-            node = rclpy.create_node(self.node_name, namespace=self.namespace or None, context=ctx)
-            executor = SingleThreadedExecutor(context=ctx)
-            executor.add_node(node)
-            steady = Clock(clock_type=ClockType.STEADY_TIME)
-        except BaseException as exc:  # noqa: BLE001 - reported to the supervisor
-            self.error = exc
-            self.ready.set()
-            return
+        ctx = self._ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
+        node = rclpy.create_node(self.node_name, namespace=self.namespace or None, context=ctx)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
         status: dict[str, dict] = {}
         clients: dict = {}
         diag_pub = node.create_publisher(DiagnosticArray, 'diagnostics', 10)
