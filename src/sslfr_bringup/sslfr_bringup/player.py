@@ -188,15 +188,19 @@ class Player:
 
 def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_ns=None,
                end_ns=None, clock_hz=100.0, progress=True, node_name='sslfr_replay',
-               domain_id=None, wait_subscribers: float = 0.0, wait_for: list[str] | None = None,
-               before_play=None) -> Player:
+               domain_id=None, wait_subscribers: float = 0.0,
+               wait_listened: list[str] | None = None) -> Player:
     """Create a node, play the bag (blocking until done or Ctrl-C), return the Player.
 
     SIGINT/SIGTERM set a flag (:class:`sslfr_common.node.StopRequest`) that the loop
     below checks at every turn, and wake the executor: the stop never depends on a
     KeyboardInterrupt, which Python does not raise at all in a process started with
     SIGINT ignored (anything run in the background by a non-interactive shell); the
-    replay then played on to its end."""
+    replay then played on to its end.
+
+    Playing starts when every played topic has a subscriber and every topic of
+    ``wait_listened`` (absolute names: e.g. a recorder's topics) has one, or after
+    ``wait_subscribers`` seconds (steady clock) at most."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -213,13 +217,12 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
     stop.executor = executor
     player = Player(node, reader, topics, remaps, rate, start_ns, end_ns, clock_hz, progress)
     try:
-        if before_play is not None and not stop.requested.is_set():
-            before_play(node, executor)
         deadline = time.monotonic() + wait_subscribers
         while time.monotonic() < deadline and not stop.requested.is_set():
             player.publish_start_clock()  # sim-time subscribers get a clock before any data
-            pubs = [p for t, p in player.publishers.items() if wait_for is None or t in wait_for]
-            if pubs and all(p.get_subscription_count() > 0 for p in pubs):
+            pubs = list(player.publishers.values())
+            if (pubs and all(p.get_subscription_count() > 0 for p in pubs)
+                    and all(node.count_subscribers(t) > 0 for t in wait_listened or ())):
                 break
             executor.spin_once(timeout_sec=0.05)
         if not stop.requested.is_set():

@@ -32,10 +32,11 @@ WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
                  'absorber/outlet_temperature', 'irradiance/beam', 'irradiance/illuminance',
                  'limit_switches', 'joint_states', 'axes/mirrors/status',
                  'axes/mobile_structure/status', 'axes/secondary_reflector/status']
-#: Decisions compared in what-if mode.
-WHATIF_DECISIONS = ['tracker/phase', 'safety/state', 'tracker/trajectory']
-#: (package, executable) of the deciding nodes started fresh.
-DECIDERS = [('sslfr_planner', 'planner'), ('sslfr_drivers', 'safety')]
+#: (package, executable, decisions it publishes) of the deciding nodes started fresh.
+DECIDERS = [('sslfr_planner', 'planner', ['tracker/phase', 'tracker/trajectory']),
+            ('sslfr_drivers', 'safety', ['safety/state'])]
+#: Decisions recorded and compared in what-if mode.
+WHATIF_DECISIONS = [t for _, _, decisions in DECIDERS for t in decisions]
 
 
 def default_config() -> Path | None:
@@ -103,7 +104,8 @@ def _run(reader: BagReader, ns, start_ns, end_ns, present: list[str], rec_exe: P
                 '-p', 'topics:=[' + ','.join(f"'{t}'" for t in WHATIF_DECISIONS) + ']']
     procs.append(('recorder', _start(rec_argv, env, out / 'recorder.log')))
     started = []
-    for pkg, exe in DECIDERS:
+    listened = []  # decisions of the started nodes: the recorder must listen before playing
+    for pkg, exe, decisions in DECIDERS:
         path = find_executable(pkg, exe)
         if path is None:
             print(f'what-if: {pkg}/{exe} is not installed: its decisions are not compared',
@@ -114,11 +116,12 @@ def _run(reader: BagReader, ns, start_ns, end_ns, present: list[str], rec_exe: P
             argv += ['--params-file', str(config)]
         procs.append((exe, _start(argv, env, out / f'{exe}.log')))
         started.append(exe)
+        listened += [absolute(t) for t in decisions]
     try:
         player = run_player(reader, topics=present, rate=ns.rate, start_ns=start_ns, end_ns=end_ns,
                             clock_hz=ns.clock_hz, progress=not ns.no_progress,
                             node_name='sslfr_whatif_player', domain_id=domain,
-                            wait_subscribers=15.0)
+                            wait_subscribers=15.0, wait_listened=listened)
         time.sleep(2.0)  # let the last decisions reach the recorder
     finally:
         for _, proc in reversed(procs):
