@@ -296,13 +296,19 @@ def test_overtemp_and_open_thermocouple_stow_on_the_wire(plant_factory, ros):
 
     # --- thermocouple disconnected during tracking
     t_open = time.monotonic()
+    n_state = len(plant.states)
     plant.abs_sim.cmd('{"cmd": "fault", "kind": "thermocouple-open", "target": "outlet"}')
     assert ros.spin_until(lambda: any(s == STOW_STEPS for _, s in plant.tap.moves(t_open)), 3.0), \
         plant.logs()
     t_wire = next(t for t, s in plant.tap.moves(t_open) if s == STOW_STEPS)
     print(f'thermocouple open (fault injected) -> stow MOVE_TO on the wire: {t_wire - t_open:.3f} s')
     assert t_wire - t_open < 2.0
-    assert any('outlet thermocouple invalid' in r for r in plant.states[-1].reasons)
+    # the state that ordered the stow reaches this test's subscription over DDS, the move
+    # reached the tap on the board's serial line: wait for the state (it once came after)
+    assert ros.spin_until(lambda: any(m.level == SafetyState.STOW and any(
+        'outlet thermocouple invalid' in r for r in m.reasons) for m in plant.states[n_state:]), 2.0), \
+        plant.states[-1]
+    assert any('outlet thermocouple invalid' in r for r in plant.states[-1].reasons), plant.states[-1]
 
 
 def test_sigkill_of_safety_stops_every_axis_within_1_2_s_then_stows(plant_factory, ros):
