@@ -339,12 +339,14 @@ def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     topics = BagReader(bag).topics
     assert topics['/tracker/phase'].message_count > 0 and topics['/safety/state'].message_count > 0
     # Recorded on the bag's day (sim time), from the start of the stretch: playing waits
-    # until the recorder listens to the fresh nodes' decisions (it did not: the first
-    # 62 s of sim time, 3 s of wall time, were once missing under load). The bound is
-    # 10 s of sim time = 0.5 s wall at rate 20 (seen: 0-3.3 s with the machine loaded).
+    # until the recorder listens to the fresh nodes' decisions and every sim-time node's
+    # /clock is matched (without: the first 55-66 s of sim time, about 3 s wall, were
+    # missing in 3 of 12 loaded runs; the recorder or the planner heard /clock late).
+    # Bound: 20 s of sim time = 1 s wall at rate 20 (seen since: 0-7 s, the planner's
+    # first plan on a loaded machine).
     for topic in ('/safety/state', '/tracker/phase'):
         first = next(BagReader(bag).messages([topic]))
-        assert 0 <= first.log_time / 1e9 - (SUNRISE - 60) < 10, topic
+        assert 0 <= first.log_time / 1e9 - (SUNRISE - 60) < 20, topic
     assert (tmp_path / 'wi' / 'whatif.md').exists()
 
 

@@ -186,10 +186,17 @@ class Player:
             self.done.set()
 
 
+def _listens(node, name: str, topics: list[str]) -> bool:
+    """Whether the node called ``name`` subscribes to every topic of ``topics`` (graph)."""
+    return all(any(info.node_name == name for info in node.get_subscriptions_info_by_topic(t))
+               for t in topics)
+
+
 def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_ns=None,
                end_ns=None, clock_hz=100.0, progress=True, node_name='sslfr_replay',
                domain_id=None, wait_subscribers: float = 0.0,
-               wait_listened: list[str] | None = None) -> Player:
+               wait_listened: tuple[str, list[str]] | None = None,
+               wait_clock_subscribers: int = 0) -> Player:
     """Create a node, play the bag (blocking until done or Ctrl-C), return the Player.
 
     SIGINT/SIGTERM set a flag (:class:`sslfr_common.node.StopRequest`) that the loop
@@ -198,9 +205,12 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
     SIGINT ignored (anything run in the background by a non-interactive shell); the
     replay then played on to its end.
 
-    Playing starts when every played topic has a subscriber and every topic of
-    ``wait_listened`` (absolute names: e.g. a recorder's topics) has one, or after
-    ``wait_subscribers`` seconds (steady clock) at most."""
+    Playing starts when every played topic has a subscriber and, with ``wait_listened``
+    = (node name, absolute topic names), when that node (e.g. a recorder) subscribes to
+    each of those topics, and when ``/clock`` has matched at least
+    ``wait_clock_subscribers`` subscriptions (the sim-time nodes of a private domain: a
+    node whose /clock matched late would start its decisions that late in the stretch),
+    or after ``wait_subscribers`` seconds (steady clock) at most."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -222,7 +232,9 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
             player.publish_start_clock()  # sim-time subscribers get a clock before any data
             pubs = list(player.publishers.values())
             if (pubs and all(p.get_subscription_count() > 0 for p in pubs)
-                    and all(node.count_subscribers(t) > 0 for t in wait_listened or ())):
+                    and (wait_listened is None or _listens(node, *wait_listened))
+                    and (player.clock_pub is None
+                         or player.clock_pub.get_subscription_count() >= wait_clock_subscribers)):
                 break
             executor.spin_once(timeout_sec=0.05)
         if not stop.requested.is_set():

@@ -35,6 +35,8 @@ WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
 #: (package, executable, decisions it publishes) of the deciding nodes started fresh.
 DECIDERS = [('sslfr_planner', 'planner', ['tracker/phase', 'tracker/trajectory']),
             ('sslfr_drivers', 'safety', ['safety/state'])]
+#: Node name of the decisions' recorder.
+RECORDER_NODE = 'whatif_recorder'
 #: Decisions recorded and compared in what-if mode.
 WHATIF_DECISIONS = [t for _, _, decisions in DECIDERS for t in decisions]
 
@@ -98,13 +100,14 @@ def _run(reader: BagReader, ns, start_ns, end_ns, present: list[str], rec_exe: P
     config = Path(ns.config) if ns.config else default_config()
     procs = []
     dec_root = out / 'decisions'
-    rec_argv = [str(rec_exe), '--ros-args', '-p', f'output_dir:={dec_root}', '-p', 'prefix:=whatif',
+    rec_argv = [str(rec_exe), '--ros-args', '-r', f'__node:={RECORDER_NODE}',
+                '-p', f'output_dir:={dec_root}', '-p', 'prefix:=whatif',
                 '-p', 'per_day:=false', '-p', 'use_sim_time:=true', '-p', 'fsync:=false',
                 '-p', 'discovery_period:=0.2',
                 '-p', 'topics:=[' + ','.join(f"'{t}'" for t in WHATIF_DECISIONS) + ']']
     procs.append(('recorder', _start(rec_argv, env, out / 'recorder.log')))
     started = []
-    listened = []  # decisions of the started nodes: the recorder must listen before playing
+    listened = []  # decisions of the started nodes: the recorder listens before playing
     for pkg, exe, decisions in DECIDERS:
         path = find_executable(pkg, exe)
         if path is None:
@@ -121,7 +124,8 @@ def _run(reader: BagReader, ns, start_ns, end_ns, present: list[str], rec_exe: P
         player = run_player(reader, topics=present, rate=ns.rate, start_ns=start_ns, end_ns=end_ns,
                             clock_hz=ns.clock_hz, progress=not ns.no_progress,
                             node_name='sslfr_whatif_player', domain_id=domain,
-                            wait_subscribers=15.0, wait_listened=listened)
+                            wait_subscribers=15.0, wait_listened=(RECORDER_NODE, listened),
+                            wait_clock_subscribers=1 + len(started))
         time.sleep(2.0)  # let the last decisions reach the recorder
     finally:
         for _, proc in reversed(procs):
