@@ -370,11 +370,14 @@ def test_corrupted_bytes_no_wrong_move_and_exact_frames_lost(rig, ros):
     assert r.status[-1].frames_bad > 0
     # no wrong move: this morning trajectory only rises (~0.1 deg/s): the joint never
     # went down, never got ahead of the ideal by more than the one-period lead + a step;
-    # lost frames only make it wait (lag, bounded by a second of trajectory motion)
+    # lost frames only make it wait (lag, bounded by a second of trajectory motion, 20
+    # steps); a session ended by corruption (or the first cut's, if it reconnects late)
+    # adds its link_timeout (1 s) before the new session moves again: 40 steps whenever a
+    # new session happened (seen in the busy soak: 21.1 steps with 3 new sessions)
     angles = [a for _, a in truth]
     assert all(a2 >= a1 - 1e-12 for a1, a2 in zip(angles, angles[1:]))
     assert ahead <= 2 * STEP, ahead / STEP
-    assert lag <= 20 * STEP, lag / STEP
+    assert lag <= (40 if new_sessions else 20) * STEP, (lag / STEP, new_sessions)
     assert r.diag()['faults'] == '0'
 
 
