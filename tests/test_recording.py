@@ -336,7 +336,8 @@ def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     assert re.search(r'tracker/phase: agreement [\d.]+ % of \d+ samples', out.stdout)
     assert re.search(r'safety/state: agreement [\d.]+ % of \d+ samples', out.stdout)
     (bag,) = _bag_dirs(tmp_path / 'wi' / 'decisions')
-    topics = BagReader(bag).topics
+    decisions = BagReader(bag)
+    topics = decisions.topics
     assert topics['/tracker/phase'].message_count > 0 and topics['/safety/state'].message_count > 0
     # Recorded on the bag's day (sim time), from the start of the stretch: playing waits
     # until the recorder listens to the fresh nodes' decisions and every sim-time node's
@@ -345,7 +346,7 @@ def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     # Bound: 20 s of sim time = 1 s wall at rate 20 (seen since: 0-7 s, the planner's
     # first plan on a loaded machine).
     for topic in ('/safety/state', '/tracker/phase'):
-        first = next(BagReader(bag).messages([topic]))
+        first = next(decisions.messages([topic]))
         assert 0 <= first.log_time / 1e9 - (SUNRISE - 60) < 20, topic
     assert (tmp_path / 'wi' / 'whatif.md').exists()
 

@@ -228,9 +228,9 @@ def run_player(reader: BagReader, *, topics=None, remaps=None, rate=1.0, start_n
     player = Player(node, reader, topics, remaps, rate, start_ns, end_ns, clock_hz, progress)
     try:
         deadline = time.monotonic() + wait_subscribers
+        pubs = list(player.publishers.values())
         while time.monotonic() < deadline and not stop.requested.is_set():
             player.publish_start_clock()  # sim-time subscribers get a clock before any data
-            pubs = list(player.publishers.values())
             if (pubs and all(p.get_subscription_count() > 0 for p in pubs)
                     and (wait_listened is None or _listens(node, *wait_listened))
                     and (player.clock_pub is None
