@@ -143,3 +143,30 @@ def test_setup_repairs_broken_venv_and_reports_unreachable_registry(tmp_path):
     assert '.venv/ is broken' in out.stdout
     assert out.returncode != 0
     assert 'package registry cannot be reached' in out.stderr, out.stderr
+
+
+def test_a_test_stuck_in_native_code_holding_the_gil_ends_its_worker_with_stacks(tmp_path):
+    """pytest-timeout's handler is Python and needs the GIL; a deadlock in native code
+    that holds it (seen in a soak round: Fast DDS's event and receive threads of a test's
+    own participant deadlocked, eProsima/Fast-DDS#6502, and the harness's destroy_node
+    waited for them with the GIL held) hung the worker for good. The suite's pytest.ini
+    arms faulthandler's C watchdog too: the stuck test's process ends with every
+    thread's stack. Checked here with the suite's own pytest.ini, the timeout shortened."""
+    case = tmp_path / 'test_stuck.py'
+    case.write_text('import ctypes\n\n'
+                    'def test_stuck_holding_the_gil():\n'
+                    '    libc = ctypes.PyDLL(None)                # PyDLL: the GIL stays held\n'
+                    '    mutex = ctypes.create_string_buffer(64)  # PTHREAD_MUTEX_INITIALIZER\n'
+                    '    libc.pthread_mutex_lock(mutex)\n'
+                    '    libc.pthread_mutex_lock(mutex)           # for ever; no signal ends it\n')
+    t0 = time.monotonic()
+    # pytest-timeout at 1 s cannot end it (its handler needs the GIL); the watchdog at 2 s must
+    run = subprocess.run([sys.executable, '-m', 'pytest', '-c', str(ROOT / 'pytest.ini'),
+                          '--rootdir', str(tmp_path), '-p', 'no:randomly', '-q', '-o', 'timeout=1',
+                          '-o', 'faulthandler_timeout=2', str(case)],
+                         capture_output=True, text=True, timeout=30)
+    took = time.monotonic() - t0
+    assert run.returncode != 0, run.stdout
+    assert took < 20, took
+    assert 'Timeout (0:00:02)!' in run.stderr, run.stderr
+    assert 'test_stuck_holding_the_gil' in run.stderr, run.stderr
