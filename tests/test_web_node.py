@@ -150,23 +150,23 @@ def test_commands_go_through_the_services_and_refusals_change_nothing(graph, ros
     assert phases[-1].mode == mode0, 'a refused command changed the mode'
     # stow through planner/set_mode: the planner's phase becomes STOW
     status, j = page.post('/api/command/stow')
-    assert status == 200 and j['success'] and j['mode'] == 'stow' and j['service'] == 'planner/set_mode'
+    assert status == 200 and j['success'] and j['mode'] == 'stow' and j['service'] == 'planner/set_mode', (status, j)
     assert ros.spin_until(lambda: phases[-1].phase_name == 'STOW' and phases[-1].mode == 'stow', 10)
     # a forbidden transition is the planner's refusal, shown with its reason
     status, j = page.post('/api/command/mode', {'mode': 'manual'})
-    assert status == 200 and j['success'] is False and j['message']
+    assert status == 200 and j['success'] is False and j['message'], (status, j)
     # e-stop (software) through safety/estop
     status, j = page.post('/api/command/estop')
-    assert status == 200 and j['success'] and 'e-stop' in j['message']
+    assert status == 200 and j['success'] and 'e-stop' in j['message'], (status, j)
     assert ros.spin_until(lambda: safety[-1].level == SafetyState.ESTOP, 5)
     status, j = page.post('/api/command/release')
-    assert status == 200 and j['success']
+    assert status == 200 and j['success'], (status, j)
     assert ros.spin_until(lambda: safety[-1].level != SafetyState.ESTOP, 5)
     status, j = page.post('/api/command/reset')
-    assert status == 200 and isinstance(j['success'], bool) and j['message']
+    assert status == 200 and isinstance(j['success'], bool) and j['message'], (status, j)
     # a jog with no driver running: the service is not there, said plainly
     status, j = page.post('/api/command/jog', {'axis': 'mirrors', 'delta': 0.01})
-    assert status == 200 and j['success'] is False and 'not available' in j['message']
+    assert status == 200 and j['success'] is False and 'not available' in j['message'], (status, j)
     audit = [json.loads(x) for x in (tmp_path / 'audit.jsonl').read_text().splitlines()]
     done = {x['command'] for x in audit if x['success']}
     assert {'login', 'stow', 'estop', 'release'} <= done
