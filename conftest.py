@@ -116,10 +116,27 @@ class NodeProcess:
         return self.proc.returncode
 
 
+_LAUNCHED = pytest.StashKey[list]()
+_LOG_TAIL = 3000          # characters of each node's output put in a failed test's report
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A test that fails while nodes it launched run gets the tail of each node's own
+    output in its report (the processes and their temporary logs are gone after)."""
+    report = yield
+    if report.when == 'call' and report.failed:
+        for proc in item.stash.get(_LAUNCHED, []):
+            report.sections.append((f'node output: {Path(proc.argv[0]).name} (last {_LOG_TAIL} chars)',
+                                    proc.output()[-_LOG_TAIL:]))
+    return report
+
+
 @pytest.fixture
-def launch(ros_env, tmp_path):
+def launch(request, ros_env, tmp_path):
     """Start node executables; all are stopped at teardown."""
     procs: list[NodeProcess] = []
+    request.node.stash[_LAUNCHED] = procs
 
     def _launch(package: str, exe: str, *args: str, params: dict | None = None,
                 name: str | None = None, env: dict | None = None,
