@@ -127,7 +127,7 @@ def pytest_runtest_makereport(item, call):
     report = yield
     if report.when == 'call' and report.failed:
         for proc in item.stash.get(_LAUNCHED, []):
-            report.sections.append((f'node output: {Path(proc.argv[0]).name} (last {_LOG_TAIL} chars)',
+            report.sections.append((f'node output: {proc.log_path.stem} (last {_LOG_TAIL} chars)',
                                     proc.output()[-_LOG_TAIL:]))
     return report
 
