@@ -30,7 +30,7 @@ from .web.params import WEB_PARAMS
 
 REMOTE_RETRY, REMOTE_REFRESH = 2.0, 60.0       # [s, steady] get_parameters: until answered / then
 SAMPLE_PERIOD = 0.5                            # [s, steady] check whether a day-plot sample is due
-DISCOVERY_WAIT = 2.0                           # [s, wall] a new service client's wait for its server
+DISCOVERY_WAIT = 2.0                           # [s, wall] a service client's wait for its server
 
 
 def _srv_class(type_name: str):
@@ -111,26 +111,32 @@ class WebNode(LeanEvents, Node):
         if client is None:        # first use (from the web thread; rclpy's node calls are locked)
             client = self.clients_[cmd.service] = self.create_client(
                 _srv_class(self._service_types[cmd.service][1]), cmd.service)
-            for _ in range(int(DISCOVERY_WAIT / 0.05)):   # let discovery match the new client
-                if client.service_is_ready():
-                    break
-                await asyncio.sleep(0.05)
-        if not client.service_is_ready():
+        for _ in range(int(DISCOVERY_WAIT / 0.05)):       # let discovery match the client
+            if client.service_is_ready():
+                break
+            await asyncio.sleep(0.05)
+        else:
             return {'success': False, 'message': f'service {cmd.service} is not available (is its node running?)'}
         loop = asyncio.get_running_loop()
-        done: asyncio.Future = loop.create_future()
+        sent: list = []
 
-        def _finished(f):
-            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(f))
+        def send() -> asyncio.Future:
+            done = loop.create_future()
+            fut = client.call_async(client.srv_type.Request(**cmd.request))
+            fut.add_done_callback(lambda f: loop.call_soon_threadsafe(lambda: done.done() or done.set_result(f)))
+            sent.append(fut)
+            return done
 
-        fut = client.call_async(client.srv_type.Request(**cmd.request))
-        fut.add_done_callback(_finished)
-        try:
-            f = await asyncio.wait_for(done, float(self.cfg['service_timeout']))
-        except asyncio.TimeoutError:
-            client.remove_pending_request(fut)
-            return {'success': False, 'message': f'no answer from {cmd.service} within '
-                                                 f'{self.cfg["service_timeout"]:g} s'}
+        timeout = float(self.cfg['service_timeout'])
+        f, n = await commands.first_answer(send, timeout, commands.RESEND_S if cmd.resend else None)
+        for fut in sent:
+            if not fut.done():
+                client.remove_pending_request(fut)
+        if f is None:
+            return {'success': False, 'message': f'no answer from {cmd.service} within {timeout:g} s'
+                                                 + (f' ({n} requests)' if n > 1 else '')}
+        if n > 1:
+            self.get_logger().warning(f'{cmd.service}: answered after {n} requests (a response lost or late)')
         resp = f.result()
         return {k: getattr(resp, k) for k in resp.get_fields_and_field_types()}
 

@@ -179,6 +179,62 @@ def test_any_bytes_either_parse_to_an_object_or_raise_command_error(raw):
             pass
 
 
+def test_only_commands_that_act_once_when_sent_twice_are_resent_checked_on_the_real_cores():
+    from sslfr_planner.modes import request_mode
+    resent = {n for n, b in [('stow', {}), ('mode', {'mode': 'auto'}), ('estop', {}), ('release', {}),
+                             ('reset', {}), ('replan', {}), ('home', {'axis': 'mirrors'}),
+                             ('jog', {'axis': 'mirrors', 'delta': -0.05})]
+              if commands.validate(n, b, LIMITS).resend}
+    assert resent == {'stow', 'mode', 'estop'}
+    core, clock = _core()                       # the real safety core: engage twice = once
+    clock.advance(1.0)
+    assert core.estop(True)[0] and core.estop(True) == (True, 'e-stop already engaged')
+    assert core.estop(False)[0] and core.estop(False)[0] is False    # a second release is refused: not resent
+    for current in ('auto', 'stow', 'manual', 'maintenance'):        # the real planner rule: again = once
+        for mode in ('auto', 'stow', 'manual', 'maintenance'):
+            first = request_mode(current, mode)
+            again = request_mode(first.mode, mode)
+            assert again.mode == first.mode and (again.success or not first.success)
+
+
+def _answers(delays: list[float | None]):
+    """A ``send`` whose k-th request is answered after delays[k] s (None: its answer is lost)."""
+    import asyncio
+    sent: list = []
+
+    def send():
+        loop = asyncio.get_running_loop()
+        fut = loop.create_future()
+        delay = delays[len(sent)]
+        if delay is not None:
+            loop.call_later(delay, lambda k=len(sent): fut.done() or fut.set_result(f'answer {k}'))
+        sent.append(fut)
+        return fut
+    return send, sent
+
+
+@pytest.mark.parametrize('delays,timeout,every,answer,n', [
+    ([0.0], 1.0, None, 'answer 0', 1),                       # answered at once: one request
+    ([0.0], 1.0, 0.05, 'answer 0', 1),
+    ([None, 0.0, 0.0], 2.0, 0.05, 'answer 1', 2),            # first answer lost: the second answers
+    ([None, None, None, 0.0], 2.0, 0.05, 'answer 3', 4),
+    ([0.12, None, None, None], 2.0, 0.05, 'answer 0', 3),    # a late first answer still counts
+    ([None], 0.2, None, None, 1),                            # sent once: lost means no answer in time
+    ([None] * 50, 0.2, 0.05, None, 4),                       # 0, .05, .10, .15 s: then the time is up
+])
+def test_first_answer_resends_only_when_asked_and_keeps_to_the_timeout(delays, timeout, every, answer, n):
+    import asyncio
+    import time
+    send, sent = _answers(delays)
+    t0 = time.monotonic()
+    got, count = asyncio.run(commands.first_answer(send, timeout, every))
+    took = time.monotonic() - t0
+    assert got == answer and count == len(sent)
+    assert count == 1 if every is None else n <= count <= timeout / every + 1
+    assert took < timeout + 1.0 and (answer is not None or took >= timeout)
+    assert all(f.done() for f in sent)                      # nothing left waiting
+
+
 def test_jog_bound_is_the_smaller_of_page_and_driver_limits():
     lim = {'mirrors': commands.JogLimits(page_max=0.05, driver_max=0.2)}
     assert commands.validate('jog', {'axis': 'mirrors', 'delta': 0.05}, lim).request['delta'] == 0.05

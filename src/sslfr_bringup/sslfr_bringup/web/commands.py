@@ -19,14 +19,23 @@ page command          service (relative name)          request
 ``replan``            ``planner/replan``                --
 ====================  ==============================  ===============================
 
+A command whose request has the effect of one when sent twice (``stow``, ``mode``,
+``estop``: the planner accepts the current mode again, the safety node answers an
+engaged e-stop "already engaged") is marked ``resend``: the web node sends it again
+every :data:`RESEND_S` until the first answer (:func:`first_answer`), because
+rmw_fastrtps drops a response when the server has not yet matched the client's
+response reader. ``release`` is not (a second release is refused: nothing to
+release), nor are ``reset``, ``replan``, ``jog`` and ``home``.
+
 Angles are radians, as everywhere behind the page (degrees only in the page's text).
 """
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Awaitable, Callable, Mapping
 
 from sslfr_common.contract import JOINTS, MODES
 
@@ -40,6 +49,8 @@ SERVICES: dict[str, tuple[str, str]] = {
     'home': ('axes/{axis}/home', 'std_srvs/srv/Trigger'),
 }
 MAX_JOG_SPEED = 2.0     # [rad/s] a speed above this is refused (the driver caps it anyway)
+RESEND_S = 1.0          # [s, wall] a ``resend`` command's request is sent again this often until answered
+RESENT = frozenset({'stow', 'mode', 'estop'})   # page commands whose request may be sent twice
 
 
 class CommandError(ValueError):
@@ -55,6 +66,7 @@ class Command:
     srv_type: str                   # e.g. 'sslfr_interfaces/srv/Jog'
     request: Mapping[str, Any] = field(default_factory=dict)
     summary: str = ''               # one line for the log and the page
+    resend: bool = False            # sending the request twice acts once (table above)
 
 
 @dataclass(frozen=True)
@@ -117,7 +129,33 @@ def _axis(body: Mapping, name: str, axes: tuple[str, ...]) -> str:
 
 def _cmd(name: str, key: str, request: dict, summary: str, axis: str = '') -> Command:
     service, typ = SERVICES[key]
-    return Command(name, service.format(axis=axis), typ, request, summary)
+    return Command(name, service.format(axis=axis), typ, request, summary, resend=name in RESENT)
+
+
+async def first_answer(send: Callable[[], Awaitable], timeout: float,
+                       resend_every: float | None = None) -> tuple[Any, int]:
+    """Send a request with ``send()`` and await its answer for at most ``timeout`` [s].
+
+    With ``resend_every`` [s] the request is sent again that often until the first
+    answer to any of them (only for a request that acts once however often it is
+    sent: :attr:`Command.resend`). Returns (the answer, or None when none came in
+    time; how many requests were sent)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    pending = [asyncio.ensure_future(send())]
+    try:
+        while True:
+            left = deadline - loop.time()
+            step = left if resend_every is None else min(left, resend_every)
+            done, _ = await asyncio.wait(pending, timeout=max(step, 0.0), return_when=asyncio.FIRST_COMPLETED)
+            if done:
+                return next(iter(done)).result(), len(pending)
+            if loop.time() >= deadline:
+                return None, len(pending)
+            pending.append(asyncio.ensure_future(send()))
+    finally:
+        for f in pending:
+            f.cancel()
 
 
 def validate(name: str, body: Mapping, jog_limits: Mapping[str, JogLimits] | None = None,
