@@ -131,7 +131,11 @@ def test_faulty_morning_on_firmware_boards(ros_env, tmp_path):
     track = 3 * TOL
     # GPS loss: NO_FIX seen, the fix back; the planner keeps its site and the mirrors track
     assert np.any(day.fix.between(g0, g1 + 60)['status'] == NavSatStatus.STATUS_NO_FIX)
-    assert np.any(day.fix.between(g1 + 60, d0)['status'] >= NavSatStatus.STATUS_FIX), 'the fix comes back'
+    # the fix back within 10 s wall (1200 sim s): the receiver's epochs come at 1 Hz wall and
+    # it needs its 1 s to a first fix; the window once ended at the link drop (d0), which
+    # left 0.5-2 s wall when a fault tick came late, and a run saw no fix message in it
+    back = day.fix.between(g1 + 60, g1 + 1200)
+    assert np.any(back['status'] >= NavSatStatus.STATUS_FIX), ('the fix comes back', back.t - g1, back['status'])
     ph = day.phase.between(g0, g1)
     assert len(ph) and set(ph['name']) == {'TRACKING'} and np.ptp(ph['latitude']) < 1e-3
     s = day.axes['mirrors'].between(g0 + 180, g1 - 60)
