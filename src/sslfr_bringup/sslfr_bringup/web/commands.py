@@ -66,7 +66,11 @@ class Command:
     srv_type: str                   # e.g. 'sslfr_interfaces/srv/Jog'
     request: Mapping[str, Any] = field(default_factory=dict)
     summary: str = ''               # one line for the log and the page
-    resend: bool = False            # sending the request twice acts once (table above)
+
+    @property
+    def resend(self) -> bool:
+        """Sending the request twice acts once (module docstring): sent again until answered."""
+        return self.name in RESENT
 
 
 @dataclass(frozen=True)
@@ -129,7 +133,7 @@ def _axis(body: Mapping, name: str, axes: tuple[str, ...]) -> str:
 
 def _cmd(name: str, key: str, request: dict, summary: str, axis: str = '') -> Command:
     service, typ = SERVICES[key]
-    return Command(name, service.format(axis=axis), typ, request, summary, resend=name in RESENT)
+    return Command(name, service.format(axis=axis), typ, request, summary)
 
 
 async def first_answer(send: Callable[[], Awaitable], timeout: float,
