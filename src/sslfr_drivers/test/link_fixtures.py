@@ -8,9 +8,9 @@ import pytest
 
 from sslfr_drivers.link.board_link import BoardLink
 from sslfr_drivers.link.transport import SerialTransport
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.base import FaultInjector
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.base import FaultInjector
+from sslfr_sim.runner import SimThread
 
 
 

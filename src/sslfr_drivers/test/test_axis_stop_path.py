@@ -23,9 +23,9 @@ from sslfr_drivers.axis.supervisor import AxisSupervisor, AxisTuning
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.protocol import Framer
 from sslfr_drivers.link.transport import SerialTransport
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.base import FaultInjector
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.base import FaultInjector
+from sslfr_sim.runner import SimThread
 
 from drivers_testutil import wait_for
 

@@ -163,6 +163,6 @@ def test_link_and_sensor_modules_never_import_the_simulators():
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ''] if isinstance(node, ast.ImportFrom) else []
             offenders += [f'{path.relative_to(root)}: {n}' for n in names
-                          if n.startswith('sslfr_drivers.sim') or (isinstance(node, ast.ImportFrom)
+                          if n.startswith('sslfr_sim') or (isinstance(node, ast.ImportFrom)
                                                                    and node.level and 'sim' in n)]
     assert len(list(root.glob('link/*.py'))) >= 8 and not offenders, offenders

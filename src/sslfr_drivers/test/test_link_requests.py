@@ -12,9 +12,9 @@ from sslfr_drivers.link.board_link import BoardLink, LinkTimeout, NackError
 from sslfr_drivers.link.link_errors import AuthError
 from sslfr_drivers.link.requests import Pending, RequestTable
 from sslfr_drivers.link.transport import SerialTransport
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.base import FaultInjector
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.base import FaultInjector
+from sslfr_sim.runner import SimThread
 
 from drivers_testutil import wait_for
 from link_fixtures import link, sim  # noqa: F401 - fixtures

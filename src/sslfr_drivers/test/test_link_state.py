@@ -12,8 +12,8 @@ from sslfr_drivers.link.board_link import BoardLink, BoardLinkState, LinkDown, N
 from sslfr_drivers.link.heartbeat import Heartbeat
 from sslfr_drivers.link.link_state import LinkStateMachine
 from sslfr_drivers.link.transport import SerialTransport
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.runner import SimThread
 
 from drivers_testutil import wait_for
 from link_fixtures import link, sim  # noqa: F401 - fixtures
