@@ -11,7 +11,6 @@ import logging
 import os
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
-from typing import TYPE_CHECKING
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NONCE_SIZE, NULL_KEY, NULL_NONCE, Session, key_id
@@ -21,21 +20,19 @@ from sslfr_drivers.link.protocol import (PROTOCOL_V1, PROTOCOL_VERSION, Frame, P
                                          SequenceCounter, SequenceTracker, encode_frame)
 from sslfr_drivers.link.requests import Pending
 
-if TYPE_CHECKING:
-    from sslfr_drivers.link.board_link import BoardLink
-
 _log = logging.getLogger('sslfr_drivers.link.board_link')
 
 
 class LinkAuth:
-    """Keys, the session in use and its sequence numbers for ``link``; seals the host's
-    frames and sorts the board's (:meth:`on_frame`).
+    """Keys, the session in use and its sequence numbers for ``link`` (the
+    :class:`~.board_link.BoardLink` it is part of); seals the host's frames and sorts
+    the board's (:meth:`on_frame`).
 
     key : bytes or None
         The installation key (16 bytes); None: the null key of unprovisioned boards.
     """
 
-    def __init__(self, link: 'BoardLink', key: bytes | None):
+    def __init__(self, link, key: bytes | None):
         self.link = link
         self.key = bytes(key) if key is not None else NULL_KEY
         if len(self.key) != 16:

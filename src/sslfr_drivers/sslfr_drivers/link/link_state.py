@@ -8,16 +8,13 @@ from __future__ import annotations
 import enum
 import logging
 import threading
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import NULL_KEY
 from sslfr_drivers.link.link_errors import AuthError, LinkError, NackError, NoSession
 from sslfr_drivers.link.protocol import PROTOCOL_V1, PROTOCOL_VERSION, ProtocolError, ProtocolVersionError
 from sslfr_drivers.link.reader import Backoff
-
-if TYPE_CHECKING:
-    from sslfr_drivers.link.board_link import BoardLink
 
 _log = logging.getLogger('sslfr_drivers.link.board_link')
 
@@ -43,19 +40,20 @@ _RETRYING = (BoardLinkState.CONNECTING, BoardLinkState.SILENT, BoardLinkState.RE
 
 
 class LinkStateMachine:
-    """The state of ``link`` and the work that moves it: listeners, the re-read
-    (:meth:`refresh`), the reboot check (:meth:`probe`), a detected board reset.
+    """The state of ``link`` (the :class:`~.board_link.BoardLink` it is part of) and
+    the work that moves it: listeners, the re-read (:meth:`refresh`), the reboot check
+    (:meth:`probe`), a detected board reset.
 
     ``state`` is the link's own view (changed first); ``shown`` is what
     ``BoardLink.state`` and :meth:`wait_up` show, once the listeners were told.
     """
 
-    def __init__(self, link: 'BoardLink', backoff_min: float, backoff_max: float):
+    def __init__(self, link, backoff_min: float, backoff_max: float):
         self.link = link
         self.state = BoardLinkState.DOWN
         self.shown = BoardLinkState.DOWN
         self.cv = threading.Condition()
-        self.listeners: list[Callable[[BoardLinkState, 'BoardLink'], None]] = []
+        self.listeners: list[Callable[[BoardLinkState, object], None]] = []
         self.refreshing = False
         self.next_refresh = 0.0
         self.next_probe = 0.0
