@@ -60,7 +60,8 @@ def make_collector(cfg: dict) -> Collector:
                              mirror_width=float(cfg['collector.mirror_width']),
                              gap=float(cfg['collector.gap']),
                              receiver_height=float(cfg['collector.receiver_height']),
-                             tube_diameter=float(cfg['collector.tube_diameter']))
+                             tube_diameter=float(cfg['collector.tube_diameter']),
+                             central_mirror=bool(cfg['collector.central_mirror']))
     return Collector(geometry=geometry,
                      azimuth=float(cfg['collector.azimuth']),
                      law=cfg['collector.law'],
