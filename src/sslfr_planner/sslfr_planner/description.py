@@ -118,10 +118,10 @@ class Sensor:
 class Optics:
     """Optical geometry (lengths [m], angles [rad]); frame and signs: docs/conventions.md.
 
-    ``lines``: number of mirror lines; ``central_line``: one line on the axis (odd
+    ``lines``: number of mirror lines; ``receiver_height``: height of the aim
+    point (the tube axis, seed 000 f + D/2) above the line pivots; ``central_line``: one line on the axis (odd
     count, seed 000) or none (even count, seeds 003 and 004); ``line_width``,
-    ``line_length``, ``gap`` between consecutive lines; ``receiver_height`` above the
-    line pivots; ``receiver_width``: the receiver's aperture (cavity opening);
+    ``line_length``, ``gap`` between consecutive lines; ``receiver_width``: the receiver's aperture (cavity opening);
     ``tube_diameter``, ``tube_count``; ``receiver_length`` (centred on the rows unless
     ``tube_ends`` (L_a^r, L_a^l) are given); ``azimuth`` of the collector axis,
     clockwise from north; ``rotation_radius``: distance of the mirror surface from
@@ -500,6 +500,12 @@ def parse(data: Any, where: str = 'description') -> Description:
     if m is not None and optics is not None:
         if m.feedback_line is not None and m.feedback_line > optics.lines:
             c.add(f'movements.{JOINTS[0]}.feedback_line', f'line {m.feedback_line} of {optics.lines} lines')
+        if m.law == 'lepten_linear':
+            reach = m.law_params['pace'] * m.law_params['transversal_limit']
+            if not m.range[0] <= -reach and reach <= m.range[1]:
+                c.add(f'movements.{JOINTS[0]}.range_deg',
+                      f'the law needs the drive at +/-{math.degrees(reach):.2f} deg (pace x transversal_limit), '
+                      'outside the range')
         offsets = m.law_params.get('offsets')
         if offsets is not None and len(offsets) != optics.lines:
             c.add(f'movements.{JOINTS[0]}.law_params.offsets_deg',
