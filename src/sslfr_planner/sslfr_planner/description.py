@@ -502,7 +502,7 @@ def parse(data: Any, where: str = 'description') -> Description:
             c.add(f'movements.{JOINTS[0]}.feedback_line', f'line {m.feedback_line} of {optics.lines} lines')
         if m.law == 'lepten_linear':
             reach = m.law_params['pace'] * m.law_params['transversal_limit']
-            if not m.range[0] <= -reach and reach <= m.range[1]:
+            if not (m.range[0] <= -reach and reach <= m.range[1]):
                 c.add(f'movements.{JOINTS[0]}.range_deg',
                       f'the law needs the drive at +/-{math.degrees(reach):.2f} deg (pace x transversal_limit), '
                       'outside the range')
