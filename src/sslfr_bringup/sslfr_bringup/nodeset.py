@@ -526,7 +526,22 @@ def checked_params(ns: NodeSet, config: str | os.PathLike, namespace: str | None
     problems = check_config(ns, params, namespace, where=str(config))
     if problems:
         raise NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
-    return params
+    return absolute_description(params, config)
+
+
+def absolute_description(params: Mapping[str, Any], config: str | os.PathLike) -> dict:
+    """``params`` with every relative ``collector.description`` made absolute (relative
+    to the config's directory), so a copy of the config written elsewhere (a namespace's
+    site.params.yaml) still names the same file."""
+    out = {}
+    for key, section in params.items():
+        values = section.get('ros__parameters') if isinstance(section, Mapping) else None
+        name = values.get(DESCRIPTION_KEY) if isinstance(values, Mapping) else None
+        if isinstance(name, str) and name and not Path(name).expanduser().is_absolute():
+            section = {**section, 'ros__parameters': {**values, DESCRIPTION_KEY: str(
+                (Path(config).resolve().parent / name).resolve())}}
+        out[key] = section
+    return out
 
 
 def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike,

@@ -180,6 +180,10 @@ class Collector:
     lepten_positions : tuple of floats
         Rotation-axis positions x_i of the LEPTEN lines (west positive) [m]; empty
         for the seed 000 field (positions from n_per_side, mirror_width, gap).
+    description : sslfr_planner.description.Description or None
+        The collector description whose mirror law the tracker follows
+        (:func:`sslfr_planner.prototype.commanded_lines`: seed 004 eq. 5, seed 003 eqs.
+        5-6); None or a 'half_transversal' law: beta_0 = theta_t' / 2 (seed 000 eq. 13).
     """
 
     geometry: FieldGeometry = field(default_factory=FieldGeometry)
@@ -198,6 +202,7 @@ class Collector:
     tracking_step: float = 0.0
     lepten_radius: float = 0.0
     lepten_positions: tuple = field(default_factory=tuple)
+    description: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not isinstance(self.geometry, FieldGeometry):
@@ -228,6 +233,13 @@ class Collector:
             raise ValueError(f'gear_ratio must be three positive numbers, got {self.gear_ratio!r}')
         if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in self.lepten_positions):
             raise ValueError('lepten_positions must be finite numbers [m]')
+
+    @property
+    def mirror_law(self) -> str:
+        """The mirror law: the description's, else 'half_transversal' (seed 000 eq. 13)."""
+        if self.description is None:
+            return 'half_transversal'
+        return self.description.movements[AXES[0]].law
 
     @property
     def axis_steps(self) -> tuple:

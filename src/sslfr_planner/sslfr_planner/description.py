@@ -525,6 +525,37 @@ def resolve(name: str, base: str | os.PathLike | None = None) -> Path:
     return p
 
 
+def find(name: str, params_files=(), cwd: str | os.PathLike | None = None) -> Path:
+    """The description file a node was given as ``name``: absolute as is; relative, beside
+    the last of ``params_files`` (the node's ``--params-file`` arguments, later wins, as
+    rcl) that has it, else in ``cwd`` (the current directory). When none has it, the
+    path beside the last params file (or in cwd): :func:`load` then says it is missing."""
+    p = Path(name).expanduser()
+    if p.is_absolute():
+        return p
+    candidates = [Path(f).parent / p for f in reversed(list(params_files))]
+    candidates.append(Path(cwd if cwd is not None else os.getcwd()) / p)
+    for cand in candidates:
+        if cand.is_file():
+            return cand
+    return candidates[0]
+
+
+def params_files(args) -> list[str]:
+    """The ``--params-file`` paths of a ROS command line (``args``: argv or cli_args)."""
+    args = list(args or ())
+    return [args[i + 1] for i, a in enumerate(args[:-1]) if a == '--params-file']
+
+
+def for_node(name: str, ros_args=()) -> Description | None:
+    """The description a node's ``collector.description`` parameter names (None for ''),
+    relative to the params file that names it (:func:`find`): DescriptionError (a
+    ValueError) saying what is wrong."""
+    if not name:
+        return None
+    return load(find(name, params_files(ros_args)))
+
+
 def load(path: str | os.PathLike) -> Description:
     """Read and validate one description file (:func:`parse`): DescriptionError naming
     the file (and the key) when it is unreadable, not YAML or invalid."""

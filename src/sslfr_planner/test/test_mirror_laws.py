@@ -163,3 +163,61 @@ def test_lines_follow_the_description_geometry():
     g = field_geometry(S004)
     assert g.n_mirrors == 10 and g.aim_height == pytest.approx(3.75)
     assert field_geometry(S003).aim_height == pytest.approx(0.75)
+
+
+# ------------------------------------------------------------------ the planner follows the law
+def _table(config, desc, day=(2026, 6, 21)):
+    import yaml
+    from sslfr_planner.day_cycle import make_collector, make_site
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    from sslfr_planner.site_source import SiteFix
+    from sslfr_planner.tracking_table import evaluate
+    data = yaml.safe_load((DIR.parent / config).read_text())
+    cfg = PLANNER_PARAMS.defaults()
+    for section in ('/**', 'planner'):
+        cfg.update((data.get(section) or {}).get('ros__parameters') or {})
+    cfg = PLANNER_PARAMS.coerce(cfg)
+    site = make_site(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'], cfg['site.elevation'],
+                                  'parameters'))
+    t = datetime.datetime(*day, 15, tzinfo=datetime.timezone.utc).timestamp() + np.arange(0.0, 3600.0, 60.0)
+    c = make_collector(cfg, desc)
+    return evaluate(t, site, c), c
+
+
+def test_planner_commands_the_seed004_table1_drive():
+    tab, c = _table('florianopolis_lepten.yaml', S004)
+    assert c.mirror_law == 'lepten_linear' and c.geometry.n_mirrors == 10
+    track = tab.phase == 2
+    assert track.sum() > 30
+    assert tab.mirrors[track] == pytest.approx(0.4962 * tab.transversal[track], abs=1e-12)
+    ref, _ = _table('florianopolis_lepten.yaml', None)               # without a description: theta_T / 2
+    assert ref.mirrors[track] == pytest.approx(tab.transversal[track] / 2, abs=1e-12)
+    assert c.sleeping == pytest.approx(DEG(40.0)) and c.mirror_max == pytest.approx(DEG(40.0))
+
+
+def test_planner_commands_the_seed003_linkage_in_steps():
+    tab, c = _table('bucaramanga_single_axis.yaml', S003, day=(2026, 3, 21))
+    track = tab.phase == 2
+    assert c.mirror_law == 'seed003_linkage' and c.tracking_step == 900.0
+    assert np.unique(tab.mirrors[track]).size <= 5                  # one value per 15 minutes in the hour
+    assert np.degrees(np.abs(tab.mirrors[track])).max() <= 51.0 + 1e-9      # inside the drive range
+
+
+def test_seed000_description_changes_nothing():
+    with_desc, c = _table('almeria_sslfr.yaml', S000)
+    without, _ = _table('almeria_sslfr.yaml', None)
+    for col in ('mirrors', 'mobile_structure', 'secondary_reflector', 'phase'):
+        assert np.array_equal(getattr(with_desc, col), getattr(without, col)), col
+    assert c.sleeping == pytest.approx(math.pi / 2)
+
+
+def test_a_node_finds_its_description_beside_its_params_file(tmp_path):
+    (tmp_path / 'collectors').mkdir()
+    (tmp_path / 'collectors' / 'x.yaml').write_text((DIR / 'florianopolis_lepten.yaml').read_text())
+    args = ['planner', '--ros-args', '--params-file', str(tmp_path / 'site.yaml'), '--params-file', '/tmp/o.yaml']
+    assert d.params_files(args) == [str(tmp_path / 'site.yaml'), '/tmp/o.yaml']
+    assert d.for_node('collectors/x.yaml', args).name == 'florianopolis_lepten'
+    assert d.for_node('', args) is None
+    with pytest.raises(ValueError, match='cannot read'):
+        d.for_node('collectors/missing.yaml', args)
+    assert d.find(str(tmp_path / 'collectors' / 'x.yaml')) == tmp_path / 'collectors' / 'x.yaml'
