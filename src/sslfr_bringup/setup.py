@@ -14,6 +14,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config/collectors', glob('config/collectors/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=False,   # the operator page serves web/static/* from the package directory
