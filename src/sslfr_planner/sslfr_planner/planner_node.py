@@ -88,7 +88,7 @@ class PlannerNode(LeanEvents, Node):
         self.create_timer(1.0, self._steady_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))  # diag, jumps
         self.get_logger().info(
             f'planner ready: mode {self.control.mode}, site {self.selector.current().describe()}, '
-            f'law {self.cfg["collector.law"]}, horizon {self.cfg["horizon"]} s at {self.cfg["step"]} s')
+            f'laws {self.cycle.collector.mirror_law}/{self.cfg["collector.law"]}, horizon {self.cfg["horizon"]} s at {self.cfg["step"]} s')
 
     def _watch_ros_time(self) -> None:
         """(Re)register the ROS-time jump callback (:func:`phase_control.immediate_step`)."""
