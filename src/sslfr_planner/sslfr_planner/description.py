@@ -489,8 +489,8 @@ def parse(data: Any, where: str = 'description') -> Description:
             if 'kind' in d:
                 c.add(f'{k}.kind', f'unknown sensor kind {d["kind"]!r}; known: {", ".join(SENSOR_KINDS)}')
             continue
-        if d.get('board') not in boards and d.get('board') not in [i.get('name') for i in top.get('boards') or []
-                                                                    if isinstance(i, Mapping)]:
+        named = {i.get('name') for i in top.get('boards') or [] if isinstance(i, Mapping)}
+        if d.get('board') not in named:     # a board named but refused above is reported there
             c.add(f'{k}.board', f'{d.get("board")!r} is not a board of this collector')
             continue
         sensors[name] = Sensor(name=name, kind=d['kind'], board=d['board'], part=d.get('part', ''))
