@@ -403,8 +403,10 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
     tables the nodes declare (one source), before anything starts: sections that apply
     to no node (a misspelt node name), keys no node it applies to declares (a misspelt
     key, with the closest names), values of the wrong YAML type or out of range, and
-    the nodes' own cross-checks on what they would receive. Each line names the file,
-    the section or node, the key, its value and what is allowed."""
+    the nodes' own cross-checks on what they would receive, and the collector
+    description the config names (:func:`collector_problems`; ``where`` is the config's
+    path, the base of a relative description name). Each line names the file, the
+    section or node, the key, its value and what is allowed."""
     import difflib
     nsp = ns.namespace if namespace is None else namespace
     doc = for_namespace(params, nsp)
