@@ -536,8 +536,11 @@ def find(name: str, params_files=(), cwd: str | os.PathLike | None = None) -> Pa
     candidates = [Path(f).parent / p for f in reversed(list(params_files))]
     candidates.append(Path(cwd if cwd is not None else os.getcwd()) / p)
     for cand in candidates:
-        if cand.is_file():
-            return cand
+        try:
+            if cand.is_file():
+                return cand
+        except (OSError, ValueError):   # an unreadable directory, a NUL in the name
+            continue
     return candidates[0]
 
 
@@ -562,7 +565,7 @@ def load(path: str | os.PathLike) -> Description:
     p = Path(path)
     try:
         text = p.read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError) as exc:   # ValueError: a NUL in the name
         raise DescriptionError([f'{p}: cannot read the collector description: {exc}']) from None
 
     class _UniqueKeys(yaml.SafeLoader):

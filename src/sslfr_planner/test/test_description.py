@@ -143,3 +143,38 @@ def test_every_problem_is_listed_at_once(tmp_path):
     with pytest.raises(d.DescriptionError) as exc:
         d.load(p)
     assert len(exc.value.problems) >= 3
+
+
+def test_any_document_is_refused_cleanly_or_accepted():
+    """Whatever YAML arrives, parse() either accepts it or raises DescriptionError."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    base = yaml.safe_load(SEED004.read_text())
+    leaf = st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=6)
+    value = st.recursive(leaf, lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=6), c, max_size=3),
+                         max_leaves=8)
+    paths = st.sampled_from([('movements', 'mirrors'), ('movements', 'mirrors', 'law_params'), ('optics',),
+                             ('boards',), ('sensors',), ('movements',), ()])
+
+    @settings(max_examples=150, deadline=None)
+    @given(path=paths, key=st.text(max_size=12) | st.sampled_from(['drive', 'law', 'range_deg', 'lines', 'pace',
+                                                                  'offsets_deg', 'name', 'gap', 'mirrors']),
+           v=value)
+    def check(path, key, v):
+        import copy
+        doc = copy.deepcopy(base)
+        node = doc
+        for k in path:
+            node = node[k]
+        if isinstance(node, dict):
+            node[key] = v
+        else:
+            node.append(v)
+        try:
+            d.parse(doc, 'fuzz.yaml')
+        except d.DescriptionError as exc:
+            assert all(p.startswith('fuzz.yaml: ') for p in exc.problems)
+    check()
+    for junk in (None, 3, 'text', [], [1, 2]):
+        with pytest.raises(d.DescriptionError):
+            d.parse(junk, 'junk.yaml')
