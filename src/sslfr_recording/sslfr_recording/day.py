@@ -322,12 +322,18 @@ class Reference:
 
 
 def reference(config: str | Path | None, latitude_deg: float, longitude_deg: float, elevation: float) -> Reference:
-    """The one ideal reference of a run: the collector and the site parameters
-    (pressure, temperature, delta-T) of its site config (:func:`planner_config`) at the
-    site the planner reported in ``tracker/phase`` [deg, deg, m]."""
+    """The one ideal reference of a run: the collector (its parameters and the collector
+    description they name, relative to the config as the planner finds it) and the site
+    parameters (pressure, temperature, delta-T) of its site config
+    (:func:`planner_config`) at the site the planner reported in ``tracker/phase``
+    [deg, deg, m]."""
+    from sslfr_bringup import nodeset
+    from sslfr_planner import description
     from sslfr_planner.day_cycle import make_collector, make_site
     from sslfr_planner.site_source import SiteFix
 
     cfg = planner_config(config)
-    return Reference(str(config or ''), make_collector(cfg),
+    name = cfg.get('collector.description') or ''
+    desc = description.load(description.find(name, [str(nodeset.resolve_config(config))])) if name and config else None
+    return Reference(str(config or ''), make_collector(cfg, desc),
                      make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters')))
