@@ -538,7 +538,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             return 1
         if args.no_report:
             return 0 if why == 'until' else 130
-        return _report(bag_root, out)
+        return _report(bag_root, out, config)
 
     finally:
         if sup is not None and not sup.stopping:
@@ -593,19 +593,20 @@ def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=No
                           run_dir=run_dir, layout=layout, params=params)
 
 
-def _report(bag_root: Path, out: Path) -> int:
-    """Run the day report on the newest bag under ``bag_root``."""
+def _report(bag_root: Path, out: Path, config: Path) -> int:
+    """Run the day report on the newest bag under ``bag_root``, its ideal from the run's
+    site ``config``."""
     bags = sorted((p for p in bag_root.iterdir() if (p / 'metadata.yaml').exists()),
                   key=lambda p: p.stat().st_mtime) if bag_root.exists() else []
     if not bags:
         print(f'sslfr sim: no bag was recorded in {bag_root}: no report', file=sys.stderr)
         return 1
     try:
-        from sslfr_recording import report
+        from sslfr_recording import report_cli
     except ImportError:
-        print('sslfr sim: MISSING the report module (sslfr_recording.report): no report', file=sys.stderr)
+        print('sslfr sim: MISSING the report module (sslfr_recording.report_cli): no report', file=sys.stderr)
         return 1
-    code = int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
+    code = int(report_cli.main([str(bags[-1]), '--out', str(out / 'report'), '--config', str(config)]) or 0)
     print(f'plots: {out / "report"}/*.png')
     return code
 
