@@ -92,7 +92,7 @@ class ModbusGateway:
         self.idle_timeout, self.command_timeout = idle_timeout, command_timeout
         self.log = log
         self.counters = {'reads': 0, 'writes_accepted': 0, 'writes_refused': 0,
-                         'connections_refused': 0, 'idle_closed': 0}
+                         'connections_refused': 0, 'idle_closed': 0, 'unknown_unit': 0}
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: _Server | None = None
         self._thread: threading.Thread | None = None
@@ -141,6 +141,10 @@ class ModbusGateway:
         self.count('writes_accepted')
         return None
 
+    async def _unknown_unit(self, *args) -> ExcCodes:  # noqa: ARG002 - the action signature
+        self.count('unknown_unit')
+        return ExcCodes.GATEWAY_NO_RESPONSE
+
     # -- lifecycle --------------------------------------------------------------------
     def start(self, timeout: float = 10.0) -> int:
         """Start serving; return the bound port. Raises OSError when it cannot bind."""
@@ -168,6 +172,10 @@ class ModbusGateway:
                                                         datatype=DataType.REGISTERS)],
                              action=functools.partial(self._action, k))
                    for k, img in enumerate(self.images)]
+        # unit 0 / an unknown unit id: the same address range, answered 0x0B (no such target)
+        devices.append(SimDevice(id=0, simdata=[SimData(sunspec.BASE, values=[0] * len(self.images[0]),
+                                                        datatype=DataType.REGISTERS)],
+                                 action=self._unknown_unit))
         self._server = _Server(self, devices, (self.bind_address, self.port))
         await self._server.serve_forever(background=True)
         sock = self._server.transport.sockets[0]

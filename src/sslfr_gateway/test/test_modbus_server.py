@@ -167,3 +167,15 @@ def test_malformed_oversized_and_a_flood_from_other_addresses_leave_the_client_a
         for s in held:
             s.close()
     assert _read_ok(port)
+
+
+def test_an_unknown_unit_id_is_answered_with_an_exception_and_the_server_goes_on(gateway):
+    c = ModbusTcpClient('127.0.0.1', port=gateway.port, timeout=3)
+    assert c.connect()
+    try:
+        for unit in (0, 9, 247):
+            r = c.read_holding_registers(sunspec.BASE, count=2, device_id=unit)
+            assert r.isError() and r.exception_code == 0x0B, unit       # gateway target: no answer
+        assert c.read_holding_registers(sunspec.BASE, count=2, device_id=2).registers == [0x5375, 0x6E53]
+    finally:
+        c.close()
