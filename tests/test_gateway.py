@@ -240,3 +240,15 @@ def test_bad_parameters_are_refused_at_start(launch, params, reason):
     gw = launch('sslfr_gateway', 'modbus_gateway', params={'port': 0, **params})
     assert gw.proc.wait(30) == 2
     assert reason in gw.output(), gw.output()
+
+
+@pytest.mark.parametrize('exe, text', [('modbus_gateway', 'cannot serve Modbus'),
+                                       ('foxglove_bridge', 'cannot listen on')])
+def test_a_port_in_use_is_refused_at_start(launch, exe, text):
+    import socket
+    with socket.socket() as busy:
+        busy.bind(('127.0.0.1', 0))
+        busy.listen(1)
+        node = launch('sslfr_gateway', exe, params={'port': busy.getsockname()[1]})
+        assert node.proc.wait(30) == 2
+    assert text in node.output(), node.output()
