@@ -204,7 +204,8 @@ def test_two_namespaced_collectors_are_two_units(launch, ros):
     from sslfr_gateway import sunspec
 
     gw = launch('sslfr_gateway', 'modbus_gateway',
-                params={'port': 0, 'collectors': ['/c1', '/c2'], 'collector_ids': ['north', 'south']})
+                params={'port': 0, 'collectors': ['/c1', '/c2'], 'collector_ids': ['north', 'south'],
+                        'stale_after': 1.0})
     _, port = _address(gw, r'SunSpec Modbus TCP at (\S+):(\d+)')
     pubs = {ns: ros.node.create_publisher(JointState, f'{ns}/joint_states', 10) for ns in ('/c1', '/c2')}
     beam = ros.node.create_publisher(Irradiance, '/c2/irradiance/beam', 10)
@@ -226,6 +227,16 @@ def test_two_namespaced_collectors_are_two_units(launch, ros):
         assert ros.spin_until(served, 15)
         sn = c.read_holding_registers(addrs['1.SN'], count=8, device_id=2).registers
         assert b''.join(r.to_bytes(2, 'big') for r in sn).rstrip(b'\0') == b'south'
+        # /c2 falls silent, /c1 goes on: /c2's position reads unknown within stale_after (+ margin)
+        def c2_unknown():
+            pubs['/c1'].publish(JointState(name=['mirrors'], position=[0.25]))
+            ros.spin_for(0.2)
+            return c.read_holding_registers(addrs['601.tracker[0].ElPos'], count=2,
+                                            device_id=2).registers == [0x8000, 0]
+        t0 = time.monotonic()
+        assert ros.spin_until(c2_unknown, 10)
+        assert time.monotonic() - t0 < 5.0
+        assert _read_elpos(c, addrs) == pytest.approx(math.degrees(0.25), abs=1e-3)
     finally:
         c.close()
 

@@ -34,6 +34,8 @@ class _Collector:
     def __init__(self, cid: str):
         self.id = cid
         self.position = None
+        self.position_at = None      # steady-clock time of the last joint_states [s]
+        self.stale = False           # no joint_states for stale_after: the position reads unknown
         self.setpoint = None
         self.fault = False
         self.mode = None
@@ -41,9 +43,10 @@ class _Collector:
 
     def unit(self, unit_id: int, threshold: float) -> sunspec.Unit:
         deg = (lambda r: None if r is None or not math.isfinite(r) else math.degrees(r))
-        tracker = sunspec.Tracker(self.id, deg(self.setpoint), deg(self.position),
+        position = None if self.stale else self.position
+        tracker = sunspec.Tracker(self.id, deg(self.setpoint), deg(position),
                                   None if self.mode is None else self.mode == 'auto',
-                                  sunspec.tracker_alarm(self.position, self.setpoint, threshold, self.fault))
+                                  sunspec.tracker_alarm(position, self.setpoint, threshold, self.fault))
         return sunspec.Unit(serial=self.id, unit_id=unit_id, trackers=[tracker], beam_wm2=self.beam)
 
 
@@ -55,6 +58,7 @@ class ModbusGatewayNode(LeanEvents, Node):
         if problem:
             raise ValueError(problem)
         self.cfg = cfg
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.collectors = [_Collector(i) for i in cfg['collector_ids']]
         self._dirty = set(range(len(self.collectors)))
         self._set_mode = []
@@ -85,7 +89,9 @@ class ModbusGatewayNode(LeanEvents, Node):
     def _on_joints(self, k: int, msg: JointState) -> None:
         for name, pos in zip(msg.name, msg.position):
             if name == 'mirrors':
-                self.collectors[k].position = float(pos)
+                c = self.collectors[k]
+                c.position, c.stale = float(pos), False
+                c.position_at = self._steady.now().nanoseconds * 1e-9
                 self._dirty.add(k)
 
     def _on_axis(self, k: int, msg: AxisStatus) -> None:
@@ -105,6 +111,11 @@ class ModbusGatewayNode(LeanEvents, Node):
         return sunspec.encode(self.collectors[k].unit(k + 1, self.cfg['setpoint_alarm']))
 
     def _refresh(self) -> None:
+        now = self._steady.now().nanoseconds * 1e-9
+        for k, c in enumerate(self.collectors):
+            if not c.stale and c.position_at is not None and now - c.position_at > self.cfg['stale_after']:
+                c.stale = True
+                self._dirty.add(k)
         dirty, self._dirty = self._dirty, set()
         for k in dirty:
             self.gateway.set_image(k, self._encode(k))

@@ -90,6 +90,10 @@ MODBUS_PARAMS = ParamTable(_COLLECTORS + (
     ParamSpec('setpoint_alarm', 0.035,
               "SunSpec 601 SetPoint alarm when the mirrors' |measured - setpoint| exceeds this [rad]",
               'rad', 0.0, 3.1416, read_only=True),
+    ParamSpec('stale_after', 5.0,
+              "No joint_states from a collector for this long: its positions read 'not "
+              "implemented' (unknown) until the next one [s, steady clock]", 's', 0.5, 3600.0,
+              read_only=True),
     ParamSpec('max_connections', 32, 'Most simultaneous Modbus connections [-]', '-', 1, 1024,
               read_only=True),
     ParamSpec('max_per_address', 4, 'Most simultaneous connections from one IP address [-]', '-',
