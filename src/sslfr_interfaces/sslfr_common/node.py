@@ -42,6 +42,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from .executor import LeanExecutor
+from .sdnotify import Notifier
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
 
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
@@ -205,19 +206,30 @@ def _ignore_signal(signum, frame) -> None:
     """A signal during the stop: nothing more to do."""
 
 
+def _no_beat() -> None:
+    """No watcher: nothing to prove."""
+
+
 def spin_until_stopped(node, executor, stop: StopRequest | None = None,
-                       stats: SpinStats | None = None) -> SpinStats:
+                       stats: SpinStats | None = None, beat: Callable[[], None] | None = None) -> SpinStats:
     """Spin ``node`` in ``executor`` until ``stop`` is requested or the context ends.
 
     A ``RuntimeError`` from the executor (a message rclpy could not take, a callback
     failing with it) is logged (throttled) and counted in ``stats``; the loop goes on.
+    ``beat()`` is called after every turn of the executor (every ``spin_once``, which
+    returns at least every :data:`SPIN_TIMEOUT_S`), by the thread that runs the
+    callbacks: a callback that never returns, a wait that never wakes or a stopped
+    process stops the beats (:meth:`sslfr_common.sdnotify.Notifier.beat`, which sends
+    at most one ``WATCHDOG=1`` per beat period).
     """
     stats = stats or SpinStats()
+    beat = beat or _no_beat
     if node not in executor.get_nodes():
         executor.add_node(node)
     while node.context.ok() and not (stop is not None and stop.requested.is_set()):
         try:
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            beat()
         except RuntimeError as exc:
             stats.errors += 1
             stats.last = str(exc)
@@ -350,7 +362,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopRequest()
     built: list = []
-    ex = bridge = stats = None
+    ex = bridge = stats = notifier = None
     code = 0
     try:
         for name, make_node in nodes:
@@ -369,13 +381,18 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
         stop.executor = ex
         for node in built:
             ex.add_node(node)
-        stats = spin_until_stopped(built[0], ex, stop)
+        notifier = Notifier.from_environ()
+        notifier.notify('READY=1', 'STATUS=executor turning: ' + ', '.join(n.get_name() for n in built))
+        stats = spin_until_stopped(built[0], ex, stop, beat=notifier.beat if notifier.period else None)
         for node in built:
             node.spin_stats = stats
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         stop.ignore_further()
+        if notifier is not None:
+            notifier.notify('STOPPING=1')     # from here no beats: the watcher lets it go
+            notifier.close()
         if ex is not None:
             drain_callbacks(ex, stats)      # nothing runs in the pool while on_exit() does
         for node in built:
