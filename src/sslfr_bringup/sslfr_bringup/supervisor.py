@@ -393,7 +393,8 @@ class Supervisor:
                 p.next_start = now + delay
                 if p.critical:
                     self.say('*' * 72, 2)
-                    self.say(f'*** CRITICAL: {p.name} DIED ({how}, up {up_for:.1f} s). '
+                    self.say(f'*** CRITICAL: {p.name} DIED ({how if p.hang_cause else f"exit code {code}"}, '
+                             f'up {up_for:.1f} s). '
                              f'Restart #{p.restarts + 1} in {delay:.0f} s. Until it is back the axis '
                              f'drivers see no safety heartbeat and stow/hold.', 2)
                     self.say('*' * 72, 2)
@@ -468,16 +469,7 @@ class Supervisor:
         self.notifier.notify('STOPPING=1')
         t0 = time.monotonic()
         deadline = t0 + self.stop_timeout - 0.4
-        for p in self.programs.values():
-            # a stopped process acts on no signal but SIGKILL (SIGINT and SIGTERM wait
-            # for a SIGCONT): killed now, not at the end of the budget
-            if p.alive() and is_stopped(p.proc.pid):
-                self.say(f'{p.name} is stopped (SIGSTOP): SIGKILL', 4)
-                try:
-                    os.killpg(p.proc.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                p.proc.wait(2)
+        self._kill_stopped(self.programs.values())
         groups: dict[int, list[Program]] = {}
         for p in self.programs.values():
             groups.setdefault(p.stop, []).append(p)
@@ -499,6 +491,7 @@ class Supervisor:
             group_deadline = min(group_deadline, deadline)
             while time.monotonic() < group_deadline and any(p.alive() for p in progs):
                 time.sleep(0.02)
+                self._kill_stopped(progs)
             for p in progs:
                 if p.alive():
                     self.say(f'{p.name} did not stop on SIGINT in time: SIGTERM', 4)
@@ -525,6 +518,19 @@ class Supervisor:
         self.close()
         self.stop_took = took
         return took
+
+    def _kill_stopped(self, progs) -> None:
+        """SIGKILL (and reap) the stopped ones among ``progs``: a stopped process acts on
+        no signal but SIGKILL (SIGINT and SIGTERM wait for a SIGCONT), so it is killed
+        at once, not at the end of the stop budget."""
+        for p in progs:
+            if p.alive() and is_stopped(p.proc.pid):
+                self.say(f'{p.name} is stopped (SIGSTOP): SIGKILL', 4)
+                try:
+                    os.killpg(p.proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                p.proc.wait(2)
 
     def close(self) -> None:
         for p in self.programs.values():
