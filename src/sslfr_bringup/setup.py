@@ -27,6 +27,7 @@ setup(
             'recorder = sslfr_bringup.recorder_node:main',
             'web = sslfr_bringup.web_node:main',
             'composed = sslfr_bringup.composed:main',
+            'liveness_watchdog = sslfr_bringup.watchdog:main',
         ],
     },
 )
