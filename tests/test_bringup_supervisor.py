@@ -258,7 +258,9 @@ def test_hung_process_is_killed_within_the_bound_and_restarted(tmp_path):
         sup.hang('planner')
         assert run_until(lambda: not _alive(pids['planner']), 6.0), out.getvalue()
         t_kill = time.monotonic()
-        assert 2.0 <= t_kill - t_hang <= 2.0 + 1.5, t_kill - t_hang   # the bound + one beat period + a pass
+        # silent for the bound (2 s) since the last beat, which came at most one beat
+        # period (0.5 s) before the hang; then one supervision pass (loaded machine: +1 s)
+        assert 2.0 - 0.5 <= t_kill - t_hang <= 2.0 + 1.0, t_kill - t_hang
         assert run_until(lambda: sup.programs['planner'].alive() and sup.liveness.beats('planner') > 0, 30.0)
         text = out.getvalue()
         assert 'planner: no executor beat for 2.' in text and 'killing it (SIGKILL) to restart it' in text, text
@@ -267,7 +269,7 @@ def test_hung_process_is_killed_within_the_bound_and_restarted(tmp_path):
         assert [p.restarts for p in progs[1:]] == [0, 0] and [p.pid for p in progs[1:]] == \
             [pids['safety'], pids['gps']]
         events = [ev for _, name, ev, _ in sup.events if name == 'planner']
-        assert events[-5:] == ['hang', 'hung', 'exited', 'restart', 'started'], events
+        assert events[-6:] == ['hang', 'hung', 'exited', 'restart', 'started', 'turning'], events
         # a critical process hangs: the same, loudly
         sup.hang('safety')
         assert run_until(lambda: sup.programs['safety'].restarts == 1, 10.0), out.getvalue()

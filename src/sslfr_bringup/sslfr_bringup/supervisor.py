@@ -315,7 +315,9 @@ class Supervisor:
         for n in self._listener.receive():
             p = by_pid.get(n.pid)
             if p is not None:
-                self.liveness.note(p.name, n.fields, now)
+                first = self.liveness.beats(p.name) == 0
+                if self.liveness.note(p.name, n.fields, now) and first and self.liveness.beats(p.name):
+                    self._event(p, 'turning', f'first executor beat {now - p.started_at:.1f} s after its start')
         for late in self.liveness.overdue(now):
             p = self.programs[late.key]
             self.liveness.forget(p.name)
@@ -731,6 +733,8 @@ class RosSide(threading.Thread):
                 s['event'], s['detail'] = event, detail
                 if event == 'restart':
                     s['restarts'] += 1
+                if event in ('hung', 'exited', 'killed'):
+                    s['cause'] = f'{event} {detail}'.strip()   # why it went, kept past the restart
             arr = DiagnosticArray()
             arr.header.stamp = node.get_clock().now().to_msg()
             for name, s in sorted(status.items()):
@@ -742,6 +746,8 @@ class RosSide(threading.Thread):
                 elif s['restarts']:
                     level = DiagnosticStatus.WARN
                 msg = f"{s['event']} {s['detail']}".strip()
+                if s['restarts'] and s.get('cause') and s['event'] not in ('hung', 'exited', 'killed'):
+                    msg += f"; restarted after: {s['cause']}"
                 if s['restarts'] and s['critical']:
                     msg = f"CRITICAL process restarted {s['restarts']}x; last: {msg}"
                 arr.status.append(DiagnosticStatus(
