@@ -19,6 +19,13 @@ and ``demo_nodes_py``), with what a tracker on a Pi needs on top of it:
 - **Invalid start-up configuration** (the exceptions in ``config_errors``, by default
   ``ValueError`` and rclpy's parameter exceptions) prints one line
   (``<node>: invalid parameters, not starting: <reason>``) and exits 2, so a supervisor can tell it from a crash.
+- **Liveness.** With ``NOTIFY_SOCKET`` in the environment (given by ``sslfr up`` /
+  ``sslfr sim``, the launch file's watchdog, or systemd) the process sends ``READY=1``
+  when its executor starts, ``WATCHDOG=1`` from the spin loop after executor turns
+  (rate-limited: at most one per beat period, a quarter of ``WATCHDOG_USEC``, <= 1 s)
+  and ``STOPPING=1`` when it begins to stop (:mod:`sslfr_common.sdnotify`). The beat
+  comes from the thread that runs the callbacks, so a deadlock, a callback that never
+  returns or a stopped process silences it; the watcher kills and restarts the process.
 - **The log bridge.** The pure modules log with Python ``logging``; :class:`LogBridge`
   forwards their records to the node's rclpy logger (once per distinct text) and is
   detached before the node is destroyed: nothing is forwarded to ``/rosout`` after
