@@ -28,8 +28,9 @@ import pytest
 
 from conftest import ROOT
 
-from sslfr_bringup import nodeset, scenario
-from sslfr_bringup.sim import day_epoch, parse_hhmm
+from sslfr_bringup import nodeset
+from sslfr_sim import scenario
+from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
@@ -77,7 +78,7 @@ def _hhmm(sod: float) -> str:
 
 
 def _run(layout, tmp_path_factory):
-    from conftest import RosHarness, _acquire_domain
+    from harness import RosHarness, acquire_test_domain
     import fcntl
     import os
     from sslfr_interfaces.msg import AxisStatus, SafetyState
@@ -93,7 +94,7 @@ def _run(layout, tmp_path_factory):
         names = [g if g in procs else next(p for p, nodes in procs.items() if g in nodes) for g in group]
         plan.append((at, group, names))
     end = first + len(plan) * step
-    dom, fh = _acquire_domain()
+    dom, fh = acquire_test_domain()
     tmp = tmp_path_factory.mktemp(f'liveness-{layout}')
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp / 'roslog'), PYTHONUNBUFFERED='1')
@@ -229,7 +230,7 @@ def test_bag_keeps_everything_but_the_hung_process_gap(run):
     SIGKILL) may never receive some publishers' topics again (Fast DDS 2.14; seen with
     the shared-memory and the UDP transport; not after a plain SIGKILL). Such topics
     are checked up to the recorder's hang and the test is marked xfail naming them."""
-    from sslfr_bringup.bag.reader import BagReader
+    from sslfr_recording.bag.reader import BagReader
     times: dict[str, list[int]] = {t: [] for t in TOPICS}
     for m in BagReader(run['bag']).messages():
         if m.topic in times:
