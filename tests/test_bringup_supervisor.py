@@ -333,3 +333,43 @@ def test_children_get_their_own_notify_socket_never_systemds(tmp_path):
     assert node['WATCHDOG_USEC'] == '3000000' and node['WATCHDOG_PID'] is None
     assert board == {'NOTIFY_SOCKET': None, 'WATCHDOG_USEC': None, 'WATCHDOG_PID': None}
     assert not os.path.exists(node['NOTIFY_SOCKET']), 'the socket is removed at close'
+
+
+def test_sslfr_up_speaks_sd_notify_to_its_watcher(tmp_path, ros_env):
+    """`sslfr up` as systemd runs it (Type=notify, WatchdogSec=): on a real
+    NOTIFY_SOCKET it beats WATCHDOG=1 from its start, says READY=1 once every node
+    process's executor turns, and STOPPING=1 at SIGTERM; every message comes from its
+    own pid (the node processes have the supervisor's socket, not this one)."""
+    from sslfr_common.sdnotify import NotifyListener
+    site = tmp_path / 'site.yaml'
+    site.write_text("/**:\n  ros__parameters:\n    site:\n      latitude_deg: 36.835\n")
+    with NotifyListener(str(tmp_path / 'systemd-notify.sock')) as lis:
+        env = dict(ros_env, NOTIFY_SOCKET=lis.path, WATCHDOG_USEC='4000000')    # beat every 1 s
+        proc = subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', 'safety,gps',
+                                 '--log-dir', str(tmp_path / 'logs')],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        got = []
+        try:
+            deadline = time.monotonic() + 90
+            while time.monotonic() < deadline and proc.poll() is None:
+                got += [(time.monotonic(), n) for n in lis.receive()]
+                if any(n.fields.get('READY') == '1' for _, n in got) and \
+                        sum('WATCHDOG' in n.fields for _, n in got) >= 3:
+                    break
+                time.sleep(0.05)
+            assert proc.poll() is None
+            proc.send_signal(signal.SIGTERM)
+            out, _ = proc.communicate(timeout=15)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate(timeout=15)
+        got += [(time.monotonic(), n) for n in lis.receive()]
+    assert proc.returncode == 0, out
+    assert {n.pid for _, n in got} == {proc.pid}, 'only the unit\'s main process talks to systemd'
+    ready = [n for _, n in got if n.fields.get('READY') == '1']
+    assert len(ready) == 1 and ready[0].fields['STATUS'].startswith('node set up: 2 node processes'), got
+    beats = [t for t, n in got if n.fields.get('WATCHDOG') == '1']
+    assert len(beats) >= 3 and max(b - a for a, b in zip(beats, beats[1:])) < 2.0, beats
+    assert got[-1][1].fields == {'STOPPING': '1'}, got[-3:]
+    assert 'node set up: 2 node processes, every executor turning' in out
