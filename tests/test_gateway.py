@@ -32,11 +32,13 @@ NODES = 'planner,safety,absorber_board,irradiance,mirrors_driver'
 @pytest.fixture
 def collector(ros_env, tmp_path):
     """A simulated collector at real speed around noon; stopped at teardown."""
+    log = open(tmp_path / 'sim.log', 'wb')  # noqa: SIM115 - closed at teardown
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'sim', '--date', '2026-06-21', '--start', '11:00',
                              '--end', '11:30', '--speed', '1', '--anchor-margin', '2', '--no-report',
                              '--only', NODES, '--out', str(tmp_path / 'out')],
-                            env=ros_env, stdout=open(tmp_path / 'sim.log', 'wb'), stderr=subprocess.STDOUT,
+                            env=ros_env, stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True)
+    proc.log_path = tmp_path / 'sim.log'
     yield proc
     if proc.poll() is None:
         import os
@@ -47,6 +49,11 @@ def collector(ros_env, tmp_path):
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(5)
+    log.close()
+
+
+def _sim_tail(collector) -> str:
+    return 'collector not running; sslfr sim said:\n' + collector.log_path.read_text(errors='replace')[-3000:]
 
 
 def _address(proc, pattern: str) -> tuple[str, int]:
@@ -87,7 +94,7 @@ def test_sunspec_positions_follow_joint_states_and_writes_obey_the_allow_list(co
                         'write_allow': ['127.0.0.1']})
     _, port_ro = _address(ro, r'SunSpec Modbus TCP at (\S+):(\d+)')
     _, port_rw = _address(rw, r'SunSpec Modbus TCP at (\S+):(\d+)')
-    assert ros.spin_until(lambda: _mirrors(joints) is not None and phases, 90), 'collector not running'
+    assert ros.spin_until(lambda: _mirrors(joints) is not None and phases, 90), _sim_tail(collector)
 
     d = SunSpecModbusClientDeviceTCP(slave_id=1, ipaddr='127.0.0.1', ipport=port_ro, timeout=5)
     try:
@@ -168,7 +175,7 @@ def test_foxglove_client_decodes_joint_states_and_other_addresses_are_refused(co
     joints = ros.collect(JointState, 'joint_states')
     fox = launch('sslfr_gateway', 'foxglove_bridge', params={'port': 0, 'discovery_period': 0.5})
     host, port = _address(fox, r'Foxglove WebSocket at ws://(\S+):(\d+)')
-    assert ros.spin_until(lambda: _mirrors(joints) is not None, 90), 'collector not running'
+    assert ros.spin_until(lambda: _mirrors(joints) is not None, 90), _sim_tail(collector)
     payload = asyncio.run(asyncio.wait_for(_foxglove_one(f'ws://{host}:{port}', '/joint_states'), 60))
     msg = deserialize_message(payload, JointState)
     assert msg.name and msg.name[0] in ('mirrors', 'mobile_structure', 'secondary_reflector')
