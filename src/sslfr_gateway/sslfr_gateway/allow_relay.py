@@ -84,6 +84,8 @@ class AllowRelay:
             return
         try:
             await asyncio.gather(_pipe(reader, up_w), _pipe(up_r, writer))
+        except asyncio.CancelledError:
+            pass                                   # stop(): close both ends below
         finally:
             self.active -= 1
             for w in (writer, up_w):
@@ -95,6 +97,10 @@ class AllowRelay:
 
         async def _close():
             self._server.close()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
             self._loop.stop()
         asyncio.run_coroutine_threadsafe(_close(), self._loop)
         if self._thread is not None:

@@ -9,9 +9,10 @@ with ILLEGAL_FUNCTION), then :func:`sunspec.decode_write`, then the node's
 ``concurrent.futures.Future`` of ``(accepted, message)`` (the planner's answer):
 refused -> DEVICE_FAILURE.
 
-Hardening: at most ``max_connections`` connections, at most ``max_per_address`` from
-one IP address (more are closed at once), a connection idle for ``idle_timeout``
-seconds is closed; pymodbus bounds a request's buffer (516 bytes) and answers a
+Hardening: at most ``max_per_address`` connections from one IP address (more are
+closed at once); when all ``max_connections`` are taken, a new connection closes the
+least recently active one of the address holding the most (:func:`evict_choice`); a
+connection idle for ``idle_timeout`` seconds is closed; pymodbus bounds a request's buffer (516 bytes) and answers a
 malformed request with an exception or drops it. Every refusal is counted.
 """
 from __future__ import annotations
@@ -35,11 +36,25 @@ _PEER: contextvars.ContextVar[str] = contextvars.ContextVar('modbus_peer', defau
 _BIT_FUNCTIONS = frozenset({1, 2, 5, 15})
 
 
+def evict_choice(conns: list[tuple[object, str, float]]):
+    """The connection to close when every slot is taken: of ``(conn, address, last
+    activity [s])``, the least recently active one of the address holding the most
+    connections (a flood from a few addresses cannot keep a new client out)."""
+    if not conns:
+        return None
+    held: dict[str, int] = {}
+    for _, ip, _ in conns:
+        held[ip] = held.get(ip, 0) + 1
+    top = max(held, key=lambda ip: held[ip])
+    return min((c for c in conns if c[1] == top), key=lambda c: c[2])[0]
+
+
 class _Handler(ServerRequestHandler):
     """One client connection: admission by address, its peer for the write check."""
 
     peer_ip = ''
     last_rx = 0.0
+    admitted = False
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
@@ -47,11 +62,21 @@ class _Handler(ServerRequestHandler):
         self.peer_ip = str(peer[0]) if peer else ''
         self.last_rx = time.monotonic()
         gw = self.server.gateway
-        conns = list(self.server.active_connections.values())
-        same = sum(1 for h in conns if getattr(h, 'peer_ip', None) == self.peer_ip)
-        if same > gw.max_per_address or len(conns) > gw.max_connections:
+        # the admitted ones only: accepted sockets whose connection_made has not run yet
+        # (a burst of connections) have no address yet
+        conns = [h for h in self.server.active_connections.values() if h.admitted and h is not self]
+        same = sum(1 for h in conns if h.peer_ip == self.peer_ip)
+        if same >= gw.max_per_address:
             gw.count('connections_refused')
             self.close()
+            return
+        if len(conns) >= gw.max_connections:
+            victim = evict_choice([(h, h.peer_ip, h.last_rx) for h in conns])
+            if victim is not None:
+                gw.count('connections_evicted')
+                victim.admitted = False
+                victim.close()
+        self.admitted = True
 
     def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
         self.last_rx = time.monotonic()
@@ -92,7 +117,8 @@ class ModbusGateway:
         self.idle_timeout, self.command_timeout = idle_timeout, command_timeout
         self.log = log
         self.counters = {'reads': 0, 'writes_accepted': 0, 'writes_refused': 0,
-                         'connections_refused': 0, 'idle_closed': 0, 'unknown_unit': 0}
+                         'connections_refused': 0, 'connections_evicted': 0, 'idle_closed': 0,
+                         'unknown_unit': 0}
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: _Server | None = None
         self._thread: threading.Thread | None = None
