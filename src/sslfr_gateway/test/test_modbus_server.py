@@ -156,6 +156,8 @@ def test_malformed_oversized_and_a_flood_from_other_addresses_leave_the_client_a
         # with two flooders 8 kept > 6 slots: the legitimate client takes the slot of a flooder
         for _ in range(5):
             assert _read_ok(port), 'the legitimate client was not answered during the flood'
+        if len(flooders) == 2:
+            assert gateway.counters['connections_evicted'] >= 1                 # it took a flooder's slot
         # a huge read count is refused, not answered with a giant frame
         c = ModbusTcpClient('127.0.0.1', port=port, timeout=3)
         assert c.connect()
