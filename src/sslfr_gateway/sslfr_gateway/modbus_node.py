@@ -75,6 +75,7 @@ class ModbusGatewayNode(LeanEvents, Node):
             self._command, bind_address=cfg['bind_address'], port=cfg['port'],
             write_allow=gp.allowed(cfg['write_allow']), max_connections=cfg['max_connections'],
             max_per_address=cfg['max_per_address'], idle_timeout=cfg['idle_timeout'],
+            frame_timeout=cfg['frame_timeout'],
             command_timeout=cfg['service_timeout'], log=lambda s: self.get_logger().info(s))
         port = self.gateway.start()
         steady = Clock(clock_type=ClockType.STEADY_TIME)

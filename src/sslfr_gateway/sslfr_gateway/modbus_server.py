@@ -12,7 +12,8 @@ refused -> DEVICE_FAILURE.
 Hardening: at most ``max_per_address`` connections from one IP address (more are
 closed at once); when all ``max_connections`` are taken, a new connection closes the
 least recently active one of the address holding the most (:func:`evict_choice`); a
-connection idle for ``idle_timeout`` seconds is closed; pymodbus bounds a request's buffer (516 bytes) and answers a
+connection idle for ``idle_timeout`` seconds is closed, and one whose request has not
+arrived whole within ``frame_timeout`` seconds of its first byte (slowloris); pymodbus bounds a request's buffer (516 bytes) and answers a
 malformed request with an exception or drops it. Every refusal is counted.
 """
 from __future__ import annotations
@@ -55,6 +56,7 @@ class _Handler(ServerRequestHandler):
     peer_ip = ''
     last_rx = 0.0
     admitted = False
+    partial_since = None         # monotonic time a request began arriving and is not complete
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
@@ -78,9 +80,13 @@ class _Handler(ServerRequestHandler):
                 victim.close()
         self.admitted = True
 
-    def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+    def datagram_received(self, data: bytes, addr) -> None:
         self.last_rx = time.monotonic()
-        return super().callback_data(data, addr)
+        super().datagram_received(data, addr)
+        if not self.recv_buffer:
+            self.partial_since = None
+        elif self.partial_since is None:
+            self.partial_since = self.last_rx
 
     async def handle_request(self):
         token = _PEER.set(self.peer_ip)
@@ -106,7 +112,7 @@ class ModbusGateway:
                  command: Callable[[int, int | None, str], concurrent.futures.Future],
                  *, bind_address: str = '127.0.0.1', port: int = 1502,
                  write_allow: tuple[str, ...] = (), max_connections: int = 32,
-                 max_per_address: int = 4, idle_timeout: float = 60.0,
+                 max_per_address: int = 4, idle_timeout: float = 60.0, frame_timeout: float = 5.0,
                  command_timeout: float = 10.0, log: Callable[[str], None] = print):
         self.images = [list(i) for i in images]
         self.n_trackers = list(n_trackers)
@@ -115,9 +121,10 @@ class ModbusGateway:
         self.write_allow = frozenset(write_allow)
         self.max_connections, self.max_per_address = max_connections, max_per_address
         self.idle_timeout, self.command_timeout = idle_timeout, command_timeout
+        self.frame_timeout = frame_timeout
         self.log = log
         self.counters = {'reads': 0, 'writes_accepted': 0, 'writes_refused': 0,
-                         'connections_refused': 0, 'connections_evicted': 0, 'idle_closed': 0,
+                         'connections_refused': 0, 'connections_evicted': 0, 'idle_closed': 0, 'slow_closed': 0,
                          'unknown_unit': 0}
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: _Server | None = None
@@ -210,7 +217,11 @@ class ModbusGateway:
         while not self._server.serving.done():
             now = time.monotonic()
             for h in list(self._server.active_connections.values()):
-                if now - getattr(h, 'last_rx', now) > self.idle_timeout:
+                partial = getattr(h, 'partial_since', None)
+                if partial is not None and now - partial > self.frame_timeout:
+                    self.count('slow_closed')
+                    h.close()
+                elif now - getattr(h, 'last_rx', now) > self.idle_timeout:
                     self.count('idle_closed')
                     h.close()
             await asyncio.wait([self._server.serving], timeout=1.0)

@@ -100,6 +100,9 @@ MODBUS_PARAMS = ParamTable(_COLLECTORS + (
               1, 1024, read_only=True),
     ParamSpec('idle_timeout', 60.0, 'A connection silent this long is closed [s, wall]', 's',
               1.0, 3600.0, read_only=True),
+    ParamSpec('frame_timeout', 5.0,
+              'A request not complete this long after its first byte closes its connection '
+              '[s, wall]', 's', 0.5, 60.0, read_only=True),
     ParamSpec('service_timeout', 5.0, 'Longest wait for planner/set_mode [s, wall]', 's', 0.5, 60.0,
               read_only=True),
 ), integers_for_floats=True)

@@ -190,3 +190,20 @@ def test_an_unknown_unit_id_is_answered_with_an_exception_and_the_server_goes_on
         assert c.read_holding_registers(sunspec.BASE, count=2, device_id=2).registers == [0x5375, 0x6E53]
     finally:
         c.close()
+
+
+@pytest.mark.parametrize('gateway', [{'frame_timeout': 1.0, 'idle_timeout': 60.0}], indirect=True)
+def test_a_request_trickling_in_is_closed_after_frame_timeout(gateway):
+    """Half a Modbus header, then silence: closed after frame_timeout (not idle_timeout)."""
+    with socket.socket() as s:
+        s.settimeout(10)
+        s.connect(('127.0.0.1', gateway.port))
+        s.sendall(struct.pack('>HH', 1, 0))
+        t0 = time.monotonic()
+        try:
+            closed = s.recv(16) == b''
+        except ConnectionResetError:
+            closed = True
+        assert closed and time.monotonic() - t0 < 5.0
+    assert gateway.counters['slow_closed'] == 1
+    assert _read_ok(gateway.port)
