@@ -33,7 +33,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES, JOINTS,
+                                   LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE,
+                                   LinkState)
 from sslfr_common.timeconv import to_sec
 from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
 
@@ -268,11 +270,10 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     params file for the ideal commands' collector)."""
     topics = reader.topics
     names = {k: _find(topics, k) for k in (
-        'tracker/phase', 'safety/state', 'gps/fix', 'absorber/inlet_temperature',
-        'absorber/outlet_temperature', 'irradiance/beam', 'joint_states',
-        *(f'axes/{a}/status' for a in JOINTS))}
-    have_status = any(names[f'axes/{a}/status'] for a in JOINTS)
-    wanted = [t for k, t in names.items() if t and not (k == 'joint_states' and have_status)]
+        TRACKER_PHASE.name, SAFETY_STATE.name, GPS_FIX.name, *(ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES),
+        IRRADIANCE_BEAM.name, JOINT_STATES.name, *(AXIS_STATUS.of(a) for a in JOINTS))}
+    have_status = any(names[AXIS_STATUS.of(a)] for a in JOINTS)
+    wanted = [t for k, t in names.items() if t and not (k == JOINT_STATES.name and have_status)]
     rep = DayReport(bag=str(reader.path), start=to_sec(reader.start_ns), end=to_sec(reader.end_ns))
     by_topic = {t: k for k, t in names.items() if t}
     phase, safety, temps, beam, fix = Series(), Series(), {}, Series(), Series()
@@ -281,7 +282,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     last_phase = None
     for raw in reader.messages(wanted):
         key = by_topic[raw.topic]
-        if key == 'gps/fix' and len(fix.t) >= 10:
+        if key == GPS_FIX.name and len(fix.t) >= 10:
             continue  # the site needs only the first valid fixes: skip decoding the rest
         try:
             m = reader.decoder(raw.type)(raw.data)
@@ -289,20 +290,20 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
             raise
         except Exception as exc:  # noqa: BLE001 - decoder errors vary
             raise BagError(f'cannot decode a {raw.type} message on {raw.topic}: {exc}') from exc
-        if key == 'tracker/phase':
+        if key == TRACKER_PHASE.name:
             phase.add(message_time(m.header, raw.log_time), phase=int(m.phase), reason=str(m.reason))
             last_phase = m
-        elif key == 'safety/state':
+        elif key == SAFETY_STATE.name:
             safety.add(message_time(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
-        elif key.startswith('absorber/'):
+        elif key in (ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES):
             temps.setdefault(key.split('/')[1], Series()).add(message_time(m.header, raw.log_time),
                                                               v=float(m.temperature))
-        elif key == 'irradiance/beam':
+        elif key == IRRADIANCE_BEAM.name:
             beam.add(message_time(m.header, raw.log_time), g=float(m.beam), sat=bool(m.saturated))
-        elif key == 'gps/fix':
+        elif key == GPS_FIX.name:
             if len(fix.t) < 10 and int(m.status.status) >= 0:
                 fix.add(message_time(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
-        elif key == 'joint_states':
+        elif key == JOINT_STATES.name:
             t = message_time(m.header, raw.log_time)
             for name, pos in zip(m.name, m.position):
                 if name in joints:
@@ -325,7 +326,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                           'solar_noon': to_sec(last_phase.solar_noon)}
     elif fix.t:
         rep.site = {'latitude': float(fix.v['lat'][0]), 'longitude': float(fix.v['lon'][0]),
-                    'altitude': float(fix.v['alt'][0]), 'source': 'gps/fix'}
+                    'altitude': float(fix.v['alt'][0]), 'source': GPS_FIX.name}
     # -- phases
     pt, pv = phase.arrays()
     if len(pt):
@@ -447,10 +448,8 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
         if good.sum() >= 2:
             held[axis] = np.interp(t, ta[good], va['measured'][good])
     args = (t, beam, table.zenith, table.azimuth)
-    e_ideal = day_energy(*args, ideal['mirrors'], ideal['mobile_structure'], ideal['secondary_reflector'],
-                         params, c.azimuth) / 1000.0
-    e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
-                        params, c.azimuth) / 1000.0
+    e_ideal = day_energy(*args, *(ideal[a] for a in JOINTS), params, c.azimuth) / 1000.0
+    e_held = day_energy(*args, *(held[a] for a in JOINTS), params, c.azimuth) / 1000.0
     missing = [a for a in JOINTS if a not in measured]
     note = 'seed 000 optical model on the 3-D ray trace (docs/optics.md), recorded beam irradiance'
     if missing:
@@ -570,7 +569,7 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
                 ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label='measured', lw=1, ls='--')
             else:
                 t, v = rep.series[f'joint_{a}']
-                ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label='joint_states', lw=1)
+                ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label=JOINT_STATES.name, lw=1)
             if f'ideal_{a}' in rep.series:
                 t, y = rep.series[f'ideal_{a}']
                 ax.plot(*_decimate(hours(t), np.degrees(y)), label='ideal', lw=0.8, alpha=0.7)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, JOINTS, SAFETY_STATE,
+                                   TRACKER_PHASE, TRACKER_TRAJECTORY)
 from sslfr_common.timeconv import to_sec
 
 
@@ -112,28 +113,28 @@ def read_day(bag: str | Path) -> Day:
         topics[raw.topic] = topics.get(raw.topic, 0) + 1
     axes = {}
     for axis in JOINTS:
-        axes[axis] = _collect(reader, f'/axes/{axis}/status', {
+        axes[axis] = _collect(reader, '/' + AXIS_STATUS.of(axis), {
             'measured': lambda m: float(m.measured), 'setpoint': lambda m: float(m.setpoint),
             'commanded': lambda m: float(m.commanded), 'error': lambda m: float(m.error),
             'state': lambda m: m.state, 'link_state': lambda m: int(m.link_state),
             'frames_lost': lambda m: int(m.frames_lost), 'homed': lambda m: bool(m.homed),
             'fault_bits': lambda m: int(m.fault_bits), 'steps': lambda m: int(m.steps)})
-    phase = _collect(reader, '/tracker/phase', {
+    phase = _collect(reader, '/' + TRACKER_PHASE.name, {
         'phase': lambda m: int(m.phase), 'name': lambda m: m.phase_name, 'reason': lambda m: m.reason,
         'mode': lambda m: m.mode, 'site_source': lambda m: m.site_source,
         'latitude': lambda m: float(m.latitude), 'longitude': lambda m: float(m.longitude),
         'sunrise': lambda m: to_sec(m.sunrise), 'sunset': lambda m: to_sec(m.sunset)})
-    safety = _collect(reader, '/safety/state', {
+    safety = _collect(reader, '/' + SAFETY_STATE.name, {
         'level': lambda m: int(m.level), 'reasons': lambda m: list(m.reasons),
         'stow_required': lambda m: bool(m.stow_required), 'stopped_axes': lambda m: list(m.stopped_axes)})
-    outlet = _collect(reader, '/absorber/outlet_temperature', {'value': lambda m: float(m.temperature)})
-    inlet = _collect(reader, '/absorber/inlet_temperature', {'value': lambda m: float(m.temperature)})
-    fix = _collect(reader, '/gps/fix', {'status': lambda m: int(m.status.status),
+    outlet = _collect(reader, '/' + ABSORBER_TEMPERATURE.of('outlet'), {'value': lambda m: float(m.temperature)})
+    inlet = _collect(reader, '/' + ABSORBER_TEMPERATURE.of('inlet'), {'value': lambda m: float(m.temperature)})
+    fix = _collect(reader, '/' + GPS_FIX.name, {'status': lambda m: int(m.status.status),
                                         'latitude': lambda m: float(m.latitude)})
     # a trajectory's stamp is its first point's time: when it was sent is the log time
-    traj = _collect(reader, '/tracker/trajectory', {'points': lambda m: len(m.points)}, log_time=True)
+    traj = _collect(reader, '/' + TRACKER_TRAJECTORY.name, {'points': lambda m: len(m.points)}, log_time=True)
     rows = []
-    for raw, msg in reader.decoded(['/diagnostics']):
+    for raw, msg in reader.decoded(['/' + DIAGNOSTICS.name]):
         for st in msg.status:
             rows.append((to_sec(msg.header.stamp), st.name, int(st.level) if not isinstance(st.level, bytes)
                          else st.level[0], st.message, {kv.key: kv.value for kv in st.values}))

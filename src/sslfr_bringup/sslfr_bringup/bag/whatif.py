@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY
 from sslfr_common.timeconv import to_sec
 
 from .reader import message_time
@@ -65,18 +65,18 @@ def _topic(reader_topics, name: str) -> str | None:
 def extract_decisions(reader, start_ns: int | None = None, end_ns: int | None = None) -> Decisions:
     """Read tracker/phase, safety/state and tracker/trajectory from a bag (any namespace)."""
     names = {key: _topic(reader.topics, key)
-             for key in ('tracker/phase', 'safety/state', 'tracker/trajectory')}
+             for key in (TRACKER_PHASE.name, SAFETY_STATE.name, TRACKER_TRAJECTORY.name)}
     topics = [t for t in names.values() if t]
     d = Decisions()
     pt, pv, st, sv = [], [], [], []
     if not topics:
         return d
     for raw, msg in reader.decoded(topics, start_ns, end_ns):
-        if raw.topic == names['tracker/phase']:
+        if raw.topic == names[TRACKER_PHASE.name]:
             pt.append(message_time(msg.header, raw.log_time))
             pv.append(int(msg.phase))
             d.phase_reason.append(str(msg.reason))
-        elif raw.topic == names['safety/state']:
+        elif raw.topic == names[SAFETY_STATE.name]:
             st.append(message_time(msg.header, raw.log_time))
             sv.append(int(msg.level))
             d.safety_reasons.append([str(r) for r in msg.reasons])
@@ -285,10 +285,10 @@ def compare(recorded: Decisions, new: Decisions, grid_s: float = 1.0,
     else:
         start, end = max(starts), min(ends)
     grid = np.arange(start, end + 1e-9, grid_s) if end > start else np.array([start])
-    phase = compare_steps('tracker/phase', recorded.phase_t, recorded.phase, new.phase_t,
+    phase = compare_steps(TRACKER_PHASE.name, recorded.phase_t, recorded.phase, new.phase_t,
                           new.phase, grid, tolerance_s, recorded.phase_reason, new.phase_reason) \
         if len(recorded.phase) and len(new.phase) else None
-    safety = compare_steps('safety/state', recorded.safety_t, recorded.safety, new.safety_t,
+    safety = compare_steps(SAFETY_STATE.name, recorded.safety_t, recorded.safety, new.safety_t,
                            new.safety, grid, tolerance_s, recorded.safety_reasons,
                            new.safety_reasons) \
         if len(recorded.safety) and len(new.safety) else None
