@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from sslfr_common.contract import (GPS_FIX, PLANNER_REPLAN, PLANNER_SET_MODE, SAFETY_STATE, TRACKER_PHASE,
+from sslfr_common.contract import (CLOCK, GPS_FIX, PLANNER_REPLAN, PLANNER_SET_MODE, SAFETY_STATE, TRACKER_PHASE,
                                    TRACKER_TRAJECTORY)
 
 from conftest import ROOT
@@ -58,7 +58,7 @@ class SimClock:
     def __init__(self, ros):
         from rosgraph_msgs.msg import Clock
         self.ros, self.Clock = ros, Clock
-        self.pub = ros.node.create_publisher(Clock, '/clock', 10)
+        self.pub = ros.node.create_publisher(Clock, CLOCK.name, 10)
         self.now = 0.0
         self.started = False
 

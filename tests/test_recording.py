@@ -25,7 +25,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, TrackerPhase
-from sslfr_common.contract import ABSORBER_TEMPERATURE, DIAGNOSTICS, TRACKER_PHASE
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, TRACKER_PHASE
 from sslfr_common.node import qos
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -97,7 +97,7 @@ def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
         'discovery_period': 0.2, 'exclude': ['/diagnostics']})
     node = ros.node
     p_temp = node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
-    p_axis = node.create_publisher(AxisStatus, 'axes/mirrors/status', 10)
+    p_axis = node.create_publisher(AxisStatus, AXIS_STATUS.of('mirrors'), 10)
     p_phase = node.create_publisher(TrackerPhase, TRACKER_PHASE.name, TL1)
     _wait_matched(ros, [p_temp, p_axis, p_phase])
     sent = {'/absorber/outlet_temperature': [], '/axes/mirrors/status': [], '/tracker/phase': []}

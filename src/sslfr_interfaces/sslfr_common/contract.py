@@ -1,6 +1,8 @@
 """The facts of the graph contract, defined once (docs/architecture.md).
 
-Pure Python (no rclpy, no generated messages), so every core can import it. Where
+Pure Python (no rclpy, no generated messages), so every core can import it. The topic
+and service table at the end is the one place a topic or service name is written
+(``test_topic_table.py`` scans the product code and docs/architecture.md). Where
 ROS carries a fact as message constants (phase codes in ``TrackerPhase``, safety
 levels in ``SafetyState``, link states in ``AxisStatus``) the values here are the
 same numbers, and ``test_contract.py`` fails if they ever differ, or if another
