@@ -269,8 +269,9 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     """Decode the report's topics from a bag and compute the figures (``config``: site
     params file for the ideal commands' collector)."""
     topics = reader.topics
+    temperatures = {ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES}
     names = {k: _find(topics, k) for k in (
-        TRACKER_PHASE.name, SAFETY_STATE.name, GPS_FIX.name, *(ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES),
+        TRACKER_PHASE.name, SAFETY_STATE.name, GPS_FIX.name, *sorted(temperatures),
         IRRADIANCE_BEAM.name, JOINT_STATES.name, *(AXIS_STATUS.of(a) for a in JOINTS))}
     have_status = any(names[AXIS_STATUS.of(a)] for a in JOINTS)
     wanted = [t for k, t in names.items() if t and not (k == JOINT_STATES.name and have_status)]
@@ -295,7 +296,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
             last_phase = m
         elif key == SAFETY_STATE.name:
             safety.add(message_time(m.header, raw.log_time), level=int(m.level), reasons='; '.join(m.reasons))
-        elif key in (ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES):
+        elif key in temperatures:
             temps.setdefault(key.split('/')[1], Series()).add(message_time(m.header, raw.log_time),
                                                               v=float(m.temperature))
         elif key == IRRADIANCE_BEAM.name:
