@@ -354,6 +354,8 @@ RULES: tuple[Rule, ...] = (
          condition=_no_time),
     # The condition (_axis_not_ready); after a silence > ``status_max_age`` the first
     # report must show the axis ready again (a restarted driver still homing is not).
+    # An active driver re-homing with its link up is no fault; its silence is the
+    # watchdog rule's.
     Rule('axis', Level.STOW, Clear.SELF,
          {'unreported': '{axis} axis not ready: no status from its driver yet',
           'idle': '{axis} axis not ready: its driver is {state}, not active',
