@@ -4,16 +4,13 @@ One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This f
 only wires ROS to pure code: parameters :mod:`.params`, decisions
 :class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
 :mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
-:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md).
+:mod:`.control_loop`, messages :mod:`.msgs`, accuracy alarm :mod:`.accuracy`.
 
 The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
-its own thread: at ``control_rate`` while something moves, else at the next setpoint
-step, the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at
-once on a trajectory, safety change, mode change, home / jog request or activation.
-No executor callback waits for the board (configure waits at most ``OPEN_WAIT``), so
-a single-threaded executor serves the node, alone or composed. With ``autostart`` it
-keeps ``active`` by itself; every ``change_state`` request gets an answer. One timer
-publishes ``axes/<axis>/status`` (every lifecycle state) and ``joint_states``.
+its own thread (``AxisSupervisor.next_tick``: at ``control_rate`` while something moves,
+at once on any event); no executor callback waits for the board (configure at most
+``OPEN_WAIT``). With ``autostart`` it keeps ``active`` by itself. One timer publishes
+``axes/<axis>/status`` and ``joint_states`` and feeds the accuracy alarm.
 """
 from __future__ import annotations
 
@@ -30,6 +27,7 @@ from sslfr_interfaces.srv import Jog
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from sslfr_drivers.axis.accuracy import AccuracyAlarm, AccuracyConfig
 from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused, open_session
 from sslfr_drivers.axis.control_loop import BackgroundOpen, ControlLoop
 from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapshot, TimeRate,
@@ -66,11 +64,9 @@ class AxisDriver(ManagedNode):
         self.session: AxisBoardSession | None = None
         self.board: BoardState | None = None
         self.active = self.refused = False
-        self._snap = Snapshot()
-        self._pub_n = 0
+        self._snap, self._pub_n, self._stop_seen = Snapshot(), 0, False
         self._opening: BackgroundOpen | None = None
-        self._stop_seen = False
-        self.rate = TimeRate()
+        self.rate, self.accuracy = TimeRate(), AccuracyAlarm(self.axis, AccuracyConfig.from_params(p))
 
         tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -103,6 +99,7 @@ class AxisDriver(ManagedNode):
             self.sup.safety.silent_stow_after = p['safety_silent_stow_after']
             self._status_timer.timer_period_ns = int(1e9 * self._publish_period(p))
             self.activation.set_retry(p['retry_period'], p['retry_period_max'])
+            self.accuracy.configure(AccuracyConfig.from_params(p))
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
@@ -269,6 +266,7 @@ class AxisDriver(ManagedNode):
         if self._pub_n % max(1, round(fast / p['status_rate'])) == 0:
             self.pub_status.publish(status_msg(self.axis, snap, self.lifecycle_state(), session, self.refused,
                                                self.get_clock().now().to_msg(), self.last_error))
+            self.accuracy.sample_snapshot(snap, self.lifecycle_state(), self.get_logger())   # the status' numbers
 
     def _publish_diagnostics(self) -> None:
         now = steady_now(self.steady)
@@ -285,8 +283,10 @@ class AxisDriver(ManagedNode):
                       'parameter_changes_refused': self.params.refused,
                       'last_refused_parameter': self.params.last_refusal,
                       **(self.session.counters() if self.session is not None else {})}
-        self.pub_diag.publish(diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw,
-                                              values, self.get_clock().now().to_msg()))
+        stamp, acc = self.get_clock().now().to_msg(), self.accuracy       # the alarm: its own status
+        arr = diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw, values, stamp)
+        arr.status += diagnostics_msg(f'{self.get_name()}: accuracy', acc.level, acc.text(), hw, acc.values(), stamp).status
+        self.pub_diag.publish(arr)
 
 
 def main(args=None) -> int:

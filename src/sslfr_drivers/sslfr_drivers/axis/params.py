@@ -16,6 +16,7 @@ import stat as stat_mod
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
+from sslfr_drivers.axis import accuracy
 from sslfr_drivers.axis.core import HOME_SWITCHES, AxisTuning, StallDetector
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.link.keys import KEY_FILE_PARAM
@@ -80,6 +81,7 @@ _SPECS = [
        'stall_window [rad]', 'rad', 1e-5, 1.0),
     _P('max_jog', 0.2, 'largest |delta| of a jog [rad]', 'rad', 0.0, math.pi),
     _P('jog_speed', 0.02, 'default jog speed [rad/s]', 'rad/s', *_SPEED),
+    *accuracy.PARAM_SPECS,
 ]
 
 
@@ -99,7 +101,7 @@ def cross_check(p: dict) -> list[str]:
         errors.append(f"stow_position {p['stow_position']:.4f} rad outside the soft limits")
     if p['min_speed'] > p['max_speed']:
         errors.append('min_speed > max_speed')
-    return errors
+    return errors + accuracy.cross_check(p)
 
 
 #: The driver's parameters with the mirrors' defaults (:func:`params_for` per axis).
