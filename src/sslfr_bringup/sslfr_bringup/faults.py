@@ -10,6 +10,9 @@ is a simulated duration, > 0)::
     gps-loss@HH:MM+SECONDS                     the GPS receiver loses its fix
     kill:NODE@HH:MM[+SECONDS]                  SIGKILL a node; held down SECONDS, else
                                                for the rest of the run
+    slip:AXIS@HH:MM+SECONDS:DEG                the axis' coupling slips: the joint (and its
+                                               encoder) turns DEG away from the motor over
+                                               SECONDS, and stays there
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -30,6 +33,10 @@ gps-loss            gps/fix status NO_FIX; the planner keeps the persisted site
 kill:planner        the drivers finish the trajectory horizon they hold, then
                     hold position
 kill:safety         no safety heartbeat: every axis stops/stows within 1.2 s
+slip                the axis' accuracy alarm: WARN past 0.06 deg, ERROR past
+                    0.36 deg (``<axis>_driver: accuracy`` diagnostics, log);
+                    past ``lost_step_tolerance`` (0.29 deg by default) the
+                    driver's lost-step check faults the axis
 ==================  ==========================================================
 """
 from __future__ import annotations
@@ -39,7 +46,7 @@ from dataclasses import dataclass
 
 from sslfr_common.contract import JOINTS
 
-KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill')
+KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'slip')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -48,6 +55,7 @@ _RULES = {
     'board-reset': (True, 'forbidden'),
     'gps-loss': (False, 'required'),
     'kill': (True, 'optional'),
+    'slip': (True, 'required'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
@@ -55,7 +63,8 @@ FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-los
 
 _SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/]+))?'
                    r'@(?P<hh>\d{1,2}):(?P<mm>\d{2})(?::(?P<ss>\d{2}(?:\.\d+)?))?'
-                   r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?$')
+                   r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?'
+                   r'(?::(?P<amount>[-+]?(?:\d+(?:\.\d*)?|\.\d+)))?$')
 
 
 class FaultSpecError(ValueError):
@@ -85,6 +94,7 @@ class Fault:
     target: str | None
     duration: float | None
     spec: str
+    amount: float | None = None     # slip: the joint's angle away from the motor [deg]
 
     @property
     def end(self) -> float | None:
@@ -94,7 +104,7 @@ class Fault:
     @property
     def board(self) -> str | None:
         """The simulated board that receives this fault (None for ``kill``)."""
-        if self.kind in ('link-drop', 'board-reset'):
+        if self.kind in ('link-drop', 'board-reset', 'slip'):
             return self.target
         return FAULT_BOARD.get(self.kind)
 
@@ -104,7 +114,7 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
     text = spec.strip()
     m = _SPEC.match(text)
     if not m:
-        raise FaultSpecError(f'fault {spec!r}: expected KIND[:TARGET]@HH:MM[:SS][+SECONDS], '
+        raise FaultSpecError(f'fault {spec!r}: expected KIND[:TARGET]@HH:MM[:SS][+SECONDS][:DEG], '
                              f'KIND one of {", ".join(KINDS)}')
     kind, target, dur = m['kind'], m['target'], m['dur']
     if kind not in _RULES:
@@ -124,7 +134,9 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
                              f'{"+60" if dur_rule == "required" else ""})')
     elif not needs_target and target:
         raise FaultSpecError(f'fault {spec!r}: {kind} takes no target')
-    if kind in ('link-drop', 'board-reset') and target not in boards:
+    if kind == 'slip' and target not in JOINTS:
+        raise FaultSpecError(f'fault {spec!r}: slip needs an axis ({", ".join(JOINTS)}), not {target!r}')
+    if kind in ('link-drop', 'board-reset', 'slip') and target not in boards:
         raise FaultSpecError(f'fault {spec!r}: unknown board {target!r} (known: {", ".join(boards)})')
     if kind == 'kill' and nodes is not None and target not in nodes:
         raise FaultSpecError(f'fault {spec!r}: unknown node {target!r} (known: {", ".join(nodes)})')
@@ -135,7 +147,14 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         raise FaultSpecError(f'fault {spec!r}: {kind} is instantaneous, no +SECONDS')
     if duration is not None and not duration > 0:
         raise FaultSpecError(f'fault {spec!r}: duration must be > 0 s')
-    return Fault(kind=kind, at=hh * 3600.0 + mm * 60.0 + ss, target=target, duration=duration, spec=text)
+    amount = float(m['amount']) if m['amount'] is not None else None
+    if kind == 'slip' and (amount is None or amount == 0 or abs(amount) > 90):
+        raise FaultSpecError(f'fault {spec!r}: slip needs the slipped angle in degrees, 0 < |DEG| <= 90: '
+                             'slip:AXIS@HH:MM+SECONDS:DEG')
+    if kind != 'slip' and amount is not None:
+        raise FaultSpecError(f'fault {spec!r}: {kind} takes no :DEG after its duration')
+    return Fault(kind=kind, at=hh * 3600.0 + mm * 60.0 + ss, target=target, duration=duration, spec=text,
+                 amount=amount)
 
 
 def format_fault(f: Fault) -> str:
@@ -147,7 +166,8 @@ def format_fault(f: Fault) -> str:
         when += f':{int(ss):02d}' if ss == int(ss) else f':{ss:05.2f}'
     target = f':{f.target}' if f.target and not (f.kind == 'thermocouple-open' and f.target == 'outlet') else ''
     dur = '' if f.duration is None else f'+{f.duration:g}'
-    return f'{f.kind}{target}@{when}{dur}'
+    amount = '' if f.amount is None else f':{f.amount:g}'
+    return f'{f.kind}{target}@{when}{dur}{amount}'
 
 
 class Schedule:

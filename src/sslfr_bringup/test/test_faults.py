@@ -38,21 +38,34 @@ def test_parse_each_kind(spec, kind, at, target, duration, board):
     ('kill@10:00', 'needs :NODE'),
     ('kill:nobody@10:00', 'unknown node'),
     ('thermocouple-open:middle@10:00', 'inlet or outlet'),
+    ('slip:mirrors@10:00+60', 'slipped angle'),
+    ('slip:mirrors@10:00+60:0', 'slipped angle'),
+    ('slip:mirrors@10:00+60:91', 'slipped angle'),
+    ('slip:gps@10:00+60:0.5', 'needs an axis'),
+    ('slip:mirrors@10:00:0.5', 'needs a duration'),
+    ('link-drop:mirrors@10:00+5:0.5', 'takes no :DEG'),
 ])
 def test_bad_specs_are_refused_with_the_reason(spec, needle):
     with pytest.raises(FaultSpecError, match=needle):
         parse(spec, nodes=['planner', 'safety'])
 
 
+def test_slip_spec():
+    f = parse('slip:secondary_reflector@10:05+600:-0.5')
+    assert (f.kind, f.at, f.target, f.duration, f.amount, f.board) == \
+        ('slip', 36300.0, 'secondary_reflector', 600.0, -0.5, 'secondary_reflector')
+    assert format_fault(f) == 'slip:secondary_reflector@10:05+600:-0.5'
+
+
 @given(kind=st.sampled_from(faults.KINDS), at=st.integers(0, 86399), dur=st.integers(1, 7200),
        board=st.sampled_from(faults.DEFAULT_BOARDS))
 def test_format_parse_round_trip(kind, at, dur, board):
     target = {'link-drop': board, 'board-reset': board, 'kill': 'planner',
-              'thermocouple-open': 'inlet'}.get(kind)
+              'thermocouple-open': 'inlet', 'slip': 'mirrors'}.get(kind)
     duration = None if kind == 'board-reset' else float(dur)
-    f = Fault(kind, float(at), target, duration, '')
+    f = Fault(kind, float(at), target, duration, '', amount=0.25 if kind == 'slip' else None)
     g = parse(format_fault(f))
-    assert (g.kind, g.at, g.target, g.duration) == (f.kind, f.at, f.target, f.duration)
+    assert (g.kind, g.at, g.target, g.duration, g.amount) == (f.kind, f.at, f.target, f.duration, f.amount)
 
 
 def test_schedule_returns_each_start_and_end_once_in_order():
