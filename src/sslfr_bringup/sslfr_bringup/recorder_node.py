@@ -9,6 +9,10 @@ transient local only if all are, as rosbag2 does) and the publishers' offered Qo
 profiles are stored in the bag. Log time = ROS time of reception (so
 ``use_sim_time`` days land in their day bag); publish time = the DDS source timestamp.
 
+``/rosout`` (every node's log lines) is recorded too; the lines a publisher keeps
+for late joiners (transient local) are recorded only when they are not older than the
+recorder (:func:`.bag.recorder_config.log_line_kept`).
+
 Diagnostics (``diagnostics``, 1 Hz, steady clock): OK while recording, ERROR with the
 reason when the free-disk guard stopped recording or writes fail. The guard only
 stops recording; it never touches another node.
@@ -16,6 +20,7 @@ stops recording; it never touches another node.
 from __future__ import annotations
 
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
@@ -46,6 +51,8 @@ class Recorder(LeanEvents, Node):
         self.write_errors = 0   # write errors over the node's life
         self.last_error = ''
         self.no_clock = 0
+        self.old_log_lines = 0     # /rosout lines older than this recorder (already recorded)
+        self._started_ns = time.time_ns()
         self._discover_timer = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._restart_discovery()
@@ -135,6 +142,7 @@ class Recorder(LeanEvents, Node):
     def _make_callback(self, topic: str):
         clock = self.get_clock()
         session_ref = self
+        started = self._started_ns if topic == rc.ROSOUT else None
 
         def callback(data: bytes, info) -> None:
             session_ref.received += 1
@@ -145,6 +153,9 @@ class Recorder(LeanEvents, Node):
             src = None
             if isinstance(info, dict):
                 src = info.get('source_timestamp')
+            if started is not None and not rc.log_line_kept(int(src or 0), started):
+                session_ref.old_log_lines += 1
+                return
             session = session_ref.session
             errors = session.stats.write_errors
             if session.write(topic, bytes(data), now, src if src else now,
@@ -186,6 +197,7 @@ class Recorder(LeanEvents, Node):
         kv = {'bag': str(s.bag_dir or ''), 'topics': len(s.topics), 'received': self.received,
               'written': s.stats.written, 'dropped_disk_full': s.stats.dropped_disk,
               'write_errors': s.stats.write_errors, 'dropped_no_clock': self.no_clock,
+              'dropped_old_log_lines': self.old_log_lines,
               'free_bytes': s.disk.free_bytes if s.disk else -1}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in kv.items()]
         arr = DiagnosticArray(status=[st])

@@ -17,6 +17,12 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 - max absorber temperatures; max beam irradiance and the day's beam irradiation
   H = integral of G_b dt [kWh/m^2] (trapezoids, gaps > 120 s not bridged);
 - link faults per axis (time not LINK_UP, frames lost / bad, fault bits);
+- per-axis accuracy alarm: time above the warning (0.06 deg) and strong (0.36 deg)
+  thresholds, by the driver's own filter (:class:`sslfr_drivers.axis.accuracy.AccuracyAlarm`
+  on the recorded status, thresholds from the ``<axis>_driver`` sections of ``--config``);
+- the day's timeline: phase and safety-level changes beside the nodes' warnings and
+  errors (``/rosout`` lines of level WARN and above, node name, log time), repeated
+  lines collapsed;
 - the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25;
   :func:`sslfr_planner.analysis.performance.day_energy`) fed with the recorded beam irradiance and
   once with the ideal axis angles, once with the measured ones (ideal vs achieved).
@@ -36,21 +42,22 @@ import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
 from sslfr_common.timeconv import to_sec
 from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
+from sslfr_planner.tracking_loss import loss_text
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader, message_time
 from .nodeset import NodeSetError, checked_params, node_params
 from .nodeset import load as load_nodeset
 
+from sslfr_drivers.axis import accuracy as accuracy_mod
+from sslfr_drivers.axis.accuracy import MOVE_CAP, MOVE_RATE, SETTLE  # noqa: F401 - one definition
+
 MAX_GAP_S = 120.0
-#: a setpoint moving faster than this is a deliberate move, not sun tracking [rad/s]: the
-#: longitudinal laws' jump bound (0.05 deg in 1 s, docs/optics.md), ten times the fastest
-#: sun-following axis rate (~0.004 deg/s)
-MOVE_RATE = math.radians(0.05)
-#: a move ends when the axis is back within this of its setpoint [rad] (~10 motor steps)
-SETTLE = 1e-3
-#: a move not settled after this long ends anyway: what follows counts as tracking error [s]
-MOVE_CAP = 300.0
+#: rcl_interfaces/msg/Log levels: the timeline lists WARN and above
+LOG_LEVELS = {10: 'DEBUG', 20: 'INFO', 30: 'WARN', 40: 'ERROR', 50: 'FATAL'}
+LOG_WARN = 30
+#: the timeline's longest listing in the text (the counts cover the rest)
+TIMELINE_MAX = 300
 
 
 def utc(t: float, fmt: str = '%H:%M:%S') -> str:
@@ -119,6 +126,10 @@ class DayReport:
     temperatures: dict = field(default_factory=dict)      # name -> {'max', 't_max', 'nan_samples'}
     irradiance: dict = field(default_factory=dict)
     links: dict = field(default_factory=dict)             # axis -> dict
+    accuracy: dict = field(default_factory=dict)          # axis -> {'warn_s', 'error_s', 'judged_s', 'peak', ...}
+    timeline: list = field(default_factory=list)          # (t, kind, text, repeats, last_t), time order
+    log_counts: dict = field(default_factory=dict)        # (level name, node) -> lines
+    has_rosout: bool = False                              # the bag holds /rosout
     energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'achieved_kwh', 'note'
     series: dict = field(default_factory=dict, repr=False)
 
@@ -269,7 +280,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     topics = reader.topics
     names = {k: _find(topics, k) for k in (
         'tracker/phase', 'safety/state', 'gps/fix', 'absorber/inlet_temperature',
-        'absorber/outlet_temperature', 'irradiance/beam', 'joint_states',
+        'absorber/outlet_temperature', 'irradiance/beam', 'joint_states', 'rosout',
         *(f'axes/{a}/status' for a in JOINTS))}
     have_status = any(names[f'axes/{a}/status'] for a in JOINTS)
     wanted = [t for k, t in names.items() if t and not (k == 'joint_states' and have_status)]
@@ -279,6 +290,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
     status = {a: Series() for a in JOINTS}
     joints = {a: Series() for a in JOINTS}
     last_phase = None
+    logs = []
     for raw in reader.messages(wanted):
         key = by_topic[raw.topic]
         if key == 'gps/fix' and len(fix.t) >= 10:
@@ -302,6 +314,11 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
         elif key == 'gps/fix':
             if len(fix.t) < 10 and int(m.status.status) >= 0:
                 fix.add(message_time(m.header, raw.log_time), lat=m.latitude, lon=m.longitude, alt=m.altitude)
+        elif key == 'rosout':
+            # the line's own stamp is the node's system clock; the log time is the day's
+            # ROS time (simulated or replayed days included)
+            if int(m.level) >= LOG_WARN:
+                logs.append((to_sec(raw.log_time), int(m.level), str(m.name), str(m.msg)))
         elif key == 'joint_states':
             t = message_time(m.header, raw.log_time)
             for name, pos in zip(m.name, m.position):
@@ -312,7 +329,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
             status[axis].add(message_time(m.header, raw.log_time), measured=float(m.measured),
                              setpoint=float(m.setpoint), commanded=float(m.commanded),
                              link=int(m.link_state), lost=int(m.frames_lost), bad=int(m.frames_bad),
-                             faults=int(m.fault_bits))
+                             faults=int(m.fault_bits), state=str(m.state))
     end = rep.end
     # -- site and sun events
     if last_phase is not None:
@@ -383,6 +400,7 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                            'frames_lost': int(v['lost'].max() - v['lost'][0]) if len(t) else 0,
                            'frames_bad': int(v['bad'].max() - v['bad'][0]) if len(t) else 0,
                            'fault_samples': int(np.sum(v['faults'] != 0))}
+        rep.accuracy[axis] = accuracy_of(axis, t, v, config)
     if not rep.tracking:
         for axis in JOINTS:
             if joints[axis].t:
@@ -407,10 +425,72 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                           'H_kWh_m2': beam_irradiation(bt, g), 'saturated': int(bv['sat'].sum())}
         rep.series['beam'] = (bt, g)
     rep.series['phase'] = (pt, pv.get('phase', np.zeros(0)))
+    rep.timeline, rep.log_counts = timeline(pt, pv, st, sv, logs)
+    rep.has_rosout = bool(names['rosout'])
     if len(bt) > 1:
         rep.energy = energy_estimate(rep.site, bt, bv['g'].astype(float),
                                      {a: status[a].arrays() for a in JOINTS if status[a].t}, config)
     return rep
+
+
+def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfig:
+    """The accuracy alarm's thresholds of ``axis``: the driver's defaults, overlaid with
+    the ``<axis>_driver`` section of a site params file (judged as ``sslfr up`` does)."""
+    p = {spec.name: spec.default for spec in accuracy_mod.PARAM_SPECS}
+    if config:
+        flat = node_params(checked_params(load_nodeset(), config), f'{axis}_driver')
+        p.update({k: float(v) for k, v in flat.items() if k in p})
+    return accuracy_mod.AccuracyConfig.from_params(p)
+
+
+def accuracy_of(axis: str, t: np.ndarray, v: dict, config: str | None = None) -> dict:
+    """The driver's accuracy alarm replayed on the recorded status samples of ``axis``
+    (times [s], the status' state / setpoint / measured [rad]): time [s] at or above
+    each level, time judged (tracking), the largest filtered error [rad] and the level
+    changes [(t, level, line)]."""
+    alarm = accuracy_mod.AccuracyAlarm(axis, accuracy_config(axis, config))
+    changes = []
+    for ti, state, sp, me in zip(t, v['state'], v['setpoint'], v['measured']):
+        change = alarm.sample(float(ti), state == 'following', float(sp), float(me))
+        if change:
+            changes.append((float(ti), *change))
+    c = alarm.cfg
+    return {'warn_s': alarm.time_above[accuracy_mod.WARN], 'error_s': alarm.time_above[accuracy_mod.ERROR],
+            'judged_s': alarm.judged_time, 'peak': alarm.peak, 'warn': c.warn, 'error': c.error,
+            'window': c.window, 'changes': changes}
+
+
+def timeline(pt, pv, st, sv, logs) -> tuple[list, dict]:
+    """The day's events in time order: phase changes, safety-level changes (with their
+    reasons) and the nodes' log lines of level WARN and above (``logs``: (t [s], level,
+    node, text)). A line repeating the previous line of the same node and level is
+    counted on it (repeats, last time). Returns (entries (t, kind, text, repeats,
+    last_t), counts {(level name, node): lines})."""
+    out, counts = [], {}
+    for i in range(len(pt)):
+        if i == 0 or pv['phase'][i] != pv['phase'][i - 1]:
+            reason = str(pv['reason'][i])
+            out.append([float(pt[i]), 'phase', PHASE_NAMES.get(int(pv['phase'][i]), '?')
+                        + (f' ({reason})' if reason else ''), 1, float(pt[i])])
+    for i in range(len(st)):
+        if i == 0 or sv['level'][i] != sv['level'][i - 1]:
+            reasons = str(sv['reasons'][i])
+            out.append([float(st[i]), 'safety', LEVEL_NAMES.get(int(sv['level'][i]), '?')
+                        + (f': {reasons}' if reasons else ''), 1, float(st[i])])
+    last: dict = {}
+    for t, level, node, text in sorted(logs, key=lambda x: x[0]):
+        name = LOG_LEVELS.get(level, str(level))
+        counts[(name, node)] = counts.get((name, node), 0) + 1
+        prev = last.get((level, node))
+        if prev is not None and prev[2] == f'{node}: {text}':
+            prev[3] += 1
+            prev[4] = t
+            continue
+        entry = [t, name, f'{node}: {text}', 1, t]
+        last[(level, node)] = entry
+        out.append(entry)
+    out.sort(key=lambda e: e[0])
+    return [tuple(e) for e in out], counts
 
 
 def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict, config: str | None) -> dict:
@@ -529,7 +609,36 @@ def render_text(rep: DayReport) -> str:
         lines.append(f'link            {axis}: {lk["drops"]} drop(s), not up {lk["time_not_up"]:.0f} s, '
                      f'{lk["frames_lost"]} frames lost, {lk["frames_bad"]} bad, '
                      f'{lk["fault_samples"]} samples with fault bits')
+    if rep.accuracy:
+        a0 = next(iter(rep.accuracy.values()))
+        lines.append(f'accuracy alarm  time above {math.degrees(a0["warn"]):.2f} deg (WARN) / '
+                     f'{math.degrees(a0["error"]):.2f} deg (ERROR), RMS over {a0["window"]:g} s while tracking')
+    for axis, a in rep.accuracy.items():
+        lines.append(f'  {axis:<20} {a["warn_s"]:8.0f} s / {a["error_s"]:6.0f} s of {a["judged_s"]:.0f} s judged; '
+                     f'largest {math.degrees(a["peak"]):.3f} deg'
+                     + (f' ({loss_text(a["peak"], axis)})' if a['peak'] > a['warn'] else ''))
+    lines += render_timeline(rep)
     return '\n'.join(lines)
+
+
+def render_timeline(rep: DayReport) -> list[str]:
+    """The timeline section: counts of log lines per level and node, then the events."""
+    lines = ['timeline (UTC): phase and safety changes, the nodes\' warnings and errors (/rosout)']
+    if rep.log_counts:
+        by_level: dict = {}
+        for (level, node), n in sorted(rep.log_counts.items()):
+            by_level.setdefault(level, []).append(f'{node} {n}')
+        lines.append('  log lines: ' + '; '.join(f'{lvl} {sum(int(x.rsplit(" ", 1)[1]) for x in v)} '
+                                                  f'({", ".join(v)})' for lvl, v in by_level.items()))
+    else:
+        lines.append('  log lines: no warning or error in /rosout' if rep.has_rosout
+                     else '  log lines: none recorded')
+    for t, kind, text, repeats, last_t in rep.timeline[:TIMELINE_MAX]:
+        more = f' (x{repeats} until {utc(last_t)})' if repeats > 1 else ''
+        lines.append(f'  {utc(t)}  {kind:<6} {text}{more}')
+    if len(rep.timeline) > TIMELINE_MAX:
+        lines.append(f'  ... {len(rep.timeline) - TIMELINE_MAX} more entries (see the counts above)')
+    return lines
 
 
 def _decimate(t, y, n=20000):
