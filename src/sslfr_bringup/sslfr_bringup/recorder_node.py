@@ -48,6 +48,8 @@ class Recorder(LeanEvents, Node):
         self._bad_types: set[str] = set()
         self.received = 0
         self.written = 0        # messages written over the node's life (all sessions)
+        self.written_data = 0   # of which not /rosout (sslfr record: a run that recorded only
+                                # log lines, its own included, recorded nothing)
         self.write_errors = 0   # write errors over the node's life
         self.last_error = ''
         self.no_clock = 0
@@ -143,6 +145,7 @@ class Recorder(LeanEvents, Node):
         clock = self.get_clock()
         session_ref = self
         started = self._started_ns if topic == rc.ROSOUT else None
+        data_topic = int(started is None)
 
         def callback(data: bytes, info) -> None:
             session_ref.received += 1
@@ -162,6 +165,7 @@ class Recorder(LeanEvents, Node):
                              int(info.get('publication_sequence_number', 0) or 0)
                              if isinstance(info, dict) else 0):
                 session_ref.written += 1
+                session_ref.written_data += data_topic
             elif session.stats.write_errors > errors:
                 session_ref._on_write_error(session.stats.last_error)
         return callback
@@ -224,9 +228,11 @@ def main(args=None, require_data: bool = False) -> int:
     if code or not require_data or not built:
         return code
     node = built[0]
-    if node.written == 0 or node.write_errors:
+    if node.written_data == 0 or node.write_errors:
         why = (f'{node.write_errors} write error(s), last: {node.last_error}' if node.write_errors
                else f'no message received on {", ".join(node.cfg["topics"]) if any(node.cfg["topics"]) else "any topic"}')
-        print(f'sslfr record: recorded {node.written} message(s): {why}', file=sys.stderr, flush=True)
+        lines = node.written - node.written_data
+        print(f'sslfr record: recorded {node.written_data} message(s)'
+              + (f' and {lines} /rosout log line(s)' if lines else '') + f': {why}', file=sys.stderr, flush=True)
         return 1
     return 0
