@@ -451,7 +451,7 @@ def accuracy_of(axis: str, t: np.ndarray, v: dict, config: str | None = None) ->
     alarm = accuracy_mod.AccuracyAlarm(axis, accuracy_config(axis, config))
     changes = []
     for ti, state, sp, me in zip(t, v['state'], v['setpoint'], v['measured']):
-        change = alarm.sample(float(ti), state == 'following', float(sp), float(me))
+        change = alarm.sample(float(ti), state in accuracy_mod.TRACKING_STATES, float(sp), float(me))
         if change:
             changes.append((float(ti), *change))
     c = alarm.cfg

@@ -112,3 +112,21 @@ def test_parameters_declared_with_units_ranges_and_refused_when_invalid():
     assert table.validate(dict(p, **{'accuracy.window': -1.0}))
     assert table.validate(dict(p, **{'accuracy.error_threshold': 0.0}))
     assert PARAMS.by_name['accuracy.window'].unit == 's'
+
+
+def test_level_changes_are_logged_by_a_real_rclpy_logger():
+    """Each severity from its own call site: rclpy raises 'Logger severity cannot be
+    changed between calls' when one call site logs two severities (a timer callback
+    raising would end the driver's process)."""
+    from rclpy.impl.rcutils_logger import RcutilsLogger
+
+    from sslfr_drivers.axis.core import Snapshot
+    log = RcutilsLogger('accuracy_test')
+    a = AccuracyAlarm('mirrors', AccuracyConfig(window=0.5))     # the latest sample alone
+    sp = 0.3
+    seen = []
+    for k, err in enumerate([0.0, 0.0, 0.1, 0.1, 0.5, 0.5, 0.0, 0.0, 0.1, 0.1]):
+        a.sample_snapshot(Snapshot(float(k + 1), 'following', sp, sp, sp + D(err)), 'active', log)
+        seen.append(a.level)
+    a.sample_snapshot(Snapshot(20.0, 'stopped', sp, sp, sp + D(0.5)), 'active', log)
+    assert seen == [OK, OK, WARN, WARN, ERROR, ERROR, OK, OK, WARN, WARN] and a.level == OK

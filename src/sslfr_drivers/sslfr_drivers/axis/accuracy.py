@@ -10,7 +10,9 @@ loss table. A level is left when the filtered error falls below :data:`CLEAR` ti
 its threshold (no chatter around a threshold).
 
 "Tracking" excludes the deliberate moves the day report also leaves out: a sample is
-judged only while the driver is ``following``, and not from a setpoint jump (faster
+judged only while the driver follows a trajectory (:data:`TRACKING_STATES`: ``following``,
+or ``waiting`` for the first point of the newest one, holding that point), and not from
+a setpoint jump (faster
 than :data:`MOVE_RATE`: the pre-dawn slew, a stow ramp, a law's repositioning, or the
 first sample after any other state) until the axis is within :data:`SETTLE` of its
 setpoint, or :data:`MOVE_CAP` seconds later (an axis that never arrives is then judged,
@@ -40,12 +42,16 @@ MOVE_CAP = 300.0
 #: a level is left when the filtered error falls below CLEAR x its threshold [-]
 CLEAR = 0.8
 OK, WARN, ERROR = 0, 1, 2
+#: the driver's states (AxisStatus.state) in which the axis tracks the sun: following the
+#: trajectory, or waiting for the first point of the newest one (that point held; the
+#: planner sends a trajectory every 5 s whose first point lies ahead)
+TRACKING_STATES = ('following', 'waiting')
 LEVEL_TEXT = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 #: The driver's parameters of the alarm (sslfr_drivers.axis.params adds them to its table).
 PARAM_SPECS = (
     ParamSpec('accuracy.warn_threshold', math.radians(0.06), 'tracking error (RMS over accuracy.window, '
-              'measured - setpoint while following) that raises a WARN [rad]; default 0.06 deg, seed 000 '
+              'measured - setpoint while tracking) that raises a WARN [rad]; default 0.06 deg, seed 000 '
               'Figs. 21-24 (~0.2 % optical loss)', 'rad', 1e-5, 0.2),
     ParamSpec('accuracy.error_threshold', math.radians(0.36), 'tracking error that raises the strong '
               'warning (diagnostics ERROR, log ERROR) [rad]; default 0.36 deg, seed 000 Figs. 22-24 '
@@ -110,8 +116,8 @@ class AccuracyAlarm:
         self.cfg = cfg
 
     def sample(self, t: float, following: bool, setpoint: float, measured: float):
-        """One sample at ROS time ``t`` [s]: ``following`` (the driver follows the
-        trajectory), ``setpoint`` and ``measured`` [rad]. Returns None, or
+        """One sample at ROS time ``t`` [s]: ``following`` (the driver's state is one of
+        :data:`TRACKING_STATES`), ``setpoint`` and ``measured`` [rad]. Returns None, or
         ``(level, line)`` when the level changed (the line for the log)."""
         if self._last_t is not None and t <= self._last_t:
             if t == self._last_t:
@@ -150,10 +156,17 @@ class AccuracyAlarm:
     def sample_snapshot(self, snap, lifecycle: str, log) -> None:
         """Feed the driver's status numbers (a ``core.Snapshot``, lifecycle state label);
         a level change is logged with ``log`` (info / warning / error by the new level)."""
-        change = self.sample(snap.stamp, lifecycle == 'active' and snap.state == 'following',
+        change = self.sample(snap.stamp, lifecycle == 'active' and snap.state in TRACKING_STATES,
                              snap.setpoint, snap.measured)
-        if change:
-            (log.info, log.warning, log.error)[change[0]](change[1])
+        if not change:
+            return
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        if change[0] == ERROR:
+            log.error(change[1])
+        elif change[0] == WARN:
+            log.warning(change[1])
+        else:
+            log.info(change[1])
 
     def _stop_judging(self):
         self.tracking = False
