@@ -1,5 +1,5 @@
 """System scenarios, faults: every `--fault` spec of `./sslfr sim` produces its
-documented reaction (sslfr_bringup/faults.py), seen live on topics and in the bag.
+documented reaction (sslfr_sim/faults.py), seen live on topics and in the bag.
 
 One simulated morning carries the faults one after the other (each given time to
 show its reaction and recover), so the node set starts once:
@@ -32,8 +32,9 @@ import pytest
 
 from conftest import ROOT
 
-from sslfr_bringup import nodeset, scenario
-from sslfr_bringup.sim import day_epoch, parse_hhmm
+from sslfr_bringup import nodeset
+from sslfr_sim import scenario
+from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
@@ -84,7 +85,7 @@ def _sim(ros, env, out, args, timeout=150.0, watch=None):
 @pytest.fixture(scope='module')
 def morning(tmp_path_factory):
     """The faulty morning, run once for the tests of this module (own domain)."""
-    from conftest import RosHarness, _acquire_domain
+    from harness import RosHarness, acquire_test_domain
     import fcntl
     import os
     from diagnostic_msgs.msg import DiagnosticArray
@@ -92,7 +93,7 @@ def morning(tmp_path_factory):
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     from sensor_msgs.msg import NavSatFix, Temperature
 
-    dom, fh = _acquire_domain()
+    dom, fh = acquire_test_domain()
     tmp = tmp_path_factory.mktemp('faults')
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp / 'roslog'), PYTHONUNBUFFERED='1')
@@ -292,8 +293,8 @@ def test_slip_raises_accuracy_warn_then_error_live_in_the_bag_and_in_the_report(
     diagnostics go WARN (past 0.06 deg) then ERROR (past 0.36 deg), live and in the bag,
     each change logged on /rosout; the day report counts the time above each threshold
     from the slip's progress until the re-homing of the board reset ends it."""
-    from sslfr_bringup import report
-    from sslfr_bringup.bag.reader import BagReader
+    from sslfr_recording import report
+    from sslfr_recording.bag.reader import BagReader
     t0, _ = _applied(morning, SLIP)
     t_reset = _fired(morning, 'board-reset:mobile_structure@10:50')['sim_time']
     name = 'mobile_structure_driver: accuracy'
@@ -346,8 +347,8 @@ def test_the_bag_holds_the_drivers_and_safetys_warnings_and_the_report_lists_the
     """/rosout is in the day's bag: the drivers' and the safety's warnings and errors
     are there at the time of their fault (log time = the day's ROS time), and the day
     report's timeline lists them beside the phase and safety changes."""
-    from sslfr_bringup import report
-    from sslfr_bringup.bag.reader import BagReader
+    from sslfr_recording import report
+    from sslfr_recording.bag.reader import BagReader
     reader = BagReader(morning['bag'])
     assert '/rosout' in reader.topics
     logs = [(raw.log_time / 1e9, m.level, m.name, m.msg) for raw, m in reader.decoded(['/rosout'])]

@@ -1,4 +1,4 @@
-"""The loss table (sslfr_planner.tracking_loss) is the ray trace's seed 000 section 5.2
+"""The loss table (sslfr_common.tracking_loss) is the ray trace's seed 000 section 5.2
 study, recomputed here so the numbers cannot drift from the analysis."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from sslfr_planner.analysis import performance
 from sslfr_planner.analysis.optics import OpticalParameters
 from sslfr_planner.analysis.performance import AnalysisSite
-from sslfr_planner.tracking_loss import LOSS_TABLE, estimated_loss, loss_text
+from sslfr_common.tracking_loss import LOSS_TABLE, estimated_loss, loss_text
 
 ALMERIA = AnalysisSite(36 + 50 / 60 + 7 / 3600, -(2 + 24 / 60 + 8 / 3600), 22.0)
 DAYS = [date(2024, 3, 21), date(2024, 6, 21), date(2024, 9, 21), date(2024, 12, 21)]

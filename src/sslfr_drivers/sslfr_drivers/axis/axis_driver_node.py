@@ -4,7 +4,7 @@ One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This f
 only wires ROS to pure code: parameters :mod:`.params`, decisions
 :class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
 :mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
-:mod:`.control_loop`, messages :mod:`.msgs`, accuracy alarm :mod:`.accuracy`.
+:mod:`.control_loop`, messages :mod:`.msgs`, accuracy alarm ``sslfr_common.accuracy``.
 
 The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
 its own thread (``AxisSupervisor.next_tick``: at ``control_rate`` while something moves,
@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from sslfr_common.accuracy import AccuracyAlarm, AccuracyConfig
 from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
@@ -27,7 +28,6 @@ from sslfr_interfaces.srv import Jog
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from sslfr_drivers.axis.accuracy import AccuracyAlarm, AccuracyConfig
 from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused, open_session
 from sslfr_drivers.axis.control_loop import BackgroundOpen, ControlLoop
 from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapshot, TimeRate,
