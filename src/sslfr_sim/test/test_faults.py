@@ -86,3 +86,15 @@ def test_sim_set_option_parses_yaml_values():
     for bad in ('planner=1', 'planner:x', 'ghost:x=1'):
         with pytest.raises(ValueError):
             parse_set(bad, ['planner'])
+
+
+def test_sim_refuses_a_slip_on_firmware_boards(tmp_path, capsys):
+    """The slipping coupling is a model of the Python boards: refused (exit 2, one line)
+    before anything starts with --boards firmware."""
+    from sslfr_sim.sim_cli import main
+    code = main(['--boards', 'firmware', '--fault', 'slip:mirrors@10:00+60:0.5', '--out', str(tmp_path / 'o'),
+                 '--start', '10:00', '--end', '10:05'])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert 'slipping coupling is simulated by the Python boards only' in err, err
+    assert not (tmp_path / 'o').exists()
