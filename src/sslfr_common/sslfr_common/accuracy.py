@@ -9,10 +9,11 @@ thresholds: seed 000's 0.06 deg (WARN: about 0.2 % of the power lost,
 loss table. A level is left when the filtered error falls below :data:`CLEAR` times
 its threshold (no chatter around a threshold).
 
-"Tracking" excludes the deliberate moves the day report also leaves out: a sample is
-judged only while the driver follows a trajectory (:data:`TRACKING_STATES`: ``following``,
-or ``waiting`` for the first point of the newest one, holding that point), and not from
-a setpoint jump (faster
+"Tracking" (:func:`tracking`) is the planner's phase TRACKING with the driver following
+a trajectory (:data:`TRACKING_STATES`: ``following``, or ``waiting`` for the first
+point of the newest one, holding that point): not the night's sleeping pose, a stow, a
+manual hold. It also excludes the deliberate moves the day report leaves out: no
+sample is judged from a setpoint jump (faster
 than :data:`MOVE_RATE`: the pre-dawn slew, a stow ramp, a law's repositioning, or the
 first sample after any other state) until the axis is within :data:`SETTLE` of its
 setpoint, or :data:`MOVE_CAP` seconds later (an axis that never arrives is then judged,
@@ -28,6 +29,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from sslfr_common.contract import Phase
 from sslfr_common.params import ParamSpec
 from sslfr_common.tracking_loss import loss_text
 
@@ -46,6 +48,13 @@ OK, WARN, ERROR = 0, 1, 2
 #: trajectory, or waiting for the first point of the newest one (that point held; the
 #: planner sends a trajectory every 5 s whose first point lies ahead)
 TRACKING_STATES = ('following', 'waiting')
+
+
+def tracking(state: str, phase: int | None) -> bool:
+    """Whether a sample is one of sun tracking: the driver's ``state`` (AxisStatus.state)
+    in :data:`TRACKING_STATES` during the planner's ``phase`` TRACKING (TrackerPhase.phase;
+    None: not known yet)."""
+    return state in TRACKING_STATES and phase == Phase.TRACKING
 LEVEL_TEXT = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 #: The driver's parameters of the alarm (sslfr_drivers.axis.params adds them to its table).
@@ -110,14 +119,15 @@ class AccuracyAlarm:
         self._last_sp = math.nan
         self._move_since: float | None = None   # ROS time the current move began
         self._following = False                 # the previous sample was following
+        self.phase: int | None = None           # the planner's phase (the driver sets it)
 
     def configure(self, cfg: AccuracyConfig) -> None:
         """New thresholds / window (a run-time parameter change); judged from the next sample."""
         self.cfg = cfg
 
     def sample(self, t: float, following: bool, setpoint: float, measured: float):
-        """One sample at ROS time ``t`` [s]: ``following`` (the driver's state is one of
-        :data:`TRACKING_STATES`), ``setpoint`` and ``measured`` [rad]. Returns None, or
+        """One sample at ROS time ``t`` [s]: ``following`` (:func:`tracking` of the
+        driver's state and the phase), ``setpoint`` and ``measured`` [rad]. Returns None, or
         ``(level, line)`` when the level changed (the line for the log)."""
         if self._last_t is not None and t <= self._last_t:
             if t == self._last_t:
@@ -154,9 +164,10 @@ class AccuracyAlarm:
         return self._judge()
 
     def sample_snapshot(self, snap, lifecycle: str, log) -> None:
-        """Feed the driver's status numbers (a ``core.Snapshot``, lifecycle state label);
-        a level change is logged with ``log`` (info / warning / error by the new level)."""
-        change = self.sample(snap.stamp, lifecycle == 'active' and snap.state in TRACKING_STATES,
+        """Feed the driver's status numbers (a ``core.Snapshot``, lifecycle state label)
+        during :attr:`phase`; a level change is logged with ``log`` (info / warning /
+        error by the new level)."""
+        change = self.sample(snap.stamp, lifecycle == 'active' and tracking(snap.state, self.phase),
                              snap.setpoint, snap.measured)
         if not change:
             return

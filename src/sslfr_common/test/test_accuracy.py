@@ -104,6 +104,7 @@ def test_level_changes_are_logged_by_a_real_rclpy_logger():
     Snapshot = namedtuple('Snapshot', 'stamp state commanded setpoint measured')     # the driver's fields
     log = RcutilsLogger('accuracy_test')
     a = AccuracyAlarm('mirrors', AccuracyConfig(window=0.5))     # the latest sample alone
+    a.phase = 2                                                   # TRACKING
     sp = 0.3
     seen = []
     for k, err in enumerate([0.0, 0.0, 0.1, 0.1, 0.5, 0.5, 0.0, 0.0, 0.1, 0.1]):
@@ -111,3 +112,20 @@ def test_level_changes_are_logged_by_a_real_rclpy_logger():
         seen.append(a.level)
     a.sample_snapshot(Snapshot(20.0, 'stopped', sp, sp, sp + D(0.5)), 'active', log)
     assert seen == [OK, OK, WARN, WARN, ERROR, ERROR, OK, OK, WARN, WARN] and a.level == OK
+
+
+def test_only_sun_tracking_is_judged():
+    """The driver following its trajectory during the planner's TRACKING phase (or
+    waiting for the newest trajectory's first point); not the night's sleeping pose,
+    a stow ramp's hold, a manual hold, or before any phase is known."""
+    from collections import namedtuple
+
+    from sslfr_common.accuracy import tracking
+    assert tracking('following', 2) and tracking('waiting', 2)
+    for state, phase in (('following', 0), ('following', 5), ('holding', 2), ('stowing', 2), ('following', None)):
+        assert not tracking(state, phase), (state, phase)
+    Snapshot = namedtuple('Snapshot', 'stamp state commanded setpoint measured')
+    a = AccuracyAlarm('mirrors', AccuracyConfig(window=0.5))
+    for k in range(5):                       # at night, off the setpoint: never judged
+        a.sample_snapshot(Snapshot(float(k), 'following', 1.5, 1.5, 1.5 + D(0.5)), 'active', None)
+    assert not a.tracking and a.level == OK

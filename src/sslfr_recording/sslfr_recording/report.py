@@ -401,7 +401,9 @@ def analyse(reader: BagReader, config: str | None = None) -> DayReport:
                            'frames_lost': int(v['lost'].max() - v['lost'][0]) if len(t) else 0,
                            'frames_bad': int(v['bad'].max() - v['bad'][0]) if len(t) else 0,
                            'fault_samples': int(np.sum(v['faults'] != 0))}
-        rep.accuracy[axis] = accuracy_of(axis, t, v, config)
+        phases = np.asarray(pv['phase'])[np.clip(np.searchsorted(pt, t, side='right') - 1, 0, None)] \
+            if len(pt) else np.full(len(t), -1)
+        rep.accuracy[axis] = accuracy_of(axis, t, v, phases, config)
     if not rep.tracking:
         for axis in JOINTS:
             if joints[axis].t:
@@ -444,15 +446,16 @@ def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfi
     return accuracy_mod.AccuracyConfig.from_params(p)
 
 
-def accuracy_of(axis: str, t: np.ndarray, v: dict, config: str | None = None) -> dict:
+def accuracy_of(axis: str, t: np.ndarray, v: dict, phases, config: str | None = None) -> dict:
     """The driver's accuracy alarm replayed on the recorded status samples of ``axis``
-    (times [s], the status' state / setpoint / measured [rad]): time [s] at or above
+    (times [s], the status' state / setpoint / measured [rad], the planner's phase in
+    force at each sample (-1: none before it)): time [s] at or above
     each level, time judged (tracking), the largest filtered error [rad] and the level
     changes [(t, level, line)]."""
     alarm = accuracy_mod.AccuracyAlarm(axis, accuracy_config(axis, config))
     changes = []
-    for ti, state, sp, me in zip(t, v['state'], v['setpoint'], v['measured']):
-        change = alarm.sample(float(ti), state in accuracy_mod.TRACKING_STATES, float(sp), float(me))
+    for ti, state, phase, sp, me in zip(t, v['state'], phases, v['setpoint'], v['measured']):
+        change = alarm.sample(float(ti), accuracy_mod.tracking(state, int(phase)), float(sp), float(me))
         if change:
             changes.append((float(ti), *change))
     c = alarm.cfg

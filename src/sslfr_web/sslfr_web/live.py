@@ -162,7 +162,9 @@ class LiveState:
         if m.axis in self.axes:
             self._set(f'axes/{m.axis}', m)
             with self._lock:
-                self.accuracy[m.axis].sample(to_sec(m.header.stamp), m.state in accuracy_mod.TRACKING_STATES,
+                phase = self._msgs.get('phase')
+                self.accuracy[m.axis].sample(to_sec(m.header.stamp),
+                                             accuracy_mod.tracking(m.state, None if phase is None else phase.phase),
                                              m.setpoint, m.measured)
 
     def on_sun(self, m) -> None:

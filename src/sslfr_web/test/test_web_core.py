@@ -296,7 +296,7 @@ def test_live_state_shows_each_axis_accuracy_alarm_with_the_drivers_thresholds()
     import json
     import math
 
-    from sslfr_interfaces.msg import AxisStatus
+    from sslfr_interfaces.msg import AxisStatus, TrackerPhase
     s = live.LiveState()
     assert remote.REMOTE_PARAMS['mirrors_driver']['accuracy.warn_threshold'] == 'mirrors.accuracy.warn_threshold'
 
@@ -304,6 +304,9 @@ def test_live_state_shows_each_axis_accuracy_alarm_with_the_drivers_thresholds()
         m = AxisStatus(axis='mirrors', state=state, setpoint=0.3, measured=0.3 + math.radians(err))
         m.header.stamp.sec = t
         return m
+    s.on_axis(status(990, 0.5))
+    assert s.snapshot()['accuracy']['mirrors']['tracking'] is False     # no phase yet: not judged
+    s.on_phase(TrackerPhase(phase=TrackerPhase.TRACKING))
     for t in range(1000, 1010):
         s.on_axis(status(t, 0.01))
     snap = s.snapshot()

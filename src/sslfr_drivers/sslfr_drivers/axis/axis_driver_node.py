@@ -198,7 +198,7 @@ class AxisDriver(ManagedNode):
             self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 
     def _on_phase(self, msg: TrackerPhase) -> None:
-        mode = operator_mode(msg.phase, msg.mode)
+        mode, self.accuracy.phase = operator_mode(msg.phase, msg.mode), int(msg.phase)   # judged in TRACKING
         with self._lock:
             old = self.sup.mode
             if self.sup.set_mode(mode):
