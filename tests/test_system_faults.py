@@ -33,6 +33,7 @@ import pytest
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
+from sslfr_recording.day import planner_config, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
@@ -79,7 +80,7 @@ def _sim(ros, env, out, args, timeout=150.0, watch=None):
     summary = json.loads((out / 'sim.json').read_text())
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     assert bags, text
-    return text, summary, scenario.read_day(bags[-1]), bags[-1]
+    return text, summary, read_day(bags[-1]), bags[-1]
 
 
 @pytest.fixture(scope='module')
@@ -138,7 +139,7 @@ def _applied(morning, spec) -> tuple[float, float]:
 
 def _ref(day):
     k = np.asarray(day.phase['site_source']) != ''
-    return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+    return reference(_config(), float(np.median(day.phase['latitude'][k])),
                               float(np.median(day.phase['longitude'][k])), 22.0)
 
 
@@ -205,7 +206,7 @@ def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
     day = morning['day']
     traj = day.trajectory.between(t0 + 120, t1 - 20)
     assert len(traj) == 0, 'no trajectory while the planner is down'
-    horizon = scenario.planner_config(_config())['horizon']
+    horizon = planner_config(_config())['horizon']
     hold = day.axes['mirrors'].between(t0 + horizon + 2 * LAG, t1)
     assert len(hold) >= 3, len(hold)
     assert np.ptp(hold['measured']) < 4 * TOL, 'holding position'
@@ -293,7 +294,7 @@ def test_slip_raises_accuracy_warn_then_error_live_in_the_bag_and_in_the_report(
     diagnostics go WARN (past 0.06 deg) then ERROR (past 0.36 deg), live and in the bag,
     each change logged on /rosout; the day report counts the time above each threshold
     from the slip's progress until the re-homing of the board reset ends it."""
-    from sslfr_recording import report
+    from sslfr_recording import report, report_render
     from sslfr_recording.bag.reader import BagReader
     t0, _ = _applied(morning, SLIP)
     t_reset = _fired(morning, 'board-reset:mobile_structure@10:50')['sim_time']
@@ -339,7 +340,7 @@ def test_slip_raises_accuracy_warn_then_error_live_in_the_bag_and_in_the_report(
     assert math.degrees(acc['peak']) == pytest.approx(0.5, abs=0.05)
     for other in ('mirrors', 'secondary_reflector'):
         assert rep.accuracy[other]['error_s'] == 0, (other, rep.accuracy[other])
-    text = report.render_text(rep)
+    text = report_render.render_text(rep)
     assert f'mobile_structure     {acc["warn_s"]:8.0f} s / {acc["error_s"]:6.0f} s of ' in text, text
 
 
@@ -347,7 +348,7 @@ def test_the_bag_holds_the_drivers_and_safetys_warnings_and_the_report_lists_the
     """/rosout is in the day's bag: the drivers' and the safety's warnings and errors
     are there at the time of their fault (log time = the day's ROS time), and the day
     report's timeline lists them beside the phase and safety changes."""
-    from sslfr_recording import report
+    from sslfr_recording import report, report_render
     from sslfr_recording.bag.reader import BagReader
     reader = BagReader(morning['bag'])
     assert '/rosout' in reader.topics
@@ -378,6 +379,6 @@ def test_the_bag_holds_the_drivers_and_safetys_warnings_and_the_report_lists_the
             (t, kinds, node)
     safety_changes = [t for t, kind, text in timeline if kind == 'safety' and text.startswith('STOW')]
     assert any(abs(t - t_hot_line) <= SPEED for t in safety_changes), 'the over-temperature STOW beside its line'
-    text = report.render_text(rep)
-    assert f'{report.utc(t_hot_line)}  ERROR  safety: ' in text
+    text = report_render.render_text(rep)
+    assert f'{report_render.utc(t_hot_line)}  ERROR  safety: ' in text
     assert 'log lines: ' in text and 'safety' in text.split('log lines: ')[1].splitlines()[0]

@@ -333,7 +333,7 @@ def test_whatif_comparison_on_bags(tmp_path):
 def test_report_figures_on_a_known_day(tmp_path):
     from daybag import SUNRISE, SUNSET, STOW, expected_H, write_day
 
-    from sslfr_recording import report
+    from sslfr_recording import report, report_cli
     start, end = STOW[0] - 1800, STOW[0] + 1800
     write_day(tmp_path / 'd', start, end, err_amp=0.002)
     rep = report.analyse(BagReader(tmp_path / 'd'))
@@ -347,7 +347,7 @@ def test_report_figures_on_a_known_day(tmp_path):
     assert 'outlet' in stow['reasons'][0]
     assert rep.temperatures['outlet_temperature']['max'] == pytest.approx(152.0)
     assert rep.irradiance['H_kWh_m2'] == pytest.approx(expected_H(start, end - 1), rel=1e-4)
-    assert report.main([str(tmp_path / 'd'), '--out', str(tmp_path / 'r')]) == 0
+    assert report_cli.main([str(tmp_path / 'd'), '--out', str(tmp_path / 'r')]) == 0
     md = (tmp_path / 'r' / 'report.md').read_text()
     for png in ('angles', 'tracking_error', 'temperatures', 'irradiance'):
         assert (tmp_path / 'r' / f'{png}.png').stat().st_size > 5000 and f'({png}.png)' in md
@@ -361,7 +361,7 @@ def test_report_accuracy_times_and_timeline_of_warnings(tmp_path):
     and safety changes, repeats collapsed, INFO left out."""
     from daybag import DAY0, STOW, write_day
 
-    from sslfr_recording import report
+    from sslfr_recording import report, report_render
     h10 = DAY0 + 10 * 3600
 
     def err(t):
@@ -378,7 +378,7 @@ def test_report_accuracy_times_and_timeline_of_warnings(tmp_path):
     assert acc['error_s'] == pytest.approx(10 * 60 + 41 - 30, abs=2)
     assert math.degrees(acc['peak']) == pytest.approx(0.5, abs=1e-6)
     assert [lvl for _, lvl, _ in acc['changes']] == [1, 2, 1, 0]
-    kinds = [(report.utc(t), kind, text, n) for t, kind, text, n, _ in rep.timeline]
+    kinds = [(report_render.utc(t), kind, text, n) for t, kind, text, n, _ in rep.timeline]
     assert ('10:00:22', 'WARN', 'mirrors_driver: mirrors: tracking error 0.061 deg ...', 1) in kinds
     assert ('13:00:00', 'safety', 'STOW: absorber: outlet 152.0 degC > 150 degC', 1) in kinds
     assert ('13:00:00', 'ERROR', 'safety: STOW: absorber: outlet 152.0 degC > 150 degC', 1) in kinds
@@ -388,7 +388,7 @@ def test_report_accuracy_times_and_timeline_of_warnings(tmp_path):
     assert not any('INFO' in k[2] for k in kinds)
     assert [k[0] for k in kinds] == sorted(k[0] for k in kinds)
     assert rep.log_counts == {('WARN', 'mirrors_driver'): 4, ('ERROR', 'safety'): 1, ('WARN', 'safety'): 1}
-    text = report.render_text(rep)
+    text = report_render.render_text(rep)
     assert f'mirrors              {acc["warn_s"]:8.0f} s / {acc["error_s"]:6.0f} s of ' in text, text
     assert '13:00:01  WARN   mirrors_driver: link lost (x3 until 13:00:03)' in text
     assert 'log lines: ERROR 1 (safety 1); WARN 5 (mirrors_driver 4, safety 1)' in text
