@@ -15,17 +15,16 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node
+from sslfr_common.contract import (AXIS_STATUS, DIAGNOSTICS, IRRADIANCE_BEAM, JOINT_STATES, MIRRORS,
+                                   PLANNER_SET_MODE, TRACKER_PHASE)
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node
 from sslfr_interfaces.msg import AxisStatus, Irradiance, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 
 from . import params as gp
 from . import sunspec
 from .modbus_server import ModbusGateway
-
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _Collector:
@@ -64,12 +63,15 @@ class ModbusGatewayNode(LeanEvents, Node):
         self._set_mode = []
         for k, ns in enumerate(cfg['collectors']):
             p = ns.rstrip('/') + '/' if ns else ''
-            self.create_subscription(JointState, p + 'joint_states', lambda m, k=k: self._on_joints(k, m), 10)
-            self.create_subscription(AxisStatus, p + 'axes/mirrors/status', lambda m, k=k: self._on_axis(k, m), 10)
-            self.create_subscription(TrackerPhase, p + 'tracker/phase', lambda m, k=k: self._on_phase(k, m),
-                                     LATCHED)
-            self.create_subscription(Irradiance, p + 'irradiance/beam', lambda m, k=k: self._on_beam(k, m), 10)
-            self._set_mode.append(self.create_client(SetMode, p + 'planner/set_mode'))
+            self.create_subscription(JointState, p + JOINT_STATES.name, lambda m, k=k: self._on_joints(k, m),
+                                     qos(JOINT_STATES))
+            self.create_subscription(AxisStatus, p + AXIS_STATUS.of(MIRRORS), lambda m, k=k: self._on_axis(k, m),
+                                     qos(AXIS_STATUS))
+            self.create_subscription(TrackerPhase, p + TRACKER_PHASE.name, lambda m, k=k: self._on_phase(k, m),
+                                     qos(TRACKER_PHASE))
+            self.create_subscription(Irradiance, p + IRRADIANCE_BEAM.name, lambda m, k=k: self._on_beam(k, m),
+                                     qos(IRRADIANCE_BEAM))
+            self._set_mode.append(self.create_client(SetMode, p + PLANNER_SET_MODE.name))
         self.gateway = ModbusGateway(
             [self._encode(k) for k in range(len(self.collectors))], [1] * len(self.collectors),
             self._command, bind_address=cfg['bind_address'], port=cfg['port'],
@@ -80,7 +82,7 @@ class ModbusGatewayNode(LeanEvents, Node):
         port = self.gateway.start()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(0.1, self._refresh, clock=steady)
-        self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self.create_timer(1.0, self._diagnostics, clock=steady)
         writes = ', '.join(gp.allowed(cfg['write_allow'])) or 'none (read-only)'
         self.get_logger().info(f"SunSpec Modbus TCP at {cfg['bind_address']}:{port} "
@@ -89,7 +91,7 @@ class ModbusGatewayNode(LeanEvents, Node):
     # -- topics -----------------------------------------------------------------------
     def _on_joints(self, k: int, msg: JointState) -> None:
         for name, pos in zip(msg.name, msg.position):
-            if name == 'mirrors':
+            if name == MIRRORS:
                 c = self.collectors[k]
                 c.position, c.stale = float(pos), False
                 c.position_at = self._steady.now().nanoseconds * 1e-9
