@@ -295,13 +295,17 @@ def _parse_layouts(data: Mapping[str, Any], nodes: Mapping[str, NodeSpec]) -> di
 
 def load(path: str | os.PathLike | None = None) -> NodeSet:
     """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
+    from sslfr_planner.cli_input import CliError, read_text_file
     p = Path(path) if path else config_dir() / NODESET_FILE
     try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise NodeSetError(f'cannot read node set {p}: {exc}') from exc
+        text = read_text_file(p, 'node set')
+    except CliError as exc:
+        raise NodeSetError(str(exc)) from None
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise NodeSetError(f'{p}: invalid YAML: {exc}') from exc
+        mark = getattr(exc, 'problem_mark', None)
+        raise NodeSetError(f'node set {p}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
     return parse(data, p)
 
 

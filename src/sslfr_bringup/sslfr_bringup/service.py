@@ -158,6 +158,7 @@ def _body(argv: list[str]) -> int:
     try:
         ns = nodeset_mod.load()
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        nodeset_mod.checked_params(ns, config, args.namespace)   # what `sslfr up` will check at start
     except nodeset_mod.NodeSetError as exc:
         raise CliError(f'argument --config: {exc}') from None
     if args.layout and args.layout not in ns.layouts:

@@ -47,7 +47,7 @@ from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, output_dir, ranged_float
 
 
 class SimClock:
@@ -185,8 +185,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00)')
     p.add_argument('--speed', type=ranged_float(0.0, 5000.0, lo_open=True), default=None,
                    help='simulated seconds per wall second, (0, 5000] (default 400)')
-    p.add_argument('--record', default=None, help='bag output directory (default OUT/bags)')
-    p.add_argument('--out', default=None, help='output directory: logs, bags, report (default out/sim-DATE)')
+    p.add_argument('--record', type=output_dir, default=None, help='bag output directory (default OUT/bags)')
+    p.add_argument('--out', type=output_dir, default=None,
+                   help='output directory: logs, bags, report (default out/sim-DATE)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
     p.add_argument('--set', action='append', default=[], metavar='NODE:KEY=VALUE',
                    help='set a node parameter for this run (YAML value, after the site config), '

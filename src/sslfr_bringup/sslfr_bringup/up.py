@@ -24,7 +24,7 @@ from pathlib import Path
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, output_dir, ros_namespace
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
@@ -87,13 +87,14 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else the node set\'s, 42)')
-    p.add_argument('--namespace', default=None, help='namespace of the whole tracker, e.g. /sslfr1')
+    p.add_argument('--namespace', type=ros_namespace, default=None,
+                   help='namespace of the whole tracker, e.g. /sslfr1 (the rules install-service checks)')
     p.add_argument('--layout', default=None,
                    help='process layout of the node set (config/nodeset.yaml layouts: composed, separate; '
                         'default: the node set\'s)')
     p.add_argument('--only', default='', help='comma-separated node names to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated node names not to run')
-    p.add_argument('--log-dir', default=None, help='write each node\'s output to DIR/<node>.log '
+    p.add_argument('--log-dir', type=output_dir, default=None, help='write each node\'s output to DIR/<node>.log '
                                                    '(default: inherit stdout, i.e. the journal under systemd)')
     p.add_argument('--print', action='store_true', dest='print_only',
                    help='print the command lines and exit (nothing is started)')

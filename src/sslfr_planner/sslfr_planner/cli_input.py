@@ -146,6 +146,8 @@ def read_text_file(path, what: str = 'file') -> str:
         raise CliError(f'{what} {p} is a directory, not a file') from None
     except OSError as exc:
         raise CliError(f'{what} {p}: {exc.strerror or exc}') from None
+    except ValueError:                         # a NUL byte in the path
+        raise CliError(f'{what} {str(p)!r}: not a usable path (NUL byte)') from None
     if len(data) > MAX_TEXT_BYTES:
         raise CliError(f'{what} {p} is larger than {MAX_TEXT_BYTES >> 20} MiB: not a config or metadata file')
     try:

@@ -299,4 +299,4 @@ class LoginLimiter:
     def locked(self) -> dict[str, float]:
         """Address -> seconds left, of every address locked out now."""
         now = self.clock()
-        return {a: s.locked_until - now for a, s in self._by_addr.items() if s.locked_until > now}
+        return {a: s.locked_until - now for a, s in list(self._by_addr.items()) if s.locked_until > now}
