@@ -252,3 +252,36 @@ def test_bad_input_through_the_sslfr_script(template, corpus):
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and 'Traceback' not in proc.stderr
     assert _snapshot(corpus['tmp']) == before
+
+
+def _schema_bag(path: Path, type_name: str, schema_text: str) -> None:
+    w = BagWriter(path, WriterOptions(fsync=False))
+    w.add_topic('/t', type_name, [profile()], schema_text=schema_text, type_hash='RIHS01_' + '0' * 64)
+    for k in range(5):
+        w.write('/t', bytes(serialize_message(Temperature(temperature=float(k)))), 10**18 + k * 10**8)
+    w.close()
+
+
+@pytest.mark.parametrize('text', ['float64 temperature\nfloat64 variance\nstd_msgs/Header header\n',
+                                  '\0garbage [[['])
+def test_recover_rebuilds_a_damaged_schema_that_info_refuses(tmp_path, capsys, text):
+    bag = tmp_path / 'bag'
+    _schema_bag(bag, 'sensor_msgs/msg/Temperature', text)
+    assert cli.main(['bag', 'info', str(bag)]) == 2
+    assert 'sslfr bag recover' in capsys.readouterr().err
+    assert cli.main(['bag', 'recover', str(bag)]) == 0
+    assert 'rebuilt from the installed message definitions' in capsys.readouterr().out
+    assert cli.main(['bag', 'info', str(bag)]) == 0          # recover and info agree
+    assert 'sensor_msgs/msg/Temperature' in capsys.readouterr().out
+
+
+def test_recover_says_plainly_when_it_cannot_rebuild_a_schema(tmp_path, capsys):
+    bag = tmp_path / 'bag'
+    _schema_bag(bag, 'nowhere_msgs/msg/Thing', 'garbage [[[')
+    assert cli.main(['bag', 'info', str(bag)]) == 2
+    err = capsys.readouterr().err
+    assert 'cannot repair it' in err and 'nowhere_msgs' in err and 'try sslfr bag recover' not in err
+    assert cli.main(['bag', 'recover', str(bag)]) == 1
+    out, err = capsys.readouterr()
+    assert 'cannot repair' in out and ': ok' not in out
+    assert len(err.strip().splitlines()) == 1 and 'would still refuse' in err
