@@ -177,14 +177,20 @@ def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr
     """Return the params file for ``name``: a path as given when it exists, else a
     file of that name (``.yaml`` optional) in :func:`config_dir`."""
     name = str(name) if name else default
+
+    def is_file(path: Path) -> bool:        # a name too long or with a NUL byte is no file
+        try:
+            return path.is_file()
+        except (OSError, ValueError):
+            return False
     p = Path(name).expanduser()
-    if p.is_file():
+    if is_file(p):
         return p.resolve()
     for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
-        if cand.is_file():
+        if is_file(cand):
             return cand
     known = ', '.join(sorted(f.name for f in config_dir().glob('*.yaml') if f.name != NODESET_FILE))
-    raise NodeSetError(f'config {name!r} not found (as a path or in {config_dir()}; known: {known})')
+    raise NodeSetError(f'config {name[:200]!r} not found (as a path or in {config_dir()}; known: {known})')
 
 
 # ---------------------------------------------------------------------------------

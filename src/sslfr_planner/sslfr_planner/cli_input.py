@@ -8,8 +8,18 @@ import sys
 from sslfr_common.files import atomic_write
 
 
+def one_line(text: str) -> str:
+    """``text`` as one line: control characters a user's argument may carry (newline,
+    carriage return, escape, ...) shown escaped, so a refusal stays one line and
+    cannot forge log lines."""
+    return ''.join(c if c.isprintable() or c == ' ' else repr(c)[1:-1] for c in str(text))
+
+
 class CliError(Exception):
     """A user input error: printed as one line, exit status 2."""
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -38,10 +48,11 @@ def run(prog: str, body, argv) -> int:
         print(f'sslfr {prog}: error: {exc}', file=sys.stderr)
         return 2
     except ValueError as exc:
-        print(f'sslfr {prog}: error: {exc}', file=sys.stderr)
+        print(f'sslfr {prog}: error: {one_line(exc)}', file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': '), file=sys.stderr)
+        print(one_line(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': ')),
+              file=sys.stderr)
         return 1
 
 
@@ -95,6 +106,23 @@ def bounded_int(lo: int, hi: int):
     return parse
 
 
+def _path_errors(check):
+    """Decorate an argparse path type: a path the OS refuses outright (a name too long,
+    a NUL byte, a loop of links) is one clear refusal, not a traceback."""
+    import functools
+
+    @functools.wraps(check)
+    def parse(text: str):
+        try:
+            return check(text)
+        except (OSError, ValueError) as exc:
+            shown = text if len(text) <= 80 else text[:77] + '...'
+            raise argparse.ArgumentTypeError(f'{shown!r} is not a usable path '
+                                             f'({getattr(exc, "strerror", None) or exc})') from None
+    return parse
+
+
+@_path_errors
 def output_dir(text: str):
     """argparse type: a directory that exists and is writable, or can be created.
 
@@ -183,6 +211,7 @@ def time_step(span: float, max_samples: int, what: str = 'the run'):
     return parse
 
 
+@_path_errors
 def output_file(text: str) -> str:
     """argparse type: a file path that can be created or replaced (checked before any work).
 
