@@ -80,6 +80,10 @@ class SimClock:
         return max(0.0, (sim_t - self.now(mono)) / self.speed)
 
 
+#: marks a directory ``sslfr sim`` made as its output: only there does a new run replace bags/ and logs/
+SIM_MARK = '.sslfr-sim-output'
+
+
 def parse_hhmm(text: str) -> float:
     """``HH:MM`` or ``HH:MM:SS`` (UTC) -> seconds after midnight."""
     parts = text.split(':')
@@ -299,9 +303,21 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
             print(f'sslfr sim: fault {f.spec}: board {f.board} is not simulated in this node set', file=sys.stderr)
             return 2
-    out = Path(args.out or f'out/sim-{date}').resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    try:                      # the default output is checked as --out is (a read-only cwd ...)
+        out = (args.out or output_dir(f'out/sim-{date}')).resolve()
+    except argparse.ArgumentTypeError as exc:
+        print(f'sslfr sim: error: output directory: {exc}', file=sys.stderr)
+        return 2
     bag_root = Path(args.record).resolve() if args.record else out / 'bags'
+    # a new run replaces the sim's own bags/ and logs/, never someone else's (--out ~)
+    foreign = [d for d in ([] if args.record else [bag_root]) + [out / 'logs']
+               if d.exists() and args.out and not (out / SIM_MARK).exists()]
+    if foreign:
+        print(f'sslfr sim: error: argument --out: {out} already holds {", ".join(d.name for d in foreign)} '
+              'that sslfr sim did not make (it would replace them): choose another directory', file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    (out / SIM_MARK).touch()
     if not args.record and bag_root.exists():   # the sim's own output: a new run replaces it
         shutil.rmtree(bag_root)
     bag_root.mkdir(parents=True, exist_ok=True)

@@ -49,6 +49,7 @@ CASES = [
     ('sim --out {file}', '--out'),
     ('sim --record /proc/x', '--record'),
     ('sim --record {file}/sub', '--record'),
+    ('sim --out {withlogs}', 'did not make'),          # never replaces someone else's logs/
     ('sim --nodeset {pngfile}', 'not a text file'),
     ('up --log-dir /proc/x', '--log-dir'),
     ('up --log-dir {file}', '--log-dir'),
@@ -198,6 +199,9 @@ def corpus(tmp_path_factory):
     paths['nometa'].mkdir()
     for f in (tmp / 'good').glob('*.mcap'):
         (paths['nometa'] / f.name).write_bytes(f.read_bytes())
+    paths['withlogs'] = tmp / 'withlogs'
+    (paths['withlogs'] / 'logs').mkdir(parents=True)
+    (paths['withlogs'] / 'logs' / 'mine.txt').write_text('not the simulation\'s')
     paths['empty'] = tmp / 'empty'
     paths['empty'].mkdir()
     paths['pngfile'] = tmp / 'picture.png'

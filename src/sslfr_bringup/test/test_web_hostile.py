@@ -215,6 +215,23 @@ def test_slow_and_idle_connections_are_dropped_and_capped_per_address(tmp_path):
         assert len(lines) <= 6, lines                          # one line per kind per 10 s
 
 
+def test_a_slow_body_is_refused_408_and_the_page_keeps_answering(tmp_path):
+    with serving(tmp_path, body_timeout=0.5) as (url, op, backend):
+        port = int(url.rsplit(':', 1)[1])
+
+        async def main():
+            r, w = await _raw('127.0.0.2', port)
+            w.write(b'POST /api/login HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n'
+                    b'Content-Length: 100\r\n\r\n{"pass')
+            head = await asyncio.wait_for(r.read(200), 5.0)
+            assert head.startswith(b'HTTP/1.1 408'), head
+            w.close()
+            assert await operator_answered(url)
+        asyncio.run(main())
+        assert op.counters['bad_requests'] == 1
+        assert any('did not arrive' in a['message'] for a in audit_lines(tmp_path))
+
+
 def test_event_streams_are_capped_per_address_and_in_total(tmp_path):
     with serving(tmp_path, max_streams_per_address=2, max_streams=5) as (url, op, backend):
         async def open_stream(s):

@@ -67,6 +67,10 @@ LOG_INTERVAL = 10.0    # [s] at most one line per kind of refusal per this long
 AUDIT_REFUSALS_PER_S, AUDIT_BURST = 5.0, 200.0   # refusals written to the audit file (token bucket)
 
 
+class SlowBody(commands.CommandError):
+    """The request body did not arrive within ``body_timeout`` (HTTP 408)."""
+
+
 def unlock_path(password_file: str | os.PathLike) -> Path:
     """The file ``./sslfr web-password --unlock`` writes: when it changes, the page
     ends every login lockout (only someone with a shell on the collector can)."""
@@ -214,7 +218,7 @@ class OperatorApp:
         try:
             raw = await asyncio.wait_for(request.read(), float(self.cfg['body_timeout']))
         except asyncio.TimeoutError:
-            raise commands.CommandError(f'the request body did not arrive within {self.cfg["body_timeout"]} s') from None
+            raise SlowBody(f'the request body did not arrive within {self.cfg["body_timeout"]} s') from None
         return commands.parse_body(raw, max_bytes=int(self.cfg['max_request_bytes']),
                                    max_depth=int(self.cfg['max_json_depth']))
 
@@ -308,8 +312,11 @@ class OperatorApp:
         await resp.prepare(request)
         queue: asyncio.Queue = asyncio.Queue(maxsize=4)
 
+        evicted = asyncio.Event()
+
         def evict():               # a newer stream took this one's slot (netguard.StreamSlots)
             self.counters['streams_evicted'] += 1
+            evicted.set()
             while queue.full():
                 queue.get_nowait()
             queue.put_nowait(None)
@@ -326,7 +333,7 @@ class OperatorApp:
                     data = await asyncio.wait_for(queue.get(), 15.0)
                 except asyncio.TimeoutError:
                     data = b': keep-alive\n\n'
-                if data is None:
+                if data is None or evicted.is_set():
                     break
                 await asyncio.wait_for(resp.write(data), write_timeout)
         except asyncio.TimeoutError:            # the client does not read: drop it
@@ -401,7 +408,7 @@ class OperatorApp:
         try:
             body = await self._read_json(request)
         except commands.CommandError as exc:
-            return self.bad_request(request, 'login', str(exc))
+            return self.bad_request(request, 'login', str(exc), 408 if isinstance(exc, SlowBody) else 400)
         password = body.get('password')
         if set(body) - {'password'} or not isinstance(password, str):
             return self.bad_request(request, 'login', 'login: expected {"password": "..."}')
@@ -467,7 +474,7 @@ class OperatorApp:
             self.counters['commands_refused'] += 1
             self.counters['bad_requests'] += 1
             self.audit(origin, name[:40], None, {'success': False, 'message': str(exc)}, 'warn')
-            return _refuse(400, str(exc))
+            return _refuse(408 if isinstance(exc, SlowBody) else 400, str(exc))
         try:
             result = await self.backend.call(cmd)
         except Exception as exc:  # noqa: BLE001 - a failed call is an answer for the operator
