@@ -77,9 +77,10 @@ def parse_sets(items: list[str]) -> dict:
     return out
 
 
-def run_avrdude(avrdude: str, port: str, baud: int, hex_path, out=sys.stdout) -> None:
+def run_avrdude(avrdude: str, port: str, baud: int, hex_path, out=None) -> None:
     """Write ``hex_path`` through the bootloader (STK500v1, ``-c arduino``); the board is
     reset into its bootloader by avrdude's DTR pulse. FirmwareError on failure."""
+    out = out or sys.stdout
     if shutil.which(avrdude) is None:
         raise FirmwareError(f'{avrdude} not found: sudo apt-get install avrdude')
     argv = [avrdude, '-p', 'atmega328p', '-c', 'arduino', '-P', port, '-b', str(baud), '-D',
@@ -106,7 +107,8 @@ def read_board(port: str, baud: int, timeout: float, key: bytes | None = None):
     return link, link.request(m.GetInfo())
 
 
-def main(argv: list[str] | None = None, out=sys.stdout) -> int:
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout           # the stream of the call, not of the import
     try:
         args = parser().parse_args(argv)
     except CliError as exc:

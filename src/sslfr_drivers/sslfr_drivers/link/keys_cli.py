@@ -110,7 +110,8 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None, out=sys.stdout) -> int:
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout           # the stream of the call, not of the import
     try:
         args = parser().parse_args(argv)
     except CliError as exc:
