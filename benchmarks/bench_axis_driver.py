@@ -26,9 +26,9 @@ from sslfr_drivers.axis.board_session import AxisBoardSession
 from sslfr_drivers.axis.core import AxisSupervisor, AxisTuning, BoardState
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.axis.trajectory import TrajectoryMsg
-from sslfr_drivers.sim.axis import AxisConfig as SimConfig
-from sslfr_drivers.sim.axis import AxisSim
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig as SimConfig
+from sslfr_sim.axis import AxisSim
+from sslfr_sim.runner import SimThread
 
 
 def pct(values, q):

@@ -1,7 +1,7 @@
 """Topic-level acceptance of the axis driver (issue 5, "Axis driver node").
 
 Each test runs the REAL ``axis_driver`` executable and the link helper's simulated
-axis board as its own process on a real pty (``python -m sslfr_drivers.sim.runner``,
+axis board as its own process on a real pty (``python -m sslfr_sim.runner``,
 the same protocol as the firmware); faults are injected through the simulator's
 control socket. The test process plays the planner (``tracker/trajectory``), the
 safety supervisor (``safety/state`` at 10 Hz) and, when needed, ``tracker/phase``.
@@ -60,13 +60,13 @@ class Rig:
         from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
         from trajectory_msgs.msg import JointTrajectory
 
-        from sslfr_drivers.sim.runner import SimControl
+        from sslfr_sim.runner import SimControl
 
         self.ros, self.axis = ros, axis
         self.dir = tempfile.mkdtemp(prefix='axd')        # short: UNIX socket path limit
         self.port = os.path.join(self.dir, 'board')
         self.ctl_path = os.path.join(self.dir, 'ctl')
-        argv = [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', axis,
+        argv = [sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', axis,
                 '--link', self.port, '--control', self.ctl_path, '--seed', '7',
                 '--opt', 'sensor_noise_deg=0.003', *sim_args]
         self.sim_proc = NodeProcess(argv, ros_env, tmp_path / 'sim.log')
@@ -556,7 +556,7 @@ def test_driver_started_before_its_board_activates_by_itself_and_after_sigkill(l
         assert all(s.state == 'unconfigured' and s.link_state == 0 for s in early), [s.state for s in early]
         # 5 Hz while configure attempts come and go (an attempt never holds the heartbeat)
         assert len(early) >= 0.7 * 5 * (_stamp(early[-1]) - _stamp(early[0])) and _gaps(early) < 1.0, _gaps(early)
-        sim = NodeProcess([sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', 'mirrors',
+        sim = NodeProcess([sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', 'mirrors',
                            '--link', port, '--seed', '7', '--opt', 'initial_angle_deg=10'],
                           ros_env, tmp_path / 'sim.log')
         t_board = time.monotonic()

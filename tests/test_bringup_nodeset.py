@@ -90,7 +90,7 @@ def test_overrides_file_beats_the_config_node_section_in_a_real_node(launch, ros
                     '    max_file_size: 1000000\n')
     over = tmp_path / 'over.yaml'
     over.write_text('/recorder:\n  ros__parameters:\n    output_dir: %s\n' % (tmp_path / 'bags'))
-    proc = launch('sslfr_bringup', 'recorder', ros_args=['--params-file', str(site), '--params-file', str(over)])
+    proc = launch('sslfr_recording', 'recorder', ros_args=['--params-file', str(site), '--params-file', str(over)])
     res = ros.call(GetParameters, 'recorder/get_parameters',
                    GetParameters.Request(names=['output_dir', 'max_file_size']), timeout=20)
     assert res.values[0].string_value == str(tmp_path / 'bags'), proc.output()
@@ -435,7 +435,7 @@ def test_composed_nodes_each_get_their_own_name_and_parameters(launch, ros, tmp_
     for name in ('rec_a', 'rec_b'):
         own = tmp_path / f'{name}.yaml'
         own.write_text(f'/{name}:\n  ros__parameters:\n    output_dir: {tmp_path / name}\n')
-        args += ['--node', 'sslfr_bringup.recorder_node:Recorder', '--ros-args', '-r', f'__node:={name}',
+        args += ['--node', 'sslfr_recording.recorder_node:Recorder', '--ros-args', '-r', f'__node:={name}',
                  '--params-file', str(site), '--params-file', str(own)]
     proc = launch('sslfr_bringup', 'composed', '--process', 'two', *args)
     for name in ('rec_a', 'rec_b'):

@@ -23,7 +23,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Temperature
 
 from sslfr_bringup import cli
-from sslfr_bringup.bag import BagWriter, WriterOptions, profile
+from sslfr_recording.bag import BagWriter, WriterOptions, profile
 
 PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))
 
@@ -43,13 +43,13 @@ WORK = {
     'analyse': ['sslfr_planner.analysis.performance.error_table',
                 'sslfr_planner.analysis.cli.YearSky.compute'],
     'up': ['sslfr_bringup.up.RosSide'],
-    'sim': ['sslfr_bringup.sim.SimClock'],
-    'record': ['sslfr_bringup.recorder_node.main'],
+    'sim': ['sslfr_sim.sim_cli.SimClock'],
+    'record': ['sslfr_recording.recorder_node.main'],
     'bag': [],
-    'replay': ['sslfr_bringup.replay.run_player', 'sslfr_bringup.replay.run_whatif'],
-    'report': ['sslfr_bringup.report.analyse'],
+    'replay': ['sslfr_recording.replay.run_player', 'sslfr_recording.replay.run_whatif'],
+    'report': ['sslfr_recording.report.analyse'],
     'install-service': ['sslfr_bringup.service.write_atomically'],
-    'web-password': ['sslfr_bringup.web.password_cli.write_password_file'],
+    'web-password': ['sslfr_web.password_cli.write_password_file'],
     'doctor': ['sslfr_bringup.doctor.find_executable'],
     'keys': ['sslfr_drivers.link.keys_cli.write_key_file', 'sslfr_drivers.link.keys_cli._open_serial'],
     'flash': ['sslfr_drivers.firmware.flash.build', 'sslfr_drivers.firmware.flash.run_avrdude',
@@ -211,7 +211,7 @@ def test_every_subcommand_has_a_property_test():
                      st.integers(1, 3000).map(lambda n: b'[' * n + b']' * n),
                      st.integers(1, 3000).map(lambda n: b'{"a":' * n + b'1' + b'}' * n)))
 def test_web_body_parser_refuses_cleanly(raw):
-    from sslfr_bringup.web import commands
+    from sslfr_web import commands
     try:
         body = commands.parse_body(raw)
     except commands.CommandError as exc:
@@ -231,7 +231,7 @@ def test_web_body_parser_refuses_cleanly(raw):
 @given(spec=st.one_of(st.text(max_size=40), st.sampled_from(['1e999', '9' * 400, '-' + '9' * 400, '99:99:99',
                                                               '0001-01-01T00:00:00', '9999-12-31T23:59:59'])))
 def test_replay_time_spec_parser_refuses_cleanly(spec):
-    from sslfr_bringup.bag.playback import parse_time_spec
+    from sslfr_recording.bag.playback import parse_time_spec
     try:
         assert isinstance(parse_time_spec(spec, 10**18, 10**18 + 10**9), int)
     except ValueError:
@@ -254,7 +254,7 @@ def test_site_config_and_node_set_readers_refuse_cleanly(data, tmp_path_factory)
 @settings(max_examples=300, deadline=None)
 @given(text=st.text(max_size=300))
 def test_bag_metadata_parser_refuses_cleanly(text):
-    from sslfr_bringup.bag.metadata import MetadataError, parse_metadata
+    from sslfr_recording.bag.metadata import MetadataError, parse_metadata
     try:
         parse_metadata(text)
     except MetadataError:
@@ -264,13 +264,13 @@ def test_bag_metadata_parser_refuses_cleanly(text):
 @settings(max_examples=300, deadline=None)
 @given(spec=st.text(max_size=60))
 def test_fault_and_set_parsers_refuse_cleanly(spec):
-    from sslfr_bringup import faults, sim
+    from sslfr_sim import faults, sim_cli
     try:
         faults.parse(spec)
     except ValueError:
         pass
     try:
-        sim.parse_set(spec, ['planner', 'safety'])
+        sim_cli.parse_set(spec, ['planner', 'safety'])
     except ValueError:
         pass
 
@@ -289,6 +289,6 @@ def test_gps_fix_check_never_accepts_a_non_finite_site(values):
 @settings(max_examples=300, deadline=None)
 @given(text=st.text(max_size=80))
 def test_network_list_parser_refuses_cleanly(text):
-    from sslfr_bringup.web.params import networks_error
+    from sslfr_web.params import networks_error
     assert networks_error(text) is None or isinstance(networks_error(text), str)
 

@@ -9,9 +9,9 @@ import pytest
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.board_link import BoardLink, BoardLinkState, LinkDown, NackError
 from sslfr_drivers.link.protocol import Frame, Framer, encode_frame
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.base import FaultInjector
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.base import FaultInjector
+from sslfr_sim.runner import SimThread
 from sslfr_drivers.link.transport import SerialTransport, TransportError, make_transport
 
 from drivers_testutil import wait_for
@@ -395,6 +395,6 @@ def test_link_and_sensor_modules_never_import_the_simulators():
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ''] if isinstance(node, ast.ImportFrom) else []
             offenders += [f'{path.relative_to(root)}: {n}' for n in names
-                          if n.startswith('sslfr_drivers.sim') or (isinstance(node, ast.ImportFrom)
+                          if n.startswith('sslfr_sim') or (isinstance(node, ast.ImportFrom)
                                                                    and node.level and 'sim' in n)]
     assert len(list(root.glob('link/*.py'))) >= 8 and not offenders, offenders

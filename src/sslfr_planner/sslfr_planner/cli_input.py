@@ -2,42 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
+from sslfr_common.cliargs import (CliError, OneLineParser, bounded_int, finite_float,  # noqa: F401 - re-exported
+                                  one_line, ranged_float)
 from sslfr_common.files import atomic_write
-
-
-def one_line(text: str) -> str:
-    """``text`` as one line: control characters a user's argument may carry (newline,
-    carriage return, escape, ...) shown escaped, so a refusal stays one line and
-    cannot forge log lines."""
-    return ''.join(c if c.isprintable() or c == ' ' else repr(c)[1:-1] for c in str(text))
-
-
-class CliError(Exception):
-    """A user input error: printed as one line, exit status 2."""
-
-    def __str__(self) -> str:
-        return one_line(super().__str__())
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one clear line on stderr (exit status 2)."""
-
-    def error(self, message):  # noqa: D401 - argparse API
-        raise CliError(message)
-
-
-def finite_float(text: str) -> float:
-    """argparse type: a finite float."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f'not a finite number: {text!r}')
-    return value
 
 
 def run(prog: str, body, argv) -> int:
@@ -54,56 +23,6 @@ def run(prog: str, body, argv) -> int:
         print(one_line(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': ')),
               file=sys.stderr)
         return 1
-
-
-# -- reusable argparse validators (one-line refusals, exit 2) -------------------------------
-def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-                 zero: bool = False, unit: str = ''):
-    """argparse type: a finite float in [lo, hi] ((lo, hi] with ``lo_open``); ``zero`` also allows 0.
-
-    The refusal names the allowed range, e.g. ``must be in (0.05, 60] s, got 'nan'``.
-    """
-    def fmt(x: float) -> str:
-        return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f'{x:g}'
-
-    def describe() -> str:
-        left = '(' if lo_open else '['
-        rng = f'{left}{fmt(lo)}, {fmt(hi)}]' if lo is not None and hi is not None else \
-            (f'>= {fmt(lo)}' if lo is not None else f'<= {fmt(hi)}')
-        if lo_open and hi is None:
-            rng = f'> {fmt(lo)}'
-        return ('0 or ' if zero else '') + rng + (f' {unit}' if unit else '')
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}') from None
-        ok = math.isfinite(value)
-        if ok and not (zero and value == 0.0):
-            if lo is not None:
-                ok = value > lo if lo_open else value >= lo
-            if ok and hi is not None:
-                ok = value <= hi
-        if not ok:
-            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}')
-        return value
-    parse.__name__ = 'number'
-    return parse
-
-
-def bounded_int(lo: int, hi: int):
-    """argparse type: an integer in [lo, hi]."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text, 10)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}') from None
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}')
-        return value
-    parse.__name__ = 'integer'
-    return parse
 
 
 def _path_errors(check):

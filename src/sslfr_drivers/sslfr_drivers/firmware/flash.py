@@ -19,7 +19,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.firmware import BOARDS, BOOTLOADER_BAUD, FirmwareError, build, hexfile
 from sslfr_drivers.link.keys_cli import BAUD_RANGE
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, ranged_float
 
 #: --set keys: name -> (ConfigRecord field, parser)
 CONFIG_KEYS = {

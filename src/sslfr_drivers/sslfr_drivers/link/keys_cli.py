@@ -22,7 +22,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, key_id
 from sslfr_drivers.link.keys import KeyFileError, default_key_path, generate, load_key, write_key_file
 from sslfr_drivers.link.protocol import Framer, encode_frame
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, ranged_float
 
 
 class ProvisionError(RuntimeError):
