@@ -298,7 +298,8 @@ BAD_CONFIGS = {   # config text -> words the one refusal line must hold
                                            if p.name != nodeset.NODESET_FILE))
 def test_shipped_site_configs_pass_the_nodes_tables(shipped):
     ns = nodeset.load()
-    assert nodeset.check_config(ns, nodeset.read_params(nodeset.config_dir() / shipped)) == []
+    path = nodeset.config_dir() / shipped          # where: also the base of its collector description
+    assert nodeset.check_config(ns, nodeset.read_params(path), where=str(path)) == []
 
 
 @pytest.mark.parametrize('text', list(BAD_CONFIGS), ids=range(len(BAD_CONFIGS)))
