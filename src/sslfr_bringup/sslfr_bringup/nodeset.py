@@ -309,6 +309,8 @@ def load(path: str | os.PathLike | None = None) -> NodeSet:
         raise NodeSetError(str(exc)) from None
     try:
         data = yaml.safe_load(text)
+    except RecursionError:
+        raise NodeSetError(f'node set {p}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         raise NodeSetError(f'node set {p}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
@@ -326,6 +328,8 @@ def read_params(path: str | os.PathLike) -> dict:
         raise NodeSetError(str(exc)) from None
     try:
         data = yaml.safe_load(text) or {}
+    except RecursionError:
+        raise NodeSetError(f'{path}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         raise NodeSetError(f'{path}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None

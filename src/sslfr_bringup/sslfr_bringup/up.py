@@ -24,7 +24,7 @@ from pathlib import Path
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, output_dir, ros_namespace
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ros_namespace
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
@@ -122,7 +122,7 @@ def main(argv: list[str]) -> int:
         try:
             return _run(parser().parse_args(argv), stop, run_dir)
         except CliError as exc:
-            print(f'sslfr up: error: {exc}', file=sys.stderr)
+            print(f'sslfr up: error: {one_line(exc)}', file=sys.stderr)
             return 2
         except Interrupted:
             return 0
@@ -138,7 +138,7 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
         programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir,
                                            layout=args.layout)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
-        print(f'sslfr up: {exc}', file=sys.stderr)
+        print(f'sslfr up: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     domain = int(env['ROS_DOMAIN_ID'])

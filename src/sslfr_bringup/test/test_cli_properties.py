@@ -15,6 +15,7 @@ import argparse
 import collections
 import io
 import math
+import os
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -110,7 +111,7 @@ def places(tmp_path_factory):
 
 
 VALUES = ['nan', 'inf', '-inf', '1e308', '-1e308', '1e-320', '1e999', '0', '-0', '-1', '2', '37', '',
-          ' ', '\x00', 'x\x00y', '\udcff\udcfe', 'ü', '9' * 400, 'a' * 5000, '/proc/x', '/proc/x/y', '/dev/null',
+          ' ', '\x00', 'x\x00y', '\udcff\udcfe', 'ü', 'a\x85b', 'a\u2028b', 'a\r\nb', '\x1b[31m', '9' * 400, 'a' * 5000, '/proc/x', '/proc/x/y', '/dev/null',
           '{tmp}/file', '{tmp}/file/sub', '{tmp}', '{tmp}/new', '{tmp}/pic.png', '{tmp}/notutf8.yaml',
           '{tmp}/deep.yaml', '{tmp}/bag', '-5:5', '99:99', '10:00', '2026-02-30', '2026-06-21',
           '/a//b', '/1bad', '/sslfr1', 'a:=b', '/t:=/u', 'separate', 'composed', 'axis', 'stow', 'A=1',
@@ -192,7 +193,8 @@ def test_cli_entry_point_never_raises(name, places, monkeypatch, capsys, tmp_pat
     monkeypatch.chdir(tmp_path)                 # relative outputs (sim's out/...) land here
     monkeypatch.setenv('HOME', str(tmp_path))   # so do ~/... defaults
 
-    @settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck),
+    @settings(max_examples=int(os.environ.get('SSLFR_CLI_EXAMPLES', '60')), deadline=None,
+              suppress_health_check=list(HealthCheck),
               database=None)
     @given(argv=_argv_strategy(name))
     def prop(argv):
@@ -238,8 +240,10 @@ def test_replay_time_spec_parser_refuses_cleanly(spec):
         pass
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=list(HealthCheck))
-@given(data=st.one_of(st.binary(max_size=300), st.text(max_size=300).map(lambda t: t.encode('utf-8', 'surrogatepass'))))
+@settings(max_examples=50, deadline=None, suppress_health_check=list(HealthCheck))
+@given(data=st.one_of(st.binary(max_size=300), st.text(max_size=300).map(lambda t: t.encode('utf-8', 'surrogatepass')),
+                      st.integers(1, 1500).map(lambda n: b'a: ' + b'[' * n + b']' * n),
+                      st.integers(1, 1500).map(lambda n: b'{a: ' * n + b'1' + b'}' * n)))
 def test_site_config_and_node_set_readers_refuse_cleanly(data, tmp_path_factory):
     from sslfr_bringup import nodeset
     path = tmp_path_factory.mktemp('cfg') / 'x.yaml'

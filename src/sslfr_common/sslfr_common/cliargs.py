@@ -13,11 +13,15 @@ import argparse
 import math
 
 
-def one_line(text: str) -> str:
+def one_line(text, *, keep_newlines: bool = False) -> str:
     """``text`` as one line: control characters a user's argument may carry (newline,
-    carriage return, escape, ...) shown escaped, so a refusal stays one line and
-    cannot forge log lines."""
-    return ''.join(c if c.isprintable() or c == ' ' else repr(c)[1:-1] for c in str(text))
+    carriage return, escape, U+0085, ...) shown escaped, so a refusal stays one line and
+    cannot forge log lines. ``keep_newlines``: a message that lists several problems
+    on purpose keeps its own line breaks ('\\n'), everything else is escaped."""
+    def esc(part: str) -> str:
+        return ''.join(c if c.isprintable() or c == ' ' else repr(c)[1:-1] for c in part)
+    text = str(text)
+    return '\n'.join(esc(p) for p in text.split('\n')) if keep_newlines else esc(text)
 
 
 class CliError(Exception):

@@ -175,6 +175,8 @@ def load_yaml_file(path: str, what: str = 'config'):
     text = read_text_file(path, what)
     try:
         doc = yaml.safe_load(text)
+    except RecursionError:
+        raise CliError(f'{what} {path}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark is not None else ''

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
 from sslfr_common.timeconv import to_sec
-from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
+from sslfr_planner.cli_input import CliError, OneLineParser, one_line, output_dir
 
 from sslfr_bringup.nodeset import NodeSetError, checked_params, node_params
 from sslfr_bringup.nodeset import load as load_nodeset
@@ -637,21 +637,21 @@ def main(argv: list[str]) -> int:
         ns = ap.parse_args(argv)
         planner_config(ns.config)           # a bad site config: refused before any work
     except CliError as exc:
-        print(f'sslfr report: error: {exc}', file=sys.stderr)
+        print(f'sslfr report: error: {one_line(exc)}', file=sys.stderr)
         return 2
     except NodeSetError as exc:
-        print(f'sslfr report: error: --config {ns.config}: '
+        print(f'sslfr report: error: --config {one_line(ns.config)}: '
               + '; '.join(line.strip() for line in str(exc).splitlines()[1:] or [str(exc)]), file=sys.stderr)
         return 2
     try:
         reader = BagReader(ns.bag)
     except BagError as exc:  # missing, damaged or wrong-kind bag: bad input
-        print(f'sslfr report: error: bag {ns.bag}: {exc}', file=sys.stderr)
+        print(f'sslfr report: error: bag {one_line(ns.bag)}: {one_line(exc)}', file=sys.stderr)
         return 2
     try:
         rep = analyse(reader, ns.config)
     except (BagError, OSError) as exc:
-        print(f'sslfr report: {exc}', file=sys.stderr)
+        print(f'sslfr report: {one_line(exc)}', file=sys.stderr)
         return 1
     print(render_text(rep))
     if not ns.no_plots:

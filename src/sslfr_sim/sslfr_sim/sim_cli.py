@@ -47,7 +47,7 @@ from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, output_dir, ranged_float
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float
 
 
 class SimClock:
@@ -147,8 +147,10 @@ def parse_set(text: str, nodes) -> tuple[str, str, object]:
         raise ValueError(f'--set {text!r}: unknown node {node!r} (known: {", ".join(nodes)})')
     try:
         return node, key, yaml.safe_load(value)
+    except RecursionError:
+        raise ValueError(f'--set {text[:80]!r}: bad value: nested too deeply') from None
     except yaml.YAMLError as exc:
-        raise ValueError(f'--set {text!r}: bad value: {exc}') from exc
+        raise ValueError(f'--set {text!r}: bad value: {" ".join(str(exc).split())}') from None
 
 
 def _watch_topics(ns) -> dict:
@@ -254,7 +256,7 @@ def main(argv: list[str]) -> int:
         try:
             return _main(parser().parse_args(argv), stop, run)
         except CliError as exc:
-            print(f'sslfr sim: error: {exc}', file=sys.stderr)
+            print(f'sslfr sim: error: {one_line(exc)}', file=sys.stderr)
             return 2
         except Interrupted as exc:
             print(f'sslfr sim: stopped by {exc} during start-up', file=sys.stderr)
@@ -297,7 +299,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                   for s in args.fault]
         sets = [parse_set(s, [n.name for n in ns.nodes]) for s in args.set]
     except (ValueError, KeyError) as exc:   # NodeSetError and FaultSpecError are ValueErrors
-        print(f'sslfr sim: {exc}', file=sys.stderr)
+        print(f'sslfr sim: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     for f in faults:
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
@@ -306,7 +308,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     try:                      # the default output is checked as --out is (a read-only cwd ...)
         out = (args.out or output_dir(f'out/sim-{date}')).resolve()
     except argparse.ArgumentTypeError as exc:
-        print(f'sslfr sim: error: output directory: {exc}', file=sys.stderr)
+        print(f'sslfr sim: error: output directory: {one_line(exc)}', file=sys.stderr)
         return 2
     bag_root = Path(args.record).resolve() if args.record else out / 'bags'
     # a new run replaces the sim's own bags/ and logs/, never someone else's (--out ~)

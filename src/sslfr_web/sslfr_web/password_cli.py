@@ -19,7 +19,7 @@ import getpass
 import sys
 from pathlib import Path
 
-from sslfr_common.cliargs import CliError, OneLineParser
+from sslfr_common.cliargs import CliError, OneLineParser, one_line
 from sslfr_common.files import atomic_write
 
 from .auth import PasswordError, check_new_password, write_password_file
@@ -69,10 +69,10 @@ def main(argv: list[str]) -> int:
                 return 1
         path = write_password_file(args.file, password)
     except PasswordError as exc:
-        print(f'sslfr web-password: {exc}; nothing changed', file=sys.stderr)
+        print(f'sslfr web-password: {one_line(exc)}; nothing changed', file=sys.stderr)
         return 1
     except (OSError, EOFError) as exc:
-        print(f'sslfr web-password: {exc}; nothing changed', file=sys.stderr)
+        print(f'sslfr web-password: {one_line(exc)}; nothing changed', file=sys.stderr)
         return 1
     print(f'operator password set: scrypt hash in {path} (mode 0600)')
     return 0

@@ -19,7 +19,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.firmware import BOARDS, BOOTLOADER_BAUD, FirmwareError, build, hexfile
 from sslfr_drivers.link.keys_cli import BAUD_RANGE
-from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
 
 #: --set keys: name -> (ConfigRecord field, parser)
 CONFIG_KEYS = {
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         sets = parse_sets(args.set)
     except ValueError as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 2
     fw_baud = args.fw_baud or 115200
     try:
@@ -152,13 +152,13 @@ def main(argv: list[str] | None = None, out=None) -> int:
         finally:
             link.stop()
     except KeyFileError as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 2
     except (FirmwareError, subprocess.TimeoutExpired) as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 1
     except Exception as exc:  # noqa: BLE001 - a NACK or link error: say it, no traceback
-        print(f'sslfr flash: {type(exc).__name__}: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {type(exc).__name__}: {one_line(exc)}', file=sys.stderr)
         return 1
     return 0
 

@@ -22,7 +22,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, key_id
 from sslfr_drivers.link.keys import KeyFileError, default_key_path, generate, load_key, write_key_file
 from sslfr_drivers.link.protocol import Framer, encode_frame
-from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, ranged_float
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
 
 
 class ProvisionError(RuntimeError):
@@ -138,11 +138,11 @@ def main(argv: list[str] | None = None, out=None) -> int:
               file=out)
         return 0
     except KeyFileError as exc:
-        print(f'sslfr keys: {exc}', file=sys.stderr)
+        print(f'sslfr keys: {one_line(exc)}', file=sys.stderr)
         return 2
     except (ProvisionError, OSError) as exc:
         where = f'{args.port}: ' if args.cmd == 'provision' else ''
-        print(f'sslfr keys: {where}{exc}', file=sys.stderr)
+        print(f'sslfr keys: {one_line(where)}{one_line(exc)}', file=sys.stderr)
         return 1
 
 
