@@ -48,7 +48,7 @@ WORK = {
     'record': ['sslfr_recording.recorder_node.main'],
     'bag': [],
     'replay': ['sslfr_recording.replay.run_player', 'sslfr_recording.replay.run_whatif'],
-    'report': ['sslfr_recording.report.analyse'],
+    'report': ['sslfr_recording.report_cli.analyse'],
     'install-service': ['sslfr_bringup.service.write_atomically'],
     'web-password': ['sslfr_web.password_cli.write_password_file'],
     'doctor': ['sslfr_bringup.doctor.find_executable'],
