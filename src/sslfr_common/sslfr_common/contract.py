@@ -140,6 +140,7 @@ class Qos(enum.Enum):
     R10 = 'R10'     # reliable, volatile, keep last 10
     BE = 'BE'       # best effort, volatile, keep last 10
     TL1 = 'TL1'     # reliable, transient local, keep last 1: latched (late joiners get the latest)
+    LOG = 'LOG'     # rcl's /rosout profile: reliable, transient local, keep last 1000, lifespan 10 s
 
 
 @dataclass(frozen=True)
@@ -188,10 +189,13 @@ SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
 DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
 CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos.BE)
 
+#: rcl's log topic: every node's logger publishes it (rcl's QoS), the recorder keeps it.
+ROSOUT = Topic('/rosout', 'rcl_interfaces/msg/Log', Qos.LOG)
+
 TOPICS: tuple[Topic, ...] = (
     GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
     AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
-    SAFETY_STATE, DIAGNOSTICS, CLOCK)
+    SAFETY_STATE, DIAGNOSTICS, CLOCK, ROSOUT)
 
 #: Each family's members: the axes and the thermocouples.
 FAMILY_MEMBERS: dict[str, tuple[str, ...]] = {AXIS_STATUS.name: JOINTS,
