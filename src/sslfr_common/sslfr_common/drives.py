@@ -161,7 +161,9 @@ class MotionWatch:
     """Stall and time-out detection of a drive measured by an angle sensor.
 
     *Stall*: driving for ``window`` [s] with the measured angle changing by less than
-    ``min_change`` [rad] (choose it above a few sensor noise sigmas) over that window.
+    ``min_change`` [rad] over that window: the change is the difference of the means of
+    the first and last quarters of the window's samples (noise averages out; choose
+    ``min_change`` above a few noise sigmas of one reading all the same).
     *Time-out*: one move (driving without a pause) lasting longer than ``timeout`` [s].
     """
 
@@ -191,7 +193,8 @@ class MotionWatch:
         if now - self._since > self.timeout:
             return f'time-out: driving for {now - self._since:.1f} s (> {self.timeout:.1f} s) without reaching the target'
         if now - hist[0][0] >= self.window:
-            span = max(a for _, a in hist) - min(a for _, a in hist)
+            k = max(1, len(hist) // 4)
+            span = abs(sum(a for _, a in hist[-k:]) / k - sum(a for _, a in hist[:k]) / k)
             if span < self.min_change:
                 return (f'stall: driving for {now - hist[0][0]:.1f} s with the inclinometer changing '
                         f'{math.degrees(span):.3f} deg (< {math.degrees(self.min_change):.3f} deg)')
