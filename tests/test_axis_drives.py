@@ -139,13 +139,16 @@ def test_actuator_board_tracks_a_ramp_within_the_deadband(drive_rig, ros):
           f'(deadband {math.degrees(mv.deadband):.3f} deg, bound {math.degrees(bound):.3f} deg)')
 
 
-def test_switchless_board_waits_for_the_operator_reference(drive_rig, ros):
+def test_switchless_board_waits_for_the_operator_reference(drive_rig, ros, tmp_path):
+    from sslfr_common.drives import ReferenceStore
     from std_srvs.srv import Trigger
     mv = load(shipped_description('bucaramanga_single_axis').path).movement('mirrors')
     r = drive_rig(kind='axis_noswitch', sim_opts={'initial_angle_deg': 0.0, 'max_speed': 2000, 'accel': 8000},
                   params={'drive': mv.drive, 'step_angle': mv.step, 'lower_limit': R(-45.0),
                           'upper_limit': mv.range[1], 'stow_position': mv.stow, 'home_position': mv.reference,
-                          'use_sensor': False, 'auto_home': False, 'max_speed': 0.2})
+                          'use_sensor': False, 'auto_home': False, 'max_speed': 0.2,
+                          'state_dir': str(tmp_path / 'state')})
+    store = ReferenceStore(tmp_path / 'state', 'mirrors')
     assert r.wait_state(('fault',), 20), r.driver.output()
     assert not r.status[-1].homed and math.isnan(r.status[-1].measured)
     t0 = time.time()
@@ -159,9 +162,13 @@ def test_switchless_board_waits_for_the_operator_reference(drive_rig, ros):
     assert 'referenced at 0.0000 rad' in fut.result().message
     assert ros.spin_until(lambda: abs(r.board()['angle'] - R(10.0)) <= mv.step and
                           r.status[-1].state == 'following', 10), r.board()
+    ref = store.load()                                                # kept with the board's boot
+    assert ref.angle == mv.reference and not ref.lost and ref.boot_count >= 1
     r.sim.cmd('reset')                                                # the reference is lost
     t_reset = time.time()
     assert ros.spin_until(lambda: _stamp(r.status[-1]) > t_reset and r.status[-1].state == 'fault'
                           and not r.status[-1].homed, 5)
     ros.spin_for(1.0)
     assert not r.board()['homed'] and r.board()['speed'] == 0.0
+    assert ros.spin_until(lambda: store.load().lost, 5), store.load()
+    assert 'is lost: board reset' in r.driver.output()

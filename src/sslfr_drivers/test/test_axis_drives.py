@@ -145,3 +145,27 @@ def test_drive_strategies_and_parameter_rules():
     assert any('auto_home and use_sensor must be false' in e for e in bad)
     bad = PARAMS.validate({**base, 'deadband': 0.001})
     assert any('deadband is a property of a linear_actuator_inclinometer drive' in e for e in bad)
+
+
+def test_reference_keeper_records_on_set_zero_and_marks_lost_on_a_board_reset(tmp_path):
+    from sslfr_drivers.axis.commands import Action, BoardState
+    from sslfr_drivers.axis.drive import reference_keeper
+    p = {**params_for('mirrors').defaults(), 'drive': 'stepper_no_switches', 'state_dir': str(tmp_path),
+         'home_position': R(5.0)}
+    assert reference_keeper({**p, 'state_dir': ''}) is None
+    assert reference_keeper({**p, 'drive': 'stepper_switches'}) is None
+    keep = reference_keeper(p)
+    homed, lost = BoardState(0, 0, False, True, False, None), BoardState(0, 0, False, False, False, None)
+    assert keep.after_read(lost, False, False, 3) is None and keep.state == 'none'
+    assert keep.after_write(Action('move', 10, 5.0), True, 3, 1.0) is None
+    assert keep.after_write(Action('set_zero', 0), False, 3, 1.0) is None          # refused: nothing kept
+    assert 'kept in' in keep.after_write(Action('set_zero', 44), True, 3, 1.0) and keep.state == 'valid'
+    ref = keep.store.load()
+    assert ref.angle == R(5.0) and ref.steps == 44 and ref.boot_count == 3
+    assert keep.after_read(homed, False, False, 3) is None and keep.state == 'valid'
+    line = keep.after_read(lost, True, False, 4)                                     # the board rebooted
+    assert 'is lost: board reset: boot 4' in line and keep.state.startswith('lost')
+    again = reference_keeper(p)                                                      # a restarted driver
+    again.after_read(homed, False, False, 4)
+    assert again.state.startswith('lost')
+    assert 'not kept' in keep.after_write(Action('set_zero', 0), True, None, 2.0)

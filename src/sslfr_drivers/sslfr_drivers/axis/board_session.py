@@ -92,6 +92,7 @@ class AxisBoardSession:
                  board_kind: int = m.BoardKind.AXIS_STEPPER):
         self.port = port
         self.board_kind = board_kind      # INFO.board_kind of the drive (axis.drive.Drive.board_kind)
+        self.reference = None             # a switchless drive's kept reference (axis.drive.ReferenceKeeper)
         self.request_timeout = request_timeout
         self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
@@ -157,7 +158,10 @@ class AxisBoardSession:
         [s]: STATUS with a ``2 * period`` time-out (a lost answer reuses a STATUS up
         to ``3 * period`` old, see :meth:`poll`) and the reset / reconnect events."""
         board = self.poll(now, 2 * period, 3 * period)
-        return BoardReading(board, self.take_reset(), self.take_reconnect())
+        reading = BoardReading(board, self.take_reset(), self.take_reconnect())
+        if self.reference is not None:
+            self.reference.after_read(board, reading.reset, reading.reconnected, self.link.boot_count)
+        return reading
 
     def poll(self, now: float, timeout: float, max_age: float) -> BoardState | None:
         """STATUS now (one try of ``timeout`` [s]).
@@ -231,6 +235,8 @@ class AxisBoardSession:
         c['status_poll_failures'] = self.poll_failures
         c['status_reused'] = self.stale_polls
         c['link_state'] = self.link.state.value
+        if self.reference is not None:
+            c['reference'] = self.reference.state
         return c
 
     def velocity(self, cal: Calibration) -> float:
@@ -264,6 +270,8 @@ class AxisBoardSession:
                 return WriteResult(False, str(exc), True)
         except (LinkError, ProtocolError) as exc:
             return WriteResult(False, str(exc) or type(exc).__name__)
+        if self.reference is not None:
+            self.reference.after_write(act, True, self.link.boot_count, time.time())
         return WriteResult(True)
 
 
@@ -284,8 +292,9 @@ def board_command(act: Action) -> m.Message | None:
 def open_session(port: str, p: dict) -> AxisBoardSession:
     """A session on ``port`` with the driver's parameters ``p``, opened (INFO read);
     the exceptions of :meth:`AxisBoardSession.open`."""
-    from sslfr_drivers.axis.drive import drive_for
+    from sslfr_drivers.axis.drive import drive_for, reference_keeper
     session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'],
                                key=link_key(p['key_file']), board_kind=drive_for(p['drive']).board_kind)
+    session.reference = reference_keeper(p)
     session.open()
     return session

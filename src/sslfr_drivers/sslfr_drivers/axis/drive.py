@@ -13,6 +13,8 @@ driver's ``drive`` parameter; the supervisor asks it and never branches on a pro
 """
 from __future__ import annotations
 
+import logging
+
 from sslfr_drivers.axis.commands import NOTHING, Action, ActionKind, BoardState
 from sslfr_drivers.axis.homing import home_action
 from sslfr_drivers.link import messages as m
@@ -105,3 +107,70 @@ def drive_for(kind: str) -> Drive:
         return _DRIVES[kind]
     except KeyError:
         raise KeyError(f'unknown drive kind {kind!r}; known: {", ".join(DRIVE_KINDS)}') from None
+
+
+
+class ReferenceKeeper:
+    """The persisted reference of a ``stepper_no_switches`` axis, kept by the board
+    session (:mod:`~.board_session`): recorded when a SET_ZERO is ACKed (the operator's
+    reference at ``angle`` [rad], the driver's ``home_position``, with the board's boot
+    count), checked on the first read and after every reset or reconnection
+    (:meth:`sslfr_common.drives.ReferenceStore.check`: a new boot count or a board no
+    longer HOMED marks it lost). ``state`` is for diagnostics; problems and losses are
+    logged (logger ``sslfr_drivers.axis.reference``, forwarded to the node's)."""
+
+    def __init__(self, store, angle: float):
+        self.store, self.angle = store, angle
+        self.state = 'unchecked'
+        self._checked = False
+
+    def after_write(self, act: Action, ok: bool, boot_count: int | None, stamp: float) -> str | None:
+        """Book a written ``act``; a SET_ZERO that was ACKed records the reference.
+        Returns the line logged."""
+        if act.kind is not ActionKind.SET_ZERO or not ok:
+            return None
+        if boot_count is None:
+            self.state = 'not kept: the board did not report its boot count'
+        else:
+            try:
+                self.store.record(self.angle, act.steps, boot_count, stamp)
+                self.state, self._checked = 'valid', True
+                return _log(f'reference at {self.angle:.4f} rad kept in {self.store.path} (board boot {boot_count})',
+                            logging.INFO)
+            except OSError as exc:
+                self.state = f'not kept: {exc}'
+        return _log(f'reference at {self.angle:.4f} rad {self.state}')
+
+    def after_read(self, board: BoardState | None, reset: bool, reconnected: bool,
+                   boot_count: int | None) -> str | None:
+        """Check the stored reference on the first read and after a reset or a
+        reconnection; returns the line logged when it is found lost or unreadable."""
+        if board is None or (self._checked and not (reset or reconnected)):
+            return None
+        self._checked = boot_count is not None
+        try:
+            state, ref = self.store.check(boot_count, board.homed)
+        except (OSError, ValueError) as exc:
+            self.state = f'unreadable: {exc}'
+            return _log(f'reference file: {exc}')
+        was = self.state
+        self.state = state if ref is None or not ref.lost else f'lost ({ref.why})'
+        if state == 'lost' and was != self.state:
+            return _log(f'the reference of {ref.axis} is lost: {ref.why}; put the axis at its '
+                        'reference angle and call the home service')
+        return None
+
+
+def _log(line: str, level: int = logging.WARNING) -> str:
+    logging.getLogger('sslfr_drivers.axis.reference').log(level, line)
+    return line
+
+
+def reference_keeper(p: dict) -> ReferenceKeeper | None:
+    """The :class:`ReferenceKeeper` of the driver's parameters ``p``: for a
+    stepper_no_switches drive with a ``state_dir`` (``~`` expanded), else None."""
+    if p['drive'] != 'stepper_no_switches' or not p['state_dir']:
+        return None
+    import os
+    from sslfr_common.drives import ReferenceStore
+    return ReferenceKeeper(ReferenceStore(os.path.expanduser(p['state_dir']), p['axis']), p['home_position'])

@@ -37,6 +37,8 @@ _SPECS = [
        choices=DRIVE_KINDS, read_only=True),
     _P('deadband', 0.0, 'position deadband of a linear_actuator_inclinometer drive [rad] (its board '
        'rests anywhere within it; 0 for steppers)', 'rad', 0.0, 0.1),
+    _P('state_dir', '~/.local/state/sslfr', 'directory of the kept reference of a stepper_no_switches drive '
+       "(reference_<axis>.json); '' = not kept"),
     _P('port', '', "board port: pyserial URL/device (/dev/ttyUSB0, a pty, loop://) or "
        "'xbee:<uart>?addr=<64-bit hex>'; '' = /dev/sslfr/<axis>"),
     _P('baudrate', 115200, 'serial line speed [bit/s]', 'bit/s', 1200, 4_000_000),
