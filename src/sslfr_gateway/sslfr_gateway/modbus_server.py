@@ -22,14 +22,18 @@ import asyncio
 import concurrent.futures
 import contextvars
 import functools
+import logging
 import threading
 import time
 from collections.abc import Callable
 
+import pymodbus.logging
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
+
+from sslfr_common.netguard import OneLineLog, OneLineLogger
 
 from . import sunspec
 
@@ -48,6 +52,14 @@ def evict_choice(conns: list[tuple[object, str, float]]):
         held[ip] = held.get(ip, 0) + 1
     top = max(held, key=lambda ip: held[ip])
     return min((c for c in conns if c[1] == top), key=lambda c: c[2])[0]
+
+
+class _LibraryLog(OneLineLogger):
+    """pymodbus' own warnings and errors (one per malformed frame) as rate-limited
+    one-line reports; its debug dumps stay off (no cost per request)."""
+
+    def isEnabledFor(self, level: int) -> bool:  # noqa: N802 - logging API
+        return level >= logging.WARNING
 
 
 class _Handler(ServerRequestHandler):
@@ -122,7 +134,9 @@ class ModbusGateway:
         self.max_connections, self.max_per_address = max_connections, max_per_address
         self.idle_timeout, self.command_timeout = idle_timeout, command_timeout
         self.frame_timeout = frame_timeout
+        self.oneline = OneLineLog(lambda level, line: log(line))
         self.log = log
+        pymodbus.logging.Log._logger = _LibraryLog('pymodbus', self.oneline)  # noqa: SLF001 - its one logger
         self.counters = {'reads': 0, 'writes_accepted': 0, 'writes_refused': 0,
                          'connections_refused': 0, 'connections_evicted': 0, 'idle_closed': 0, 'slow_closed': 0,
                          'unknown_unit': 0}
@@ -152,13 +166,13 @@ class ModbusGateway:
         peer = _PEER.get()
         if peer not in self.write_allow:
             self.count('writes_refused')
-            self.log(f'modbus write from {peer or "?"} refused: not in write_allow')
+            self.oneline.report('write refused', f'modbus write from {peer or "?"} refused: not in write_allow')
             return ExcCodes.ILLEGAL_FUNCTION
         try:
             commands = sunspec.decode_write(self.n_trackers[unit_index], address, list(set_values))
         except sunspec.WriteRefused as exc:
             self.count('writes_refused')
-            self.log(f'modbus write from {peer} refused: {exc}')
+            self.oneline.report('write refused', f'modbus write from {peer} refused: {exc}')
             return ExcCodes(exc.code)
         for tracker, mode in commands:
             try:
