@@ -4,6 +4,7 @@ run for real against a child process on a real NOTIFY_SOCKET; the launch file gi
 the nodes and the watchdog the same socket and bound."""
 from __future__ import annotations
 
+import configparser
 import importlib.util
 import io
 import os
@@ -126,5 +127,7 @@ def test_launch_file_gives_nodes_and_watchdog_one_socket_and_bound(tmp_path):
     text = path.read_text()
     assert text.count('additional_env=notify_env') == 2, 'every node entry (single and composed)'
     assert "executable='liveness_watchdog'" in text
-    setup = (ROOT / 'src/sslfr_bringup/setup.py').read_text()
-    assert "'liveness_watchdog = sslfr_bringup.watchdog:main'" in setup
+    cfg = configparser.ConfigParser()
+    cfg.read(ROOT / 'src/sslfr_bringup/setup.cfg')
+    scripts = cfg['options.entry_points']['console_scripts'].split('\n')
+    assert 'liveness_watchdog = sslfr_bringup.watchdog:main' in scripts

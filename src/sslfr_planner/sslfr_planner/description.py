@@ -488,6 +488,16 @@ def _named_list(c: _Checker, items: Any, schema: dict, key: str) -> dict:
     return out
 
 
+
+def _kinded(c: _Checker, items: Any, schema: dict, key: str, what: str, kinds: tuple[str, ...]):
+    """Yield ``(name, key, section)`` of the named entries whose ``kind`` is one of ``kinds``;
+    an unknown kind is reported (a missing one already is, by the schema) and the entry skipped."""
+    for name, (k, d) in _named_list(c, items, schema, key).items():
+        if d.get('kind') in kinds:
+            yield name, k, d
+        elif 'kind' in d:
+            c.add(f'{k}.kind', f'unknown {what} kind {d["kind"]!r}; known: {", ".join(kinds)}')
+
 def _optics(c: _Checker, raw: Any) -> Optics | None:
     n0 = len(c.problems)
     o = c.section(raw, _OPTICS, 'optics')
@@ -551,11 +561,7 @@ def parse(data: Any, where: str = 'description') -> Description:
                 c.add(f'movements.{mv.name}.law', f'{mv.law!r} differs from movements.{needed}.law '
                                                   f'{movements[needed].law!r}: the two move together')
     boards = {}
-    for name, (k, d) in _named_list(c, top.get('boards') or [], _BOARD, 'boards').items():
-        if d.get('kind') not in BOARD_KINDS:
-            if 'kind' in d:
-                c.add(f'{k}.kind', f'unknown board kind {d["kind"]!r}; known: {", ".join(BOARD_KINDS)}')
-            continue
+    for name, k, d in _kinded(c, top.get('boards') or [], _BOARD, 'boards', 'board', BOARD_KINDS):
         mv = d.get('movement')
         if d['kind'] == 'axis' and mv not in (top.get('movements') or {}):
             c.add(f'{k}.movement', f'an axis board drives a movement of this collector; got {mv!r}')
@@ -570,11 +576,7 @@ def parse(data: Any, where: str = 'description') -> Description:
             c.add(f'movements.{name}', f'needs exactly one axis board (boards with movement: {name}); '
                                        f'found {driven.count(name)}')
     sensors = {}
-    for name, (k, d) in _named_list(c, top.get('sensors') or [], _SENSOR, 'sensors').items():
-        if d.get('kind') not in SENSOR_KINDS:
-            if 'kind' in d:
-                c.add(f'{k}.kind', f'unknown sensor kind {d["kind"]!r}; known: {", ".join(SENSOR_KINDS)}')
-            continue
+    for name, k, d in _kinded(c, top.get('sensors') or [], _SENSOR, 'sensors', 'sensor', SENSOR_KINDS):
         named = {i.get('name') for i in top.get('boards') or [] if isinstance(i, Mapping)}
         if d.get('board') not in named:     # a board named but refused above is reported there
             c.add(f'{k}.board', f'{d.get("board")!r} is not a board of this collector')
