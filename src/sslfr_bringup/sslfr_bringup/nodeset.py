@@ -315,38 +315,32 @@ def _parse_layouts(data: Mapping[str, Any], nodes: Mapping[str, NodeSpec]) -> di
 
 def load(path: str | os.PathLike | None = None) -> NodeSet:
     """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
-    from sslfr_planner.cli_input import CliError, read_text_file
     p = Path(path) if path else config_dir() / NODESET_FILE
+    return parse(_yaml_document(p, 'node set', f'node set {p}'), p)
+
+
+def _yaml_document(path, what: str, label: str):
+    """The YAML document of text file ``path``; :class:`NodeSetError` (``label``: the
+    line's subject) if it is unreadable, not UTF-8 text or not YAML (with the YAML line)."""
+    from sslfr_planner.cli_input import CliError, read_text_file
     try:
-        text = read_text_file(p, 'node set')
+        text = read_text_file(path, what)
     except CliError as exc:
         raise NodeSetError(str(exc)) from None
     try:
-        data = yaml.safe_load(text)
+        return yaml.safe_load(text)
     except RecursionError:
-        raise NodeSetError(f'node set {p}: YAML nested too deeply') from None
+        raise NodeSetError(f'{label}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
-        raise NodeSetError(f'node set {p}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
-    return parse(data, p)
+        raise NodeSetError(f'{label}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
 
 
 def read_params(path: str | os.PathLike) -> dict:
     """Read a ROS params file; raise :class:`NodeSetError` with the reason if it is not
     one (not UTF-8 text, not YAML, not a mapping of sections with ``ros__parameters``
     mappings): the line names the file and, where there is one, the YAML line."""
-    from sslfr_planner.cli_input import CliError, read_text_file
-    try:
-        text = read_text_file(path, 'config')
-    except CliError as exc:
-        raise NodeSetError(str(exc)) from None
-    try:
-        data = yaml.safe_load(text) or {}
-    except RecursionError:
-        raise NodeSetError(f'{path}: YAML nested too deeply') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        raise NodeSetError(f'{path}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
+    data = _yaml_document(path, 'config', f'{path}') or {}
     if not isinstance(data, dict):
         raise NodeSetError(f'{path}: a params file is a mapping of node names')
     for key, section in data.items():

@@ -507,12 +507,7 @@ class Supervisor:
             time.sleep(0.02)
         for p in self.programs.values():
             if p.alive():
-                self.say(f'{p.name} still running: SIGKILL', 3)
-                try:
-                    os.killpg(p.proc.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                p.proc.wait(2)
+                self._sigkill(p, 'still running', 3)
         took = time.monotonic() - t0
         for p in self.programs.values():
             if p.proc is not None:
@@ -528,12 +523,16 @@ class Supervisor:
         at once, not at the end of the stop budget."""
         for p in progs:
             if p.alive() and is_stopped(p.proc.pid):
-                self.say(f'{p.name} is stopped (SIGSTOP): SIGKILL', 4)
-                try:
-                    os.killpg(p.proc.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                p.proc.wait(2)
+                self._sigkill(p, 'is stopped (SIGSTOP)', 4)
+
+    def _sigkill(self, p, why: str, level: int) -> None:
+        """SIGKILL program ``p``'s process group, saying ``why``, and reap it (2 s at most)."""
+        self.say(f'{p.name} {why}: SIGKILL', level)
+        try:
+            os.killpg(p.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        p.proc.wait(2)
 
     def close(self) -> None:
         for p in self.programs.values():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 
 def one_line(text, *, keep_newlines: bool = False) -> str:
@@ -36,6 +37,15 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):  # noqa: D401 - argparse API
         raise CliError(message)
+
+    def parse_or_report(self, argv=None) -> argparse.Namespace | None:
+        """Parsed ``argv``; on a refusal, ``<prog>: error: <one line>`` on stderr and None
+        (the caller exits with status 2)."""
+        try:
+            return self.parse_args(argv)
+        except CliError as exc:
+            print(f'{self.prog}: error: {exc}', file=sys.stderr)
+            return None
 
 
 def finite_float(text: str) -> float:

@@ -97,6 +97,14 @@ def _clean(out):
     assert 'never retrieved' not in out, out
 
 
+def _finish_clean(proc):
+    """The process ended with status 0 and a clean stop (see :func:`_clean`); its output."""
+    code, out = _finish(proc)
+    assert code == 0, out
+    _clean(out)
+    return out
+
+
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_one_signal_orderly_stop_exit_0(ros_env, sig):
     proc = _start(ros_env)
@@ -104,9 +112,7 @@ def test_one_signal_orderly_stop_exit_0(ros_env, sig):
     time.sleep(0.2)
     t0 = time.monotonic()
     proc.send_signal(sig)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    out = _finish_clean(proc)
     assert time.monotonic() - t0 < 5.0
     assert 'stopped cleanly' in out      # logged while the context is still valid
 
@@ -121,9 +127,7 @@ def test_executor_chosen_by_the_environment(ros_env, choice, name):
     proc = _start(env)
     _wait_line(proc, f'executor {name}')
     proc.send_signal(signal.SIGINT)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    _finish_clean(proc)
 
 
 def test_unknown_executor_choice_is_one_line_exit_2(ros_env):
@@ -142,9 +146,7 @@ def test_second_sigint_50ms_later_during_the_stop_is_ignored(ros_env):
     time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     proc.send_signal(signal.SIGTERM)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    _finish_clean(proc)
 
 
 def test_two_sigints_50ms_apart_right_after_start(ros_env):
@@ -153,9 +155,7 @@ def test_two_sigints_50ms_apart_right_after_start(ros_env):
     proc.send_signal(signal.SIGINT)
     time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    _finish_clean(proc)
 
 
 def test_callbacks_in_flight_in_a_thread_pool_finish_before_on_exit(ros_env):
@@ -165,9 +165,7 @@ def test_callbacks_in_flight_in_a_thread_pool_finish_before_on_exit(ros_env):
     proc = _start(ros_env, MT='1', SLOW_CB_S='0.4')
     _wait_line(proc, 'cb start')
     proc.send_signal(signal.SIGINT)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    out = _finish_clean(proc)
     assert out.rindex('cb end') < out.index('on_exit start'), out
 
 
@@ -175,9 +173,7 @@ def test_signal_while_the_node_is_being_built(ros_env):
     proc = _start(ros_env, BUILD_S='1.5')
     _wait_line(proc, 'building')
     proc.send_signal(signal.SIGINT)
-    code, out = _finish(proc)
-    assert code == 0, out
-    _clean(out)
+    out = _finish_clean(proc)
     assert 'ready' in out                 # construction finished, then the orderly stop
 
 

@@ -162,14 +162,10 @@ class AxisSim(SimBoard):
 
     # --------------------------------------------------------------- requests
     def handle(self, msg: m.Message, frame) -> m.Message | None:
-        if isinstance(msg, m.GetStatus):
-            return self.status()
-        if isinstance(msg, m.Stop):
-            self._stop()
-            return m.Ack(msg.TYPE)
+        answer = self._motion_request(msg)
+        if answer is not None:
+            return answer
         if isinstance(msg, m.MoveTo):
-            if not self.homed:
-                raise Refuse(m.ErrorCode.NOT_HOMED)
             if not (0 < msg.speed) or abs(msg.steps) > 2**30:
                 raise Refuse(m.ErrorCode.OUT_OF_RANGE)
             if self.homing is not None:

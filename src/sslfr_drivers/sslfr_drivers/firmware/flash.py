@@ -19,7 +19,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.firmware import BOARDS, BOOTLOADER_BAUD, FirmwareError, build, hexfile
 from sslfr_drivers.link.keys_cli import BAUD_RANGE
-from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
+from sslfr_common.cliargs import OneLineParser, bounded_int, one_line, ranged_float
 
 #: --set keys: name -> (ConfigRecord field, parser)
 CONFIG_KEYS = {
@@ -109,10 +109,8 @@ def read_board(port: str, baud: int, timeout: float, key: bytes | None = None):
 
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout           # the stream of the call, not of the import
-    try:
-        args = parser().parse_args(argv)
-    except CliError as exc:
-        print(f'sslfr flash: error: {exc}', file=sys.stderr)
+    args = parser().parse_or_report(argv)
+    if args is None:
         return 2
     try:
         sets = parse_sets(args.set)

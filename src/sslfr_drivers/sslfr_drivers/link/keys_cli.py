@@ -22,7 +22,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, key_id
 from sslfr_drivers.link.keys import KeyFileError, default_key_path, generate, load_key, write_key_file
 from sslfr_drivers.link.protocol import Framer, encode_frame
-from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
+from sslfr_common.cliargs import OneLineParser, bounded_int, one_line, ranged_float
 
 
 class ProvisionError(RuntimeError):
@@ -112,10 +112,8 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout           # the stream of the call, not of the import
-    try:
-        args = parser().parse_args(argv)
-    except CliError as exc:
-        print(f'sslfr keys: error: {exc}', file=sys.stderr)
+    args = parser().parse_or_report(argv)
+    if args is None:
         return 2
     try:
         if args.cmd == 'new':
