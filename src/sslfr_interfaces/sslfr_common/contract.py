@@ -41,6 +41,15 @@ JOINT_RANGE: dict[str, tuple[float, float]] = {
 STOW_POSITION: dict[str, float] = {'mirrors': math.pi / 2, 'mobile_structure': 0.0,
                                    'secondary_reflector': 0.0}
 
+#: Wind stow position per joint [rad] (the default of the planner's ``stow.wind_pose``
+#: and of each driver's ``wind_stow_position``): every surface face-up. A flat mirror
+#: row edge-on to a horizontal wind (beta_0 = 0) shows it the least area and the least
+#: overturning moment about its axis; the sleeping position (+pi/2, vertical mirrors)
+#: is seed 000's protection against dust at night and turns the rows broadside to the
+#: wind. The longitudinal axes are horizontal at their rest position (0).
+WIND_STOW_POSITION: dict[str, float] = {'mirrors': 0.0, 'mobile_structure': 0.0,
+                                        'secondary_reflector': 0.0}
+
 
 def driver_node(joint: str) -> str:
     """Default node name of the axis driver of ``joint`` (``mirrors_driver``)."""
