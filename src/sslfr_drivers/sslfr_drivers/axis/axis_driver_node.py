@@ -193,10 +193,10 @@ class AxisDriver(ManagedNode):
             session.stop_now()      # before taking the lock: never wait behind a control tick
         self._stop_seen = stop_us
         with self._lock:
-            before = self.sup.safety.verdict(now)[0]
+            before = self.sup.safety.verdict(now)[0], self.sup.safety.wind_stow
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
-                                    msg.sequence, list(msg.reasons))
-            changed = self.sup.safety.verdict(now)[0] is not before
+                                    msg.sequence, list(msg.reasons), msg.wind_stow)
+            changed = self.sup.safety.verdict(now)[0] is not before[0] or self.sup.safety.wind_stow != before[1]
         if changed:
             self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 

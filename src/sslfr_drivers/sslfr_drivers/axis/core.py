@@ -68,10 +68,12 @@ class SafetyWatch:
     stow_required: bool = False
     stopped_axes: tuple = ()
     reasons: tuple = ()
+    wind_stow: bool = False
 
     def receive(self, now_steady: float, level: int, stow_required: bool, stopped_axes,
-                sequence: int, reasons=()) -> bool:
+                sequence: int, reasons=(), wind_stow: bool = False) -> bool:
         """Record a SafetyState; return True when it was fresh (new sequence)."""
+        self.wind_stow = bool(wind_stow)
         fresh = sequence != self.last_sequence
         self.level, self.stow_required = int(level), bool(stow_required)
         self.stopped_axes, self.reasons = tuple(stopped_axes), tuple(reasons)
@@ -102,6 +104,11 @@ class SafetyWatch:
         if self.stow_required or self.level == Level.STOW:
             return SafetyVerdict.STOW, 'safety requires stow: ' + '; '.join(self.reasons)
         return SafetyVerdict.FOLLOW, ''
+
+    def wind_pose(self, now_steady: float) -> bool:
+        """True when a STOW goes to the wind pose: the last fresh message said the stow
+        is for wind only (a fail-safe stow on silence goes to the stow position)."""
+        return self.wind_stow and self.last_rx is not None and now_steady - self.last_rx <= self.timeout
 
 
 # --------------------------------------------------------------------------- stall
@@ -257,6 +264,8 @@ class AxisTuning:
         Home by itself when the board lost its position (else wait for the home service).
     ref_samples : int
         Sensor readings (at rest, one per tick) averaged for a SET_ZERO [-].
+    wind_stow_position : float or None
+        Position of a wind stow (safety's ``wind_stow``) [rad]; None: ``stow_position``.
     """
 
     axis: str
@@ -272,6 +281,7 @@ class AxisTuning:
     use_sensor: bool = True
     auto_home: bool = True
     ref_samples: int = 5
+    wind_stow_position: float | None = None
 
 
 class Snapshot(NamedTuple):
@@ -517,7 +527,9 @@ class AxisSupervisor:
             self._latch(problem)
             return self._stop(board, 'fault', problem)
         if verdict is SafetyVerdict.STOW:
-            return self._move(board, self.cfg.stow_position, 'stowing', why)
+            wind = self.cfg.wind_stow_position is not None and self.safety.wind_pose(now_steady)
+            return self._move(board, self.cfg.wind_stow_position if wind else self.cfg.stow_position,
+                              'stowing', why)
         if self.mode == 'maintenance':
             if self.jog_target is not None:
                 return self._move(board, self.jog_target, 'jogging', 'maintenance jog')
