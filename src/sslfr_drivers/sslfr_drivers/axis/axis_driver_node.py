@@ -128,7 +128,7 @@ class AxisDriver(ManagedNode):
             self.session, self.refused = session, False
             self.last_error = self.sup.last_error = ''
             self.sup.position_lost()
-        self.get_logger().info(f'configured: board {session.board_info} on {port}')
+        self.get_logger().info(f'configured: board {session.board_info} on {port}; {session.host_loss_note}')
         return _SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:

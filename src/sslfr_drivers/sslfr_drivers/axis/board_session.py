@@ -26,6 +26,7 @@ from sslfr_common.contract import LinkState as Link
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.axis.core import Action, BoardState, Calibration
+from sslfr_drivers.axis.host_loss import configure_host_loss
 from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackError
 from sslfr_drivers.link.protocol import ProtocolError
 from sslfr_drivers.link.keys import link_key
@@ -93,6 +94,7 @@ class AxisBoardSession:
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
                               backoff_min=0.1, backoff_max=2.0, key=key)
         self.board_info = ''
+        self.host_loss_note = ''
         self.last_status: m.Status | None = None
         self.poll_failures = 0
         self.stale_polls = 0
@@ -273,4 +275,5 @@ def open_session(port: str, p: dict) -> AxisBoardSession:
     session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'],
                                key=link_key(p['key_file']))
     session.open()
+    session.host_loss_note = configure_host_loss(session.link, p)     # the board's own stow (EEPROM)
     return session

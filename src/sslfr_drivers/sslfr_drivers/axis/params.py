@@ -65,6 +65,13 @@ _SPECS = [
        'rad', *_ANGLE),
     _P('wind_stow_position', WIND_STOW_POSITION[_M], 'position of a wind stow (safety/state wind_stow) '
        '[rad] (default face-up: mirrors 0, others 0; least wind load)', 'rad', *_ANGLE),
+    _P('host_loss_stow', 'position', "the board's own stow after losing the host (stored in its EEPROM "
+       'at configure): off | position (host_loss_stow_position, only when referenced) | switch (toward '
+       'home_switch)', choices=('off', 'position', 'switch')),
+    _P('host_loss_stow_position', STOW_POSITION[_M], 'joint angle of the host-loss stow [rad] (default the '
+       'stow position: mirrors pi/2 sleeping, defocused)', 'rad', *_ANGLE),
+    _P('host_loss_stow_delay', 60.0, 'host silence after the board watchdog stop (1 s) before the board '
+       'stows by itself [s]', 's', 1.0, 86400.0),
     _P('home_switch', 'sleep', 'limit switch HOME drives to: low | high | sleep (default sleep: '
        'mirrors +pi/2, others 0)', choices=tuple(HOME_SWITCHES)),
     _P('home_position', STOW_POSITION[_M], 'joint angle where the home switch closes [rad]', 'rad', *_ANGLE),
@@ -98,7 +105,7 @@ def cross_check(p: dict) -> list[str]:
         errors.append(f"soft limits [{p['lower_limit']:.4f}, {p['upper_limit']:.4f}] rad exceed the "
                       f'mechanical range [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
     else:
-        for key in ('stow_position', 'wind_stow_position'):
+        for key in ('stow_position', 'wind_stow_position', 'host_loss_stow_position'):
             if not SoftLimits(p['lower_limit'], p['upper_limit']).contains(p[key]):
                 errors.append(f"{key} {p[key]:.4f} rad outside the soft limits")
     if p['min_speed'] > p['max_speed']:
@@ -116,7 +123,8 @@ def params_for(axis: str) -> ParamTable:
     lo, hi = JOINT_RANGE[axis]
     return PARAMS.with_defaults(axis=axis, lower_limit=lo, upper_limit=hi,
                                 stow_position=STOW_POSITION[axis], home_position=STOW_POSITION[axis],
-                                wind_stow_position=WIND_STOW_POSITION[axis])
+                                wind_stow_position=WIND_STOW_POSITION[axis],
+                                host_loss_stow_position=STOW_POSITION[axis])
 
 
 def tuning_from(p: dict) -> tuple[AxisTuning, StallDetector]:
