@@ -10,6 +10,8 @@ is a simulated duration, > 0)::
     gps-loss@HH:MM+SECONDS                     the GPS receiver loses its fix
     kill:NODE@HH:MM[+SECONDS]                  SIGKILL a node; held down SECONDS, else
                                                for the rest of the run
+    wind:MEAN@HH:MM+SECONDS                    a gusty wind of mean MEAN [m/s] (0..100) at
+                                               the anemometer (absorber board)
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -30,6 +32,10 @@ gps-loss            gps/fix status NO_FIX; the planner keeps the persisted site
 kill:planner        the drivers finish the trajectory horizon they hold, then
                     hold position
 kill:safety         no safety heartbeat: every axis stops/stows within 1.2 s
+wind                safety STOW (wind) at the first 3 s mean over wind.gust_limit
+                    or a mean over wind.mean_limit: planner phase STOW, axes to
+                    the wind pose (face-up); after the fault, released once the
+                    mean stayed below the limit - hysteresis for wind.hold
 ==================  ==========================================================
 """
 from __future__ import annotations
@@ -39,7 +45,7 @@ from dataclasses import dataclass
 
 from sslfr_common.contract import JOINTS
 
-KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill')
+KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'wind')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -48,12 +54,15 @@ _RULES = {
     'board-reset': (True, 'forbidden'),
     'gps-loss': (False, 'required'),
     'kill': (True, 'optional'),
+    'wind': (True, 'required'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
-FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps'}
+FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps', 'wind': 'absorber'}
+#: [m/s] the largest wind mean a fault may inject
+WIND_MAX = 100.0
 
-_SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/]+))?'
+_SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/.]+))?'
                    r'@(?P<hh>\d{1,2}):(?P<mm>\d{2})(?::(?P<ss>\d{2}(?:\.\d+)?))?'
                    r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?$')
 
@@ -73,7 +82,8 @@ class Fault:
     at : float
         Seconds after 00:00 UTC of the simulated day [s].
     target : str or None
-        Board (link-drop, board-reset), node (kill) or thermocouple (inlet/outlet).
+        Board (link-drop, board-reset), node (kill), thermocouple (inlet/outlet) or the
+        mean wind [m/s] as text (wind).
     duration : float or None
         Simulated seconds the fault lasts [s]; None = until the end (or instantaneous).
     spec : str
@@ -117,6 +127,15 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         if target not in (None, 'inlet', 'outlet'):
             raise FaultSpecError(f'fault {spec!r}: thermocouple is inlet or outlet, not {target!r}')
         target = target or 'outlet'
+    elif kind == 'wind':
+        try:
+            mean = float(target or '')
+        except ValueError:
+            mean = -1.0
+        if not 0.0 <= mean <= WIND_MAX:
+            raise FaultSpecError(f'fault {spec!r}: wind needs :MEAN, the mean wind in m/s, 0..{WIND_MAX:g} '
+                                 f'(e.g. wind:18@12:00+600)')
+        target = f'{mean:g}'
     elif needs_target and not target:
         what = 'NODE' if kind == 'kill' else 'BOARD'
         raise FaultSpecError(f'fault {spec!r}: {kind} needs :{what} (e.g. {kind}:'

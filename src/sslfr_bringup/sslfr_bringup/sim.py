@@ -118,6 +118,8 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
     cmd = {'cmd': 'fault', 'kind': f.kind, 'active': active}
     if f.kind == 'thermocouple-open':
         cmd['target'] = f.target
+    if f.kind == 'wind':
+        cmd['value'] = float(f.target)
     return [json.dumps(cmd)]
 
 

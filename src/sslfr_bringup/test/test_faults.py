@@ -16,6 +16,8 @@ from sslfr_bringup.faults import Fault, FaultSpecError, Schedule, format_fault, 
     ('gps-loss@06:00+600', 'gps-loss', 21600, None, 600.0, 'gps'),
     ('kill:planner@12:00', 'kill', 43200, 'planner', None, None),
     ('kill:safety@12:00+30', 'kill', 43200, 'safety', 30.0, None),
+    ('wind:18@12:00+600', 'wind', 43200, '18', 600.0, 'absorber'),
+    ('wind:7.5@12:00+60', 'wind', 43200, '7.5', 60.0, 'absorber'),
 ])
 def test_parse_each_kind(spec, kind, at, target, duration, board):
     f = parse(spec, nodes=['planner', 'safety'])
@@ -38,6 +40,10 @@ def test_parse_each_kind(spec, kind, at, target, duration, board):
     ('kill@10:00', 'needs :NODE'),
     ('kill:nobody@10:00', 'unknown node'),
     ('thermocouple-open:middle@10:00', 'inlet or outlet'),
+    ('wind@10:00+60', 'wind needs :MEAN'),
+    ('wind:calm@10:00+60', 'wind needs :MEAN'),
+    ('wind:101@10:00+60', 'wind needs :MEAN'),
+    ('wind:12@10:00', 'needs a duration'),
 ])
 def test_bad_specs_are_refused_with_the_reason(spec, needle):
     with pytest.raises(FaultSpecError, match=needle):
@@ -48,7 +54,7 @@ def test_bad_specs_are_refused_with_the_reason(spec, needle):
        board=st.sampled_from(faults.DEFAULT_BOARDS))
 def test_format_parse_round_trip(kind, at, dur, board):
     target = {'link-drop': board, 'board-reset': board, 'kill': 'planner',
-              'thermocouple-open': 'inlet'}.get(kind)
+              'thermocouple-open': 'inlet', 'wind': '12.5'}.get(kind)
     duration = None if kind == 'board-reset' else float(dur)
     f = Fault(kind, float(at), target, duration, '')
     g = parse(format_fault(f))
@@ -64,6 +70,15 @@ def test_schedule_returns_each_start_and_end_once_in_order():
     assert s.due(36000.0) == []
     assert s.due(36100.0) == [(b, 'start'), (a, 'end')]
     assert s.pending() == 0
+
+
+def test_wind_fault_commands_set_and_release_the_simulated_mean():
+    import json
+    from sslfr_bringup.sim import fault_commands
+    f = parse('wind:18@12:00+600')
+    assert json.loads(fault_commands(f, 'start', 1.0)[0]) == {'cmd': 'fault', 'kind': 'wind', 'active': True,
+                                                              'value': 18.0}
+    assert json.loads(fault_commands(f, 'end', 1.0)[0])['active'] is False
 
 
 def test_sim_set_option_parses_yaml_values():

@@ -303,6 +303,7 @@ class AbsorberSim(_SensorSim):
 
     kind = m.BoardKind.ABSORBER
     name = 'sim-absorber'
+    REQUESTS = _SensorSim.REQUESTS | {SetPulseInput.TYPE}
 
     def __init__(self, options: dict | None = None, rng: random.Random | None = None,
                  board_id: int = 1):
