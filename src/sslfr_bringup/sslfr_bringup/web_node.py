@@ -19,7 +19,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import NavSatFix, Temperature
-from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase
+from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase, Wind
 from sslfr_common.contract import JOINTS
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now, to_sec
 
@@ -54,6 +54,7 @@ class WebNode(LeanEvents, Node):
         sub(SunPosition, 'tracker/sun', st.on_sun, 10)
         sub(Irradiance, 'irradiance/beam', st.on_beam, 10)
         sub(NavSatFix, 'gps/fix', st.on_fix, 10)
+        sub(Wind, 'wind', st.on_wind, 10)
         for name in ('inlet', 'outlet'):
             sub(Temperature, f'absorber/{name}_temperature', lambda m, n=name: st.on_temperature(n, m), 10)
         for axis in JOINTS:
