@@ -11,7 +11,9 @@ is a simulated duration, > 0)::
     kill:NODE@HH:MM[+SECONDS]                  SIGKILL a node; held down SECONDS, else
                                                for the rest of the run
     wind:MEAN@HH:MM+SECONDS                    a gusty wind of mean MEAN [m/s] (0..100) at
-                                               the anemometer (absorber board)
+                                               the anemometer (absorber board); the gust
+                                               and mean windows and the release hold run
+                                               on wall time: use a low --speed
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -61,6 +63,9 @@ DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps', 'wind': 'absorber'}
 #: [m/s] the largest wind mean a fault may inject
 WIND_MAX = 100.0
+#: [s wall] a wind fault shorter than this may not reach the 3 s gust averaging (the
+#: anemometer and the wind rules run on steady time, not on the simulated clock)
+WIND_MIN_WALL_S = 6.0
 
 _SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/.]+))?'
                    r'@(?P<hh>\d{1,2}):(?P<mm>\d{2})(?::(?P<ss>\d{2}(?:\.\d+)?))?'

@@ -300,6 +300,11 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
             print(f'sslfr sim: fault {f.spec}: board {f.board} is not simulated in this node set', file=sys.stderr)
             return 2
+        if f.kind == 'wind' and f.duration / speed < faults_mod.WIND_MIN_WALL_S:
+            print(f'sslfr sim: warning: fault {f.spec} lasts {f.duration / speed:.1f} wall seconds at --speed '
+                  f'{speed:g}: the anemometer\'s 3 s gust and 10 min mean and the wind hold run on the boards\' '
+                  f'and the supervisor\'s steady clocks, not on simulated time; give it at least '
+                  f'{faults_mod.WIND_MIN_WALL_S * speed:.0f} s or a lower --speed', file=sys.stderr)
     out = Path(args.out or f'out/sim-{date}').resolve()
     out.mkdir(parents=True, exist_ok=True)
     bag_root = Path(args.record).resolve() if args.record else out / 'bags'
