@@ -83,6 +83,7 @@ def test_killed_driver_leaves_a_board_that_stows_by_itself(launch, ros, ros_env,
         again = launch('sslfr_drivers', 'axis_driver', params=params, name='mirrors_driver')
         assert ros.spin_until(lambda: any(s.fault_bits & m.FaultBits.HOST_LOSS for s in status[n:]), 30), \
             again.output()
+        assert 'the board stowed by itself while its host was away' in again.output()
         ros.spin_for(1.0)
         assert abs(board.cmd('status')['boards'][0]['counter'] - target) <= 1
     finally:

@@ -53,9 +53,13 @@ def describe(p: dict) -> str:
 
 def configure_host_loss(link, p: dict) -> str:
     """Send the record to the board (blocking: the configure thread); the log line, or
-    why the board did not take it (an older firmware: NACK UNKNOWN_TYPE)."""
+    why the board did not take it (an older firmware: NACK UNKNOWN_TYPE). The line also
+    says when the board's status (read at link up) shows it stowed by itself."""
+    st = getattr(link, 'last_status', None)
+    stowed = ('; the board stowed by itself while its host was away (fault HOST_LOSS)'
+              if st is not None and st.fault_bits & m.FaultBits.HOST_LOSS else '')
     try:
         link.request(host_loss_request(p))
     except Exception as exc:  # noqa: BLE001 - NackError, LinkTimeout...: reported, configure goes on
-        return f'host-loss stow NOT set on the board ({type(exc).__name__}: {exc})'
-    return describe(p)
+        return f'host-loss stow NOT set on the board ({type(exc).__name__}: {exc}){stowed}'
+    return describe(p) + stowed

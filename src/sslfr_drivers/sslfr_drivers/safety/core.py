@@ -419,6 +419,9 @@ class SafetyCore:
             return
         threshold = cfg.wind_mean_limit - cfg.wind_hysteresis
         gusty, windy = speed > cfg.wind_gust_limit, mean > cfg.wind_mean_limit
+        if (gusty or windy) and 'wind' not in self.faults:
+            self._notes.append(f'wind stow: releases once the mean wind stays below {threshold:.1f} m/s '
+                               f'for {cfg.wind_hold:.0f} s')
         if gusty:
             # the 3 s running mean crossing the limit is a gust above it (WMO); the gust
             # field (its highest value over 10 min) would re-raise a released stow
