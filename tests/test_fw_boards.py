@@ -450,8 +450,9 @@ def test_absorber_thermocouples_and_switches(tmp_path):
 
 
 def test_absorber_counts_anemometer_pulses(tmp_path):
-    """Issue 35: the cup anemometer's square wave on D7 (simavr drives the pin): the
-    firmware counts every falling edge; 20 Hz -> 0.765 * 20 + 0.35 = 15.65 m/s."""
+    """Issue 35: the cup anemometer's square wave on the pin the host set (D8 here; simavr
+    drives the pin the firmware counts on): every falling edge counted; 20 Hz -> 0.765 *
+    20 + 0.35 = 15.65 m/s."""
     from sslfr_drivers.sensors import anemometer
     h = _harness('absorber', tmp_path)
     host = _in_session(h.path)
@@ -459,10 +460,10 @@ def test_absorber_counts_anemometer_pulses(tmp_path):
         assert not _samples(host, ms.PulseSample, 0.6)                  # no input set: no samples
         nack = host.request(ms.SetPulseInput(9))                         # D9: a MAX6675 /CS
         assert nack == m.Nack(ms.SetPulseInput.TYPE, m.ErrorCode.OUT_OF_RANGE)
-        assert host.request(ms.SetPulseInput(7)) == m.Ack(ms.SetPulseInput.TYPE)
-        h.cmd('pulses 20 7')
+        assert host.request(ms.SetPulseInput(8)) == m.Ack(ms.SetPulseInput.TYPE)
+        h.cmd('pulses 20')
         s = _samples(host, ms.PulseSample, 4.2)
-        assert len(s) >= 15 and all(x.pin == 7 for x in s)
+        assert len(s) >= 15 and all(x.pin == 8 for x in s)
         assert all(b.board_ms - a.board_ms == 250 for a, b in zip(s, s[1:]))            # 4 Hz
         rate = (s[-1].count - s[1].count) / ((s[-1].board_ms - s[1].board_ms) / 1000.0)
         assert rate == pytest.approx(20.0, abs=0.3), rate
@@ -471,7 +472,7 @@ def test_absorber_counts_anemometer_pulses(tmp_path):
         assert readings[-1].speed == pytest.approx(15.65, abs=0.3)
         st = h.status()
         assert abs(st['fw_pulses'] - st['pulses_sent']) <= 1             # every edge counted
-        h.cmd('pulses 0 7')                                              # calm: the count stops
+        h.cmd('pulses 0')                                                # calm: the count stops
         host.poll(0.6)
         s = _samples(host, ms.PulseSample, 1.2)
         assert len(s) >= 4 and len({x.count for x in s}) == 1

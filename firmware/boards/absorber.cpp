@@ -32,7 +32,7 @@ uint16_t g_words[2] __attribute__((used));   /* last MAX6675 words (inlet, outle
 /* ---- pulse input (anemometer) */
 #define PULSE_LOCKOUT_US 1000u
 static const uint8_t PULSE_PINS[] = {7, 8, 11, 14, 15, 16, 17};
-static uint8_t g_pulse_pin = PULSE_PIN_OFF;
+uint8_t g_pulse_pin __attribute__((used)) = PULSE_PIN_OFF;   /* the harness follows it */
 static volatile uint8_t *g_pulse_reg;
 static uint8_t g_pulse_mask;
 static volatile uint8_t g_pulse_level;
