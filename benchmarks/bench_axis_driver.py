@@ -23,12 +23,13 @@ import time
 
 from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
 from sslfr_drivers.axis.board_session import AxisBoardSession
-from sslfr_drivers.axis.core import AxisSupervisor, AxisTuning, BoardState
+from sslfr_drivers.axis.commands import BoardState
+from sslfr_drivers.axis.supervisor import AxisSupervisor, AxisTuning
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.axis.trajectory import TrajectoryMsg
-from sslfr_drivers.sim.axis import AxisConfig as SimConfig
-from sslfr_drivers.sim.axis import AxisSim
-from sslfr_drivers.sim.runner import SimThread
+from sslfr_sim.axis import AxisConfig as SimConfig
+from sslfr_sim.axis import AxisSim
+from sslfr_sim.runner import SimThread
 
 
 def pct(values, q):

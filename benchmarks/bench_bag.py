@@ -67,7 +67,7 @@ def write_day(directory: Path, seconds: int, t0_ns: int = 1_782_000_000 * 10**9)
     from sensor_msgs.msg import JointState
     from sslfr_interfaces.msg import SunPosition
 
-    from sslfr_bringup.bag import BagWriter, WriterOptions, profile
+    from sslfr_recording.bag import BagWriter, WriterOptions, profile
     w = BagWriter(directory, WriterOptions(fsync=False))
     w.add_topic('/tracker/sun', 'sslfr_interfaces/msg/SunPosition', [profile()])
     w.add_topic('/joint_states', 'sensor_msgs/msg/JointState', [profile()])
@@ -102,7 +102,7 @@ def bench_recorder(seconds: float = 20.0) -> None:
     import psutil
     tmp = Path(tempfile.mkdtemp(prefix='bench_rec_'))
     env = dict(os.environ, ROS_DOMAIN_ID=str(200 + os.getpid() % 30))
-    exe = ROOT / 'ros_ws/install/sslfr_bringup/lib/sslfr_bringup/recorder'
+    exe = ROOT / 'ros_ws/install/sslfr_recording/lib/sslfr_recording/recorder'
     rec = subprocess.Popen([str(exe), '--ros-args', '-p', f'output_dir:={tmp}'], env=env,
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     pub_code = f'''
@@ -158,14 +158,14 @@ def main() -> int:
         size = sum(p.stat().st_size for p in bag.glob('*.mcap'))
         print(f'writer: {n} messages ({seconds} s of 1 Hz + 10 Hz) in {dt:.1f} s = {n / dt:,.0f} msg/s, '
               f'{size / 1e6:.1f} MB')
-        from sslfr_bringup.bag import BagReader
+        from sslfr_recording.bag import BagReader
         r = BagReader(bag)
         t = time.monotonic()
         k = sum(1 for _ in r.messages())
         dt = time.monotonic() - t
         print(f'reader (raw): {k} messages in {dt:.1f} s = {k / dt:,.0f} msg/s')
-        from sslfr_bringup.bag.conformance import check_bag
-        from sslfr_bringup.bag.recover import recover_bag
+        from sslfr_recording.bag.conformance import check_bag
+        from sslfr_recording.bag.recover import recover_bag
         t = time.monotonic()
         rep = check_bag(bag)
         dt = time.monotonic() - t

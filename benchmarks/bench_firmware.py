@@ -27,8 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests'))
 from fw_support import RawHost  # noqa: E402
 
 from sslfr_drivers import firmware as fw, messages as m  # noqa: E402
-from sslfr_drivers.sim.fw_board import config_record  # noqa: E402
-from sslfr_drivers.sim.fw_harness import Harness, axis_mech  # noqa: E402
+from sslfr_sim.fw_board import config_record  # noqa: E402
+from sslfr_sim.fw_harness import Harness, axis_mech  # noqa: E402
 
 
 def cpu_of(pid: int) -> float:

@@ -31,8 +31,8 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, Session
 from sslfr_drivers.link.board_link import BoardLink
 from sslfr_drivers.link.protocol import Framer, encode_frame
-from sslfr_drivers.sim.base import SimBoard
-from sslfr_drivers.sim.xbee import ApiParser, api_frame
+from sslfr_sim.base import SimBoard
+from sslfr_sim.xbee import ApiParser, api_frame
 from sslfr_drivers.link.transport import SerialTransport, make_transport
 
 
@@ -94,7 +94,7 @@ class BoardEnd(threading.Thread):
             if self.xbee:
                 for fd in api.feed(data):
                     if fd[0] == 0x08 or fd[0] == 0x09:       # AT command at digi-xbee open
-                        from sslfr_drivers.sim.xbee import DEFAULT_AT
+                        from sslfr_sim.xbee import DEFAULT_AT
                         cmd = fd[2:4].decode()
                         val = DEFAULT_AT.get(cmd)
                         os.write(self.master, api_frame(bytes((0x88, fd[1])) + fd[2:4] +
@@ -118,7 +118,7 @@ def run(link: BoardLink, end: BoardEnd, n: int, rate: float) -> tuple[list[float
     wire, rtt = [], []
     period = 1.0 / rate
     for i in range(n):
-        seq = link._seq.peek()
+        seq = link.auth.seq.peek()
         t0 = time.perf_counter()
         fut = link.submit(m.MoveTo(1000 + i, 500.0), timeout=0.5, retries=0)
         try:
@@ -147,7 +147,8 @@ def before(rev: str, n: int, rate: float) -> None:
                               check=True).stdout
         subprocess.run(['tar', '-x', '-C', tmp], input=arch, check=True)
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-            [f'{tmp}/src/sslfr_drivers', f'{tmp}/src/sslfr_interfaces', os.environ.get('PYTHONPATH', '')]))
+            [f'{tmp}/src/{pkg}' for pkg in ('sslfr_drivers', 'sslfr_sim', 'sslfr_common', 'sslfr_interfaces')]
+            + [os.environ.get('PYTHONPATH', '')]))
         out = subprocess.run([sys.executable, f'{tmp}/benchmarks/bench_link_latency.py', '--n', str(n), '--rate',
                               str(rate), '--xbee-n', '0'], capture_output=True, text=True, env=env, timeout=600)
         for line in (out.stdout + out.stderr).splitlines():

@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'sslfr_driv
 from pynmeagps import NMEAReader  # noqa: E402
 
 from sslfr_drivers.sensors import nmea  # noqa: E402
-from sslfr_drivers.sim.world import GpsReceiver  # noqa: E402
+from sslfr_sim.world import GpsReceiver  # noqa: E402
 
 
 def main(epochs: int = 2000) -> None:

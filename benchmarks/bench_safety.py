@@ -1,6 +1,6 @@
 """Benchmark: the safety supervisor.
 
-1. Rules core (sslfr_drivers.safety.core + the rule table): one simulated hour of a
+1. Rules core (sslfr_safety.core + the rule table): one simulated hour of a
    tracking day at the real message rates (2 thermocouples at 4 Hz, switches at 10 Hz,
    3 axis statuses at 5 Hz (motion and driver report: two core events each),
    phase/beam/fix at 1 Hz) and a verdict at 20 Hz, on a fake clock: cost per event and
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from sslfr_common.contract import JOINTS as AXES
 from sslfr_common.contract import SWITCHES, LinkState
-from sslfr_drivers.safety.core import FakeClock, SafetyConfig, SafetyCore
+from sslfr_safety.core import FakeClock, SafetyConfig, SafetyCore
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,17 +65,17 @@ def bench_core(hours: float = 1.0) -> None:
 
 
 def bench_node(n: int) -> None:
-    sys.path.insert(0, str(ROOT))
-    from conftest import RosHarness, _acquire_domain, executable
+    sys.path.insert(0, str(ROOT / 'tests'))
+    from harness import RosHarness, acquire_test_domain, executable
 
     from sensor_msgs.msg import Temperature
     from std_srvs.srv import Trigger
 
     from sslfr_interfaces.msg import SafetyState
-    dom, lock = _acquire_domain()
+    dom, lock = acquire_test_domain()
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     # only over-temperature matters here: no site rule, one watchdog that never fires
-    argv = [str(executable('sslfr_drivers', 'safety')), '--ros-args',
+    argv = [str(executable('sslfr_safety', 'safety')), '--ros-args',
             '-p', 'temperature.cool_hold:=0.0', '-p', 'temperature.hysteresis:=0.0',
             '-p', 'require_site_and_time:=false', '-p', 'watchdog.nodes:=["gps"]',
             '-p', 'watchdog.timeouts:=[1000.0]', '-p', 'watchdog.actions:=["WARN"]']

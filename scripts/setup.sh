@@ -163,12 +163,11 @@ bash "$ROOT/scripts/setup-browser.sh"
 command -v colcon >/dev/null 2>&1 || die "colcon not found (on a Pi: apt install python3-colcon-common-extensions)."
 STAMP="$ROOT/ros_ws/.setup-stamp"
 # Build inputs: package manifests, build files, interfaces, launch and config files.
-# Python sources do not count: --symlink-install links each package directory
-# (ament_python) or each file (ament_cmake: sslfr_common, so its file names count).
+# Python sources do not count: --symlink-install links each ament_python package's
+# directory, so a new or moved module is found without a rebuild.
 NEWSTAMP="$( (cd "$ROOT" && find src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg \
     -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -path '*/resource/*' \
     -o -path '*/launch/*' -o -path '*/config/*' \) -print0 | sort -z | xargs -0 sha256sum; \
-    find src/sslfr_interfaces/sslfr_common -name '*.py' | sort; \
     echo "$SSLFR_ROS_SOURCE $PYVER") | sha256sum | cut -d' ' -f1)"
 if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$NEWSTAMP" ] && [ -f "$ROOT/ros_ws/install/setup.bash" ]; then
   say "build up to date (ros_ws/install)"

@@ -7,14 +7,10 @@ missing; with ``CI=true`` a missing toolchain FAILS instead (CI must run them).
 from __future__ import annotations
 
 import os
-import sys
-from pathlib import Path
 
 import pytest
 
-# one polling helper for every test package
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'sslfr_drivers' / 'test'))
-from drivers_testutil import RawHost, wait_for  # noqa: E402,F401
+from drivers_testutil import RawHost, wait_for  # noqa: F401 - one polling helper for every test package
 
 
 #: the installation key of the firmware tests (fresh for every run: nothing depends on a

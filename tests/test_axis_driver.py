@@ -1,7 +1,7 @@
 """Topic-level acceptance of the axis driver (issue 5, "Axis driver node").
 
 Each test runs the REAL ``axis_driver`` executable and the link helper's simulated
-axis board as its own process on a real pty (``python -m sslfr_drivers.sim.runner``,
+axis board as its own process on a real pty (``python -m sslfr_sim.runner``,
 the same protocol as the firmware); faults are injected through the simulator's
 control socket. The test process plays the planner (``tracker/trajectory``), the
 safety supervisor (``safety/state`` at 10 Hz) and, when needed, ``tracker/phase``.
@@ -27,6 +27,7 @@ import time
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.contract import JOINTS
 from sslfr_common.timeconv import to_sec
 
 pytestmark = pytest.mark.timeout(120)
@@ -60,13 +61,13 @@ class Rig:
         from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
         from trajectory_msgs.msg import JointTrajectory
 
-        from sslfr_drivers.sim.runner import SimControl
+        from sslfr_sim.runner import SimControl
 
         self.ros, self.axis = ros, axis
         self.dir = tempfile.mkdtemp(prefix='axd')        # short: UNIX socket path limit
         self.port = os.path.join(self.dir, 'board')
         self.ctl_path = os.path.join(self.dir, 'ctl')
-        argv = [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', axis,
+        argv = [sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', axis,
                 '--link', self.port, '--control', self.ctl_path, '--seed', '7',
                 '--opt', 'sensor_noise_deg=0.003', *sim_args]
         self.sim_proc = NodeProcess(argv, ros_env, tmp_path / 'sim.log')
@@ -430,6 +431,19 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     assert ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
     assert r.board()['counter'] == held                          # and it stays stopped
     r.safety.update(level=0, stow_required=False)
+    # the operator e-stop (safety/estop: ESTOP listing every axis) while stowing: the
+    # same STOP from the safety callback, motor still within 0.3 s
+    r.safety.update(level=2, stow_required=True)
+    assert ros.spin_until(lambda: r.board()['speed'] != 0.0, 3)
+    r.safety.update(level=3, stow_required=True, stopped_axes=list(JOINTS))
+    r._beat()
+    t_estop = time.monotonic()
+    while r.board()['speed'] != 0.0 and time.monotonic() < t_estop + 1.0:
+        ros.spin_for(0.01)
+    print(f'operator e-stop: motor still {time.monotonic() - t_estop:.3f} s after the message')
+    assert time.monotonic() - t_estop <= 0.3
+    assert ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
+    r.safety.update(level=0, stow_required=False, stopped_axes=[])
 
     # jog: refused outside maintenance, accepted in maintenance
     res = ros.call(Jog, 'axes/mirrors/jog', Jog.Request(delta=0.01, speed=0.0))
@@ -556,7 +570,7 @@ def test_driver_started_before_its_board_activates_by_itself_and_after_sigkill(l
         assert all(s.state == 'unconfigured' and s.link_state == 0 for s in early), [s.state for s in early]
         # 5 Hz while configure attempts come and go (an attempt never holds the heartbeat)
         assert len(early) >= 0.7 * 5 * (_stamp(early[-1]) - _stamp(early[0])) and _gaps(early) < 1.0, _gaps(early)
-        sim = NodeProcess([sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', 'mirrors',
+        sim = NodeProcess([sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', 'mirrors',
                            '--link', port, '--seed', '7', '--opt', 'initial_angle_deg=10'],
                           ros_env, tmp_path / 'sim.log')
         t_board = time.monotonic()

@@ -90,7 +90,7 @@ def test_overrides_file_beats_the_config_node_section_in_a_real_node(launch, ros
                     '    max_file_size: 1000000\n')
     over = tmp_path / 'over.yaml'
     over.write_text('/recorder:\n  ros__parameters:\n    output_dir: %s\n' % (tmp_path / 'bags'))
-    proc = launch('sslfr_bringup', 'recorder', ros_args=['--params-file', str(site), '--params-file', str(over)])
+    proc = launch('sslfr_recording', 'recorder', ros_args=['--params-file', str(site), '--params-file', str(over)])
     res = ros.call(GetParameters, 'recorder/get_parameters',
                    GetParameters.Request(names=['output_dir', 'max_file_size']), timeout=20)
     assert res.values[0].string_value == str(tmp_path / 'bags'), proc.output()
@@ -298,7 +298,8 @@ BAD_CONFIGS = {   # config text -> words the one refusal line must hold
                                            if p.name != nodeset.NODESET_FILE))
 def test_shipped_site_configs_pass_the_nodes_tables(shipped):
     ns = nodeset.load()
-    assert nodeset.check_config(ns, nodeset.read_params(nodeset.config_dir() / shipped)) == []
+    path = nodeset.config_dir() / shipped          # where: also the base of its collector description
+    assert nodeset.check_config(ns, nodeset.read_params(path), where=str(path)) == []
 
 
 @pytest.mark.parametrize('text', list(BAD_CONFIGS), ids=range(len(BAD_CONFIGS)))
@@ -435,7 +436,7 @@ def test_composed_nodes_each_get_their_own_name_and_parameters(launch, ros, tmp_
     for name in ('rec_a', 'rec_b'):
         own = tmp_path / f'{name}.yaml'
         own.write_text(f'/{name}:\n  ros__parameters:\n    output_dir: {tmp_path / name}\n')
-        args += ['--node', 'sslfr_bringup.recorder_node:Recorder', '--ros-args', '-r', f'__node:={name}',
+        args += ['--node', 'sslfr_recording.recorder_node:Recorder', '--ros-args', '-r', f'__node:={name}',
                  '--params-file', str(site), '--params-file', str(own)]
     proc = launch('sslfr_bringup', 'composed', '--process', 'two', *args)
     for name in ('rec_a', 'rec_b'):

@@ -20,7 +20,7 @@ AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
 
 @pytest.fixture
 def axis_boards(ros_env, tmp_path):
-    exe = executable('sslfr_drivers', 'sim_board')
+    exe = executable('sslfr_sim', 'sim_board')
     if not exe.exists():
         pytest.fail('sim_board is not installed: run make setup')
     boards = {}

@@ -26,8 +26,8 @@ def _built():
 
 
 def _axis(tmp_path, key=KEY, name='axis', pace=0.5):
-    from sslfr_drivers.sim.fw_board import config_record
-    from sslfr_drivers.sim.fw_harness import Harness, axis_mech
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import Harness, axis_mech
     rec = config_record('axis', {'axis': 'mirrors'}, 5)
     return Harness('axis', eeprom=provisioned(rec, key), link=str(tmp_path / name), pace=pace,
                    mech=axis_mech('mirrors')).start()

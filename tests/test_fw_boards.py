@@ -34,8 +34,8 @@ def _harness(board, tmp, record=None, **kw):
     """The board's harness. Paced at half real time unless a test needs real time: on a
     loaded machine the test process may stall for a moment, which must not look like a
     silent host to the firmware (the timing assertions use simulated time)."""
-    from sslfr_drivers.sim.fw_board import config_record
-    from sslfr_drivers.sim.fw_harness import Harness, axis_mech
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import Harness, axis_mech
     kw.setdefault('pace', 0.5 if board == 'axis' else 1.0)
     if board == 'axis':
         kw.setdefault('mech', axis_mech('mirrors'))
@@ -145,7 +145,7 @@ def _profile(h, seconds, period=0.02):
 def test_trapezoidal_profile_at_20000_steps_per_s(tmp_path):
     """Top speed reached and held, ramps at the EEPROM acceleration, stop exactly on
     the target (no overshoot); >= 2000 steps/s required, 20 000 configured."""
-    from sslfr_drivers.sim.fw_board import config_record
+    from sslfr_sim.fw_board import config_record
     rec = config_record('axis', {'axis': 'mirrors', 'max_speed': 20000, 'accel': 40000}, 1)
     h = _harness('axis', tmp_path, rec)
     host = fw_host(h.path).heartbeat()
@@ -220,8 +220,8 @@ def test_host_killed_motor_stopped_within_1_2_s(tmp_path):
     """The host process dies (SIGKILL) while the axis moves at 3000 steps/s: the 1 s
     host-silence watchdog decelerates the motor to a stop; last step <= 1.2 s after the
     last byte received (simulated time), fault WATCHDOG latched."""
-    from sslfr_drivers.sim.fw_board import config_record
-    from sslfr_drivers.sim.fw_harness import axis_mech
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import axis_mech
     rec = config_record('axis', {'axis': 'mobile_structure'}, 1)
     h = _harness('axis', tmp_path, rec, mech=axis_mech('mobile_structure', 0.0), pace=1.0)
     proc = subprocess.Popen([sys.executable, '-c', HOST_SCRIPT, h.path, KEY.hex()], stdout=subprocess.PIPE, text=True)
@@ -266,8 +266,8 @@ def test_host_killed_axis_drives_to_its_host_loss_stow_by_itself(tmp_path):
     (2 s) and drives to its host-loss stow (14000 steps = 84 deg, 16000 steps away at
     3000 steps/s: ~5.8 s of travel) by itself; a host that comes back reads fault
     HOST_LOSS, a PING does not move it, a MOVE_TO does."""
-    from sslfr_drivers.sim.fw_board import config_record
-    from sslfr_drivers.sim.fw_harness import axis_mech
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import axis_mech
     rec = config_record('axis', {'axis': 'mirrors'}, 1)
     h = _harness('axis', tmp_path, rec, mech=axis_mech('mirrors', 0.0), pace=1.0)
     proc = subprocess.Popen([sys.executable, '-c', STOW_HOST_SCRIPT, h.path, KEY.hex()], stdout=subprocess.PIPE,
@@ -388,7 +388,7 @@ def test_eeprom_configuration_procedure(axis):
 def test_position_sensor_as5048a(tmp_path):
     """With the optional encoder configured the STATUS sensor angle follows the joint to
     the encoder's resolution (2 pi / 16384)."""
-    from sslfr_drivers.sim.fw_board import config_record
+    from sslfr_sim.fw_board import config_record
     rec = config_record('axis', {'axis': 'mirrors', 'sensor': 1}, 1)
     h = _harness('axis', tmp_path, rec, sensor_zero=rec.sensor_zero)
     host = fw_host(h.path)
@@ -510,7 +510,7 @@ def test_irradiance_auto_range_covers_0_to_120_klx(tmp_path):
 
 
 def test_gps_nmea_forwarded_byte_exact(tmp_path):
-    from sslfr_drivers.sim.world import GpsReceiver
+    from sslfr_sim.world import GpsReceiver
     h = _harness('gps', tmp_path)
     host = _in_session(h.path)
     try:

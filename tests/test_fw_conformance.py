@@ -104,10 +104,10 @@ def _norm(name, answer):
 
 
 def test_python_simulator_answers_like_the_firmware(tmp_path):
-    from sslfr_drivers.sim.fw_board import config_record
-    from sslfr_drivers.sim.fw_harness import Harness, axis_mech
-    from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-    from sslfr_drivers.sim.runner import SimThread
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import Harness, axis_mech
+    from sslfr_sim.axis import AxisConfig, AxisSim
+    from sslfr_sim.runner import SimThread
 
     rec = config_record('axis', {'axis': 'mirrors'}, 1)
     with Harness('axis', eeprom=provisioned(rec), link=str(tmp_path / 'fw'), mech=axis_mech('mirrors')) as h:

@@ -32,7 +32,7 @@ def _built():
 
 def test_sslfr_flash_through_the_debian_bootloader(tmp_path):
     from sslfr_drivers import firmware as fw
-    from sslfr_drivers.sim.fw_harness import Harness, axis_mech
+    from sslfr_sim.fw_harness import Harness, axis_mech
     h = Harness('axis', bootloader=str(fw.BOOTLOADER), app=False, link=str(tmp_path / 'promini'),
                 mech=axis_mech('mirrors')).start()
     try:
@@ -69,7 +69,7 @@ def test_watchdog_reset_needs_a_watchdog_aware_bootloader(tmp_path, bootloader, 
     never reaches the firmware (as on real boards, until a power cycle). Optiboot (also
     shipped by arduino-core-avr) starts the application at once: BOOT, not HOMED."""
     from sslfr_drivers import firmware as fw
-    from sslfr_drivers.sim.fw_harness import Harness, axis_mech
+    from sslfr_sim.fw_harness import Harness, axis_mech
     h = Harness('axis', bootloader=str(fw.ARDUINO / 'bootloaders' / bootloader), app=True,
                 link=str(tmp_path / 'b'), mech=axis_mech('mirrors')).start()
     host = fw_host(h.path, key=None)              # a blank EEPROM: not provisioned

@@ -30,7 +30,7 @@ def _hostlib():
 
 
 def native():
-    from sslfr_drivers.firmware import native as n
+    from sslfr_sim import fw_native as n
     return n
 
 
@@ -434,8 +434,8 @@ def test_board_session_equals_simboard(ops, rnd):
     """The firmware's session + common requests answer byte for byte like the simulators'
     SimBoard (the Python model of the board protocol), counters included, through
     sessions, retries, replays and forgeries."""
-    from sslfr_drivers.firmware.native import BOARD_COUNTERS
-    from sslfr_drivers.sim.base import SimBoard
+    from sslfr_sim.fw_native import BOARD_COUNTERS
+    from sslfr_sim.base import SimBoard
     key = rnd.randbytes(16)
     py = SimBoard(board_id=7, key=key)
     fwb = native().Board(kind=0, board_id=7, key=key)
@@ -533,7 +533,7 @@ def test_provisioning_only_in_the_window_after_an_external_reset():
     """PROVISION is refused LOCKED (counted) without the window and after it closes; in
     it the board takes the key, answers ACK under the new key and then opens sessions
     only with it. Python SimBoard and firmware alike."""
-    from sslfr_drivers.sim.base import SimBoard
+    from sslfr_sim.base import SimBoard
     old, new = bytes(range(16)), bytes(range(100, 116))
     for b in (native().Board(kind=0, key=old), None):
         py = SimBoard(key=old) if b is None else None

@@ -3,7 +3,7 @@
 paced to the wall clock; the sensor worlds are those of the Python simulators.
 
 - a tracking window: every axis within one motor step (+ the quantisation allowance of
-  sslfr_bringup.scenario) of the ephemeris core's ideal angle;
+  sslfr_sim.scenario) of the ephemeris core's ideal angle;
 - one faulty morning: link drop -> recovery, board reset -> re-home, over-temperature
   -> STOW with the mirrors asleep.
 The host-silence watchdog (host killed -> motor stopped within 1.2 s) and the limit
@@ -17,8 +17,9 @@ import pytest
 
 from fw_support import require
 
-from sslfr_bringup import nodeset, scenario
-from sslfr_bringup.sim import day_epoch, parse_hhmm
+from sslfr_bringup import nodeset
+from sslfr_sim import scenario
+from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(420)]
 DATE = '2026-06-21'

@@ -18,7 +18,7 @@ from fw_support import require, wait_for
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link import sensor_messages as ms
 from sslfr_drivers.link.board_link import BoardLink, LinkState
-from sslfr_drivers.sim.runner import SimControl
+from sslfr_sim.runner import SimControl
 from sslfr_drivers.link.transport import SerialTransport
 
 pytestmark = pytest.mark.timeout(180)
@@ -32,7 +32,7 @@ def _built():
 
 def _fw_board(tmp_path, *args):
     ctl = str(tmp_path / 'ctl')
-    proc = subprocess.Popen([sys.executable, '-m', 'sslfr_drivers.sim.fw_board', '--control', ctl, '--seed', '2', *args],
+    proc = subprocess.Popen([sys.executable, '-m', 'sslfr_sim.fw_board', '--control', ctl, '--seed', '2', *args],
                             stdout=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
     assert line.startswith('SIM_PTY '), line

@@ -25,11 +25,11 @@ DELAY, SPEED, START = 2.0, 0.5, math.radians(20.0)
 
 def test_killed_driver_leaves_a_board_that_stows_by_itself(launch, ros, ros_env, tmp_path):
     from sslfr_drivers.link import messages as m
-    from sslfr_drivers.sim.runner import SimControl
+    from sslfr_sim.runner import SimControl
     from sslfr_interfaces.msg import AxisStatus
     d = tempfile.mkdtemp(prefix='hls')
     port, ctl = os.path.join(d, 'board'), os.path.join(d, 'ctl')
-    sim = NodeProcess([sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', 'mirrors',
+    sim = NodeProcess([sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', 'mirrors',
                        '--link', port, '--control', ctl, '--seed', '3', '--opt', f'initial_angle_deg={20.0}'],
                       ros_env, tmp_path / 'sim.log')
     try:

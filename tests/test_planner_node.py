@@ -221,6 +221,37 @@ def test_trajectory_equals_core_and_is_never_in_the_past(launch, ros, tmp_path):
     assert 'Traceback' not in proc.output()
 
 
+@pytest.mark.timeout(60)
+def test_trajectory_follows_the_described_mirror_law(launch, ros, tmp_path):
+    """Seed 004's site config names its collector description: the planner commands the
+    common drive a theta_T (Table 1's pace 0.4962), not theta_T / 2."""
+    from sslfr_planner import description
+    from sslfr_planner.day_cycle import make_collector, make_site
+    from sslfr_planner.site_source import SiteFix
+    from sslfr_planner.tracking_table import evaluate
+    from trajectory_msgs.msg import JointTrajectory
+
+    config = CONFIG / 'florianopolis_lepten.yaml'
+    overrides = {'republish_period': 0.5}
+    cfg = _planner_cfg(config, overrides)
+    site = make_site(cfg, SiteFix(cfg['site.latitude_deg'], cfg['site.longitude_deg'],
+                                  cfg['site.elevation'], 'parameters'))
+    coll = make_collector(cfg, description.load(CONFIG / cfg['collector.description']))
+    proc = _start(launch, tmp_path, config, overrides)
+    box = ros.collect(JointTrajectory, 'tracker/trajectory', _qos_tl1())
+    clock = SimClock(ros)
+    t = _utc(2026, 6, 21, 18, 0, 0) + 0.5              # 15:00 local: theta_T ~ +50 deg
+    clock.step_until(t, box)
+    times = _points(box[-1])
+    pos = np.array([p.positions for p in box[-1].points])
+    ref = evaluate(times, site, coll)
+    assert np.all(ref.phase == 2)
+    assert np.max(np.abs(pos[:, 0] - ref.mirrors)) <= 1e-9
+    assert np.allclose(pos[:, 0], 0.4962 * ref.transversal, atol=1e-9)
+    assert np.min(np.abs(pos[:, 0] - ref.transversal / 2)) > np.radians(0.1)
+    assert 'laws lepten_linear/horizontal' in proc.output() and 'Traceback' not in proc.output()
+
+
 # ------------------------------------------------------------------- clock jumps
 @pytest.mark.timeout(60)
 def test_replans_within_one_second_of_a_3h_clock_jump(launch, ros, tmp_path):

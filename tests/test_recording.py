@@ -12,7 +12,6 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -28,10 +27,9 @@ from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, TrackerPhase
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / 'src' / 'sslfr_bringup' / 'test'))
 
-from sslfr_bringup.bag import BagReader, BagWriter, WriterOptions, profile  # noqa: E402
-from sslfr_bringup.bag.conformance import check_bag  # noqa: E402
+from sslfr_recording.bag import BagReader, BagWriter, WriterOptions, profile  # noqa: E402
+from sslfr_recording.bag.conformance import check_bag  # noqa: E402
 
 TL1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -92,7 +90,7 @@ def _sslfr(args, env, timeout=60):
 
 
 def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
-    rec = launch('sslfr_bringup', 'recorder', params={
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'exclude': ['/diagnostics']})
     node = ros.node
@@ -164,7 +162,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
             w.write('/tracker/phase',
                     dds_padded(serialize_message(TrackerPhase(phase=2, reason=str(k)))), tk + 2_000_000)
     w.close()
-    rec = launch('sslfr_bringup', 'recorder', params={
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'two'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'use_sim_time': True,
         'topics': ['/absorber/inlet_temperature', '/axes/mirrors/status', '/tracker/phase']})
@@ -200,7 +198,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
 
 
 def test_sigkill_then_recover_loses_at_most_5_s(launch, ros, ros_env, tmp_path):
-    rec = launch('sslfr_bringup', 'recorder', params={
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'discovery_period': 0.2})  # default 2 s chunks
     pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
     _wait_matched(ros, [pub])
@@ -264,7 +262,7 @@ def test_full_rate_day_replays_over_1000x(ros_env, tmp_path):
 
 def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
-    rec = launch('sslfr_bringup', 'recorder', params={
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'min_free_bytes': 2**60, 'discovery_period': 0.2,
         'disk_check_period': 0.2})
     diags = ros.collect(DiagnosticArray, 'diagnostics')
@@ -290,10 +288,10 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
     from rcl_interfaces.srv import SetParameters
     # at start: an output_dir that cannot hold bags stops the node with the reason
     (tmp_path / 'a_file').write_text('x')
-    bad = launch('sslfr_bringup', 'recorder', params={'output_dir': str(tmp_path / 'a_file')})
+    bad = launch('sslfr_recording', 'recorder', params={'output_dir': str(tmp_path / 'a_file')})
     assert bad.proc.wait(20) == 2
     assert 'not a directory' in bad.output()
-    rec = launch('sslfr_bringup', 'recorder', params={
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'discovery_period': 0.2, 'chunk_duration': 0.2,
         'fsync': False, 'exclude': ['/diagnostics']})
     diags = ros.collect(DiagnosticArray, 'diagnostics')
@@ -322,7 +320,7 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
 
 
 @pytest.mark.skipif(not (ROOT / 'ros_ws/install/sslfr_planner/lib/sslfr_planner/planner').exists()
-                    or not (ROOT / 'ros_ws/install/sslfr_drivers/lib/sslfr_drivers/safety').exists(),
+                    or not (ROOT / 'ros_ws/install/sslfr_safety/lib/sslfr_safety/safety').exists(),
                     reason='planner/safety executables not installed')
 def test_whatif_replay_runs_fresh_planner_and_safety(ros_env, tmp_path):
     """Inputs of a recorded stretch go to a fresh planner + safety; their decisions are
@@ -403,8 +401,8 @@ def test_two_sigints_during_the_stop_still_finish_the_bag(launch, ros, tmp_path,
     """A terminal's Ctrl-C and launch's own SIGINT (issue 21): the recorder exits 0 and
     the day's bag is complete (metadata.yaml written atomically, no .tmp left), as
     rosbag2's rules require."""
-    from sslfr_bringup.bag.conformance import check_bag
-    rec = launch('sslfr_bringup', 'recorder', params={
+    from sslfr_recording.bag.conformance import check_bag
+    rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'chunk_duration': 0.5, 'discovery_period': 0.2,
         'exclude': ['/diagnostics']})
     pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)

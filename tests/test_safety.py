@@ -129,7 +129,7 @@ def _key(state):
 
 
 def _start(launch, ros, **params):
-    proc = launch('sslfr_drivers', 'safety', params={**FAST, **params})
+    proc = launch('sslfr_safety', 'safety', params={**FAST, **params})
     world = World(ros)
     world.proc = proc
     from sslfr_interfaces.msg import SafetyState
@@ -353,7 +353,7 @@ def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
         now = stamp(sim['t'])
         clock_pub.publish(Clock(clock=now))
         world.stamp = now
-    proc = launch('sslfr_drivers', 'safety', params={**FAST, 'use_sim_time': True})
+    proc = launch('sslfr_safety', 'safety', params={**FAST, 'use_sim_time': True})
     world = World(ros)
     ros.node.create_timer(0.05, tick)
     assert world.wait_level(SafetyState.OK, 20.0), f'{world.latest()}\n{proc.output()}'

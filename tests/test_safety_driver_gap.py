@@ -52,7 +52,7 @@ def _ready(status) -> bool:
 def board(ros_env, tmp_path):
     d = tempfile.mkdtemp(prefix='sdg')              # short: UNIX socket path limit
     port, ctl = os.path.join(d, 'board'), os.path.join(d, 'ctl')
-    argv = [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', 'axis', '--axis', AXIS,
+    argv = [sys.executable, '-m', 'sslfr_sim.runner', '--kind', 'axis', '--axis', AXIS,
             '--link', port, '--control', ctl, '--seed', '5', '--opt', 'initial_angle_deg=20.0']
     sim = NodeProcess(argv, ros_env, tmp_path / 'sim.log')
     deadline = time.monotonic() + 20
@@ -74,7 +74,7 @@ def test_killed_and_restarted_driver_keeps_safety_stowed_until_active_and_homed(
     states: list = []                         # (arrival [steady s], SafetyState)
     ros.node.create_subscription(SafetyState, 'safety/state', lambda m: states.append((time.monotonic(), m)), 10)
     statuses = ros.collect(AxisStatus, f'axes/{AXIS}/status')
-    safety = launch('sslfr_drivers', 'safety', params={
+    safety = launch('sslfr_safety', 'safety', params={
         'require_site_and_time': False, 'watchdog.nodes': [NODE], 'watchdog.timeouts': [WATCHDOG],
         'watchdog.actions': ['STOW'], 'watchdog.startup_grace': 30.0})
     assert ros.spin_until(lambda: states, 30.0), safety.output()

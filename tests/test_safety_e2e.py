@@ -113,7 +113,7 @@ class Plant:
         from sensor_msgs.msg import Temperature
         from trajectory_msgs.msg import JointTrajectory
 
-        from sslfr_drivers.sim.runner import SimControl
+        from sslfr_sim.runner import SimControl
         from sslfr_interfaces.msg import AxisStatus, LimitSwitches, SafetyState, TrackerPhase
 
         self.ros = ros
@@ -123,7 +123,7 @@ class Plant:
 
         def sim(kind, name, *opts):
             link, ctl = os.path.join(self.dir, name), os.path.join(self.dir, name + '.ctl')
-            argv = [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--kind', kind, '--link', link,
+            argv = [sys.executable, '-m', 'sslfr_sim.runner', '--kind', kind, '--link', link,
                     '--control', ctl, '--seed', '3', *opts]
             proc = NodeProcess(argv, env, tmp_path / f'{name}.log')
             self.procs.append(proc)
@@ -165,7 +165,7 @@ class Plant:
             'max_speed': MAX_SPEED, 'home_speed': MAX_SPEED}) for axis in self.axes}
         self.driver = self.drivers['mirrors']
         watched = ['planner', 'absorber_board'] + [f'{axis}_driver' for axis in self.axes]
-        self.safety = launch('sslfr_drivers', 'safety', params={
+        self.safety = launch('sslfr_safety', 'safety', params={
             'temperature.cool_hold': 1.0, 'watchdog.startup_grace': 10.0,
             'watchdog.nodes': watched, 'watchdog.timeouts': [3.0] + [2.0] * (len(watched) - 1),
             'watchdog.actions': ['STOW'] * len(watched)})

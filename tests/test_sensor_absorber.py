@@ -8,8 +8,8 @@ from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
 from sslfr_common.node import to_sec
-from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.sim.sensors import AbsorberSim
+from sslfr_sim.runner import SimThread
+from sslfr_sim.sensors import AbsorberSim
 
 NOON = dt.datetime(2026, 6, 21, 12, 0, tzinfo=dt.timezone.utc).timestamp()
 

@@ -11,8 +11,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from sslfr_common.node import to_sec
-from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.sim.sensors import GpsSim
+from sslfr_sim.runner import SimThread
+from sslfr_sim.sensors import GpsSim
 
 START = dt.datetime(2026, 3, 21, 11, 0, tzinfo=dt.timezone.utc).timestamp()
 SITE = {'latitude_deg': 37.0931, 'longitude_deg': -2.3590, 'elevation': 510.0}

@@ -6,9 +6,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
-from sslfr_drivers.sim.world import Sky
-from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.sim.sensors import DEFAULT_SITE, IrradianceSim
+from sslfr_sim.world import Sky
+from sslfr_sim.runner import SimThread
+from sslfr_sim.sensors import DEFAULT_SITE, IrradianceSim
 
 T = dt.datetime(2026, 3, 21, 11, 0, tzinfo=dt.timezone.utc).timestamp()
 
@@ -74,8 +74,8 @@ def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
     the luminous efficacy is a parameter, validated at runtime."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
-    from sslfr_drivers.sim.base import FaultInjector
-    from sslfr_drivers.sim.xbee import XBeeSimCoordinator
+    from sslfr_sim.base import FaultInjector
+    from sslfr_sim.xbee import XBeeSimCoordinator
     host = XBeeSimCoordinator()
     host.add_board(bytes.fromhex('0013A20040000012'),
                    IrradianceSim({'start_utc': T, 'period': 0.25, 'noise': 0.0}), FaultInjector())

@@ -1,5 +1,5 @@
 """System scenarios, faults: every `--fault` spec of `./sslfr sim` produces its
-documented reaction (sslfr_bringup/faults.py), seen live on topics and in the bag.
+documented reaction (sslfr_sim/faults.py), seen live on topics and in the bag.
 
 One simulated morning carries the faults one after the other (each given time to
 show its reaction and recover), so the node set starts once:
@@ -27,8 +27,9 @@ import pytest
 
 from conftest import ROOT
 
-from sslfr_bringup import nodeset, scenario
-from sslfr_bringup.sim import day_epoch, parse_hhmm
+from sslfr_bringup import nodeset
+from sslfr_sim import scenario
+from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
@@ -78,13 +79,13 @@ def _sim(ros, env, out, args, timeout=150.0, watch=None):
 @pytest.fixture(scope='module')
 def morning(tmp_path_factory):
     """The faulty morning, run once for the tests of this module (own domain)."""
-    from conftest import RosHarness, _acquire_domain
+    from harness import RosHarness, acquire_test_domain
     import fcntl
     import os
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     from sensor_msgs.msg import NavSatFix, Temperature
 
-    dom, fh = _acquire_domain()
+    dom, fh = acquire_test_domain()
     tmp = tmp_path_factory.mktemp('faults')
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp / 'roslog'), PYTHONUNBUFFERED='1')

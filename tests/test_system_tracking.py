@@ -3,7 +3,7 @@ boards through `./sslfr sim`, observed live on topics and in the recorded bag.
 
 - a tracking window at high speed, in both process layouts of the node set (composed,
   separate): every axis within one motor step + the position sensor noise of the ideal angle of the ephemeris core (sslfr_planner.tracking_table),
-  allowing for the sim-time quantisation (see sslfr_bringup.scenario);
+  allowing for the sim-time quantisation (see sslfr_sim.scenario);
 - sunrise and sunset windows: the phase changes NIGHT -> PRE_DAWN -> TRACKING and
   TRACKING -> STOWING -> NIGHT at the times of the reference table, the mirrors
   leaving and reaching the sleeping position.
@@ -18,8 +18,9 @@ import pytest
 
 from conftest import ROOT
 
-from sslfr_bringup import nodeset, scenario
-from sslfr_bringup.sim import day_epoch
+from sslfr_bringup import nodeset
+from sslfr_sim import scenario
+from sslfr_sim.sim_cli import day_epoch
 
 STEP = math.radians(0.006)            # seed 000 section 3.4: one motor step
 SENSOR_NOISE = math.radians(0.003)    # simulated position sensor, 1 sigma (sim/axis.py)
@@ -158,5 +159,5 @@ def test_sunrise_and_sunset_phase_changes(ros, ros_env, tmp_path, window, expect
 
 
 def scenario_hhmm(text: str) -> float:
-    from sslfr_bringup.sim import parse_hhmm
+    from sslfr_sim.sim_cli import parse_hhmm
     return parse_hhmm(text)

@@ -24,7 +24,7 @@ import pytest
 
 from conftest import ROOT, NodeProcess
 
-from sslfr_bringup.web import auth
+from sslfr_web import auth
 
 CHROMIUM, CHROMEDRIVER = Path('/usr/bin/chromium'), Path('/usr/bin/chromedriver')
 PASSWORD = 'browser-test-pass'

@@ -24,7 +24,7 @@ import urllib.request
 import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
-from sslfr_bringup.web import auth
+from sslfr_web import auth
 
 PASSWORD = 'topic-level-pass'
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -85,8 +85,8 @@ def graph(launch, ros, tmp_path):
     """planner + safety + web; returns (web process, Page)."""
     pw = auth.write_password_file(tmp_path / 'pw', PASSWORD)
     launch('sslfr_planner', 'planner', params={'state_dir': str(tmp_path / 'state')})
-    launch('sslfr_drivers', 'safety')
-    web = launch('sslfr_bringup', 'web', params={'port': 0, 'password_file': str(pw),
+    launch('sslfr_safety', 'safety')
+    web = launch('sslfr_web', 'web', params={'port': 0, 'password_file': str(pw),
                                                   'audit_file': str(tmp_path / 'audit.jsonl'),
                                                   'bag_dir': str(tmp_path / 'bags')})
     assert web.wait_for_output('operator page at', 30), web.output()

@@ -14,8 +14,8 @@ import time
 
 import pytest
 
-from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.sim.sensors import AbsorberSim
+from sslfr_sim.runner import SimThread
+from sslfr_sim.sensors import AbsorberSim
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -59,7 +59,7 @@ def _fault(sim, kind, active, **kw):
 
 
 def _kinds(state):
-    from sslfr_drivers.safety.rules import rule_for
+    from sslfr_safety.rules import rule_for
     return {rule_for(r).kind for r in state.reasons}
 
 

@@ -8,24 +8,22 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['web/static/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config/collectors', glob('config/collectors/*.yaml')),
     ],
     install_requires=['setuptools'],
-    zip_safe=False,   # the operator page serves web/static/* from the package directory
+    zip_safe=True,
     maintainer='SSLFR tracker maintainers',
     maintainer_email='maintainers@sslfr-tracker.org',
-    description='SSLFR bringup: node set, launch, configs, CLI, recorder, replay, report, operator page',
+    description='SSLFR bringup: node set, launch file, site configs, supervisor, the sslfr command',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'sslfr = sslfr_bringup.cli:main',
-            'recorder = sslfr_bringup.recorder_node:main',
-            'web = sslfr_bringup.web_node:main',
             'composed = sslfr_bringup.composed:main',
         ],
     },

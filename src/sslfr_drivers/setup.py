@@ -14,19 +14,16 @@ setup(
     zip_safe=True,
     maintainer='SSLFR tracker maintainers',
     maintainer_email='maintainers@sslfr-tracker.org',
-    description='SSLFR board links, drivers, safety supervisor, simulated boards',
+    description='SSLFR board links, axis and sensor drivers, firmware build and flash',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'axis_driver = sslfr_drivers.axis.axis_driver_node:main',
             'lifecycle_ctl = sslfr_drivers.axis.lifecycle_ctl:main',
-            'safety = sslfr_drivers.safety.safety_node:main',
-            'sim_board = sslfr_drivers.sim.runner:main',
             'xbee_hub = sslfr_drivers.link.xbee_hub:main',
             'gps = sslfr_drivers.sensors.gps_node:main',
             'absorber_board = sslfr_drivers.sensors.absorber_board_node:main',
             'irradiance = sslfr_drivers.sensors.irradiance_node:main',
-            'fw_board = sslfr_drivers.sim.fw_board:main',
         ],
     },
 )

@@ -1,1 +1,1 @@
-"""SSLFR tracker bringup: node set, CLI, recorder, replay and report."""
+"""SSLFR tracker bringup: the node set, the launch file, the process supervisor and the sslfr command."""

@@ -11,19 +11,22 @@ import importlib
 import importlib.util
 import sys
 
-#: name -> (module, one-line help). The module must define ``main(argv) -> int``.
+#: name -> (module, one-line help). The module must define ``main(argv) -> int``; it is
+#: imported by name only when its command runs, and listed only when installed. The
+#: ``sim`` entry is the product's one reference to the simulation package (sslfr_sim,
+#: checked by test_code_map.py).
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'plan': ('sslfr_planner.cli_plan', 'per-step day table (sun, incidence angles, axis setpoints) as CSV'),
     'field': ('sslfr_planner.cli_field', 'LEPTEN mirror lines: exact model fitted with the common-drive law'),
     'analyse': ('sslfr_planner.analysis.cli', 'optical power with tracking error, annual energy, EAR, LCOE, tilts'),
     'up': ('sslfr_bringup.up', 'start the whole node set (real boards) as supervised processes'),
-    'sim': ('sslfr_bringup.sim', 'run the node set against simulated boards over a simulated day'),
-    'record': ('sslfr_bringup.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
-    'bag': ('sslfr_bringup.bag_cli', 'bag utilities: info, check (rosbag2 rules), recover'),
-    'replay': ('sslfr_bringup.replay', 'replay a recorded bag with /clock'),
-    'report': ('sslfr_bringup.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
+    'sim': ('sslfr_sim.sim_cli', 'run the node set against simulated boards over a simulated day'),
+    'record': ('sslfr_recording.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
+    'bag': ('sslfr_recording.bag_cli', 'bag utilities: info, check (rosbag2 rules), recover'),
+    'replay': ('sslfr_recording.replay', 'replay a recorded bag with /clock'),
+    'report': ('sslfr_recording.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
-    'web-password': ('sslfr_bringup.web.password_cli', 'set the operator password of the web page (stored as a scrypt hash)'),
+    'web-password': ('sslfr_web.password_cli', 'set the operator password of the web page (stored as a scrypt hash)'),
     'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),
     'keys': ('sslfr_drivers.link.keys_cli', 'installation key: new key file, key id, provision a board over USB'),
     'flash': ('sslfr_drivers.firmware.flash', 'build and flash a board\'s firmware (avrdude), read INFO back, set its EEPROM'),

@@ -12,10 +12,13 @@ from .host import executable_path, find_executable, install_prefix
 #: build. kind 'cli' answers ``--help``; kind 'node' starts with defaults and stops
 #: cleanly on SIGINT. Kept in one place; tests/test_foundation.py checks every one.
 EXECUTABLES: dict[str, dict[str, str]] = {
-    'sslfr_bringup': {'sslfr': 'cli', 'recorder': 'node', 'web': 'node'},
-    'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'safety': 'node',
-                      'sim_board': 'cli', 'xbee_hub': 'cli', 'gps': 'node', 'absorber_board': 'node',
-                      'irradiance': 'node'},
+    'sslfr_bringup': {'sslfr': 'cli'},
+    'sslfr_recording': {'recorder': 'node'},
+    'sslfr_web': {'web': 'node'},
+    'sslfr_safety': {'safety': 'node'},
+    'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'xbee_hub': 'cli', 'gps': 'node',
+                      'absorber_board': 'node', 'irradiance': 'node'},
+    'sslfr_sim': {'sim_board': 'cli'},
     'sslfr_planner': {'planner': 'node'},
 }
 

@@ -403,8 +403,10 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
     tables the nodes declare (one source), before anything starts: sections that apply
     to no node (a misspelt node name), keys no node it applies to declares (a misspelt
     key, with the closest names), values of the wrong YAML type or out of range, and
-    the nodes' own cross-checks on what they would receive. Each line names the file,
-    the section or node, the key, its value and what is allowed."""
+    the nodes' own cross-checks on what they would receive, and the collector
+    description the config names (:func:`collector_problems`; ``where`` is the config's
+    path, the base of a relative description name). Each line names the file, the
+    section or node, the key, its value and what is allowed."""
     import difflib
     nsp = ns.namespace if namespace is None else namespace
     doc = for_namespace(params, nsp)
@@ -442,7 +444,56 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
             if err not in seen:
                 errors.append(line)
                 seen.add(err)
+    errors.extend(collector_problems(doc, nsp, where))
     return errors
+
+
+#: the planner parameter that names the collector description (docs/collectors.md)
+DESCRIPTION_KEY = 'collector.description'
+
+
+def collector_problems(doc: Mapping[str, Any], namespace: str, where: str) -> list[str]:
+    """Problems of the collector description a site config names (``collector.description``
+    for the planner, relative to the config's directory): every problem of the file
+    (:func:`sslfr_planner.description.load`, each naming the file and key) and every
+    planner ``collector.*`` value of the config that contradicts it."""
+    from sslfr_planner import description as desc_mod
+    name = node_params(doc, 'planner', namespace).get(DESCRIPTION_KEY)
+    if not name or not isinstance(name, str):
+        return []
+    path = desc_mod.resolve(name, Path(where).parent)
+    try:
+        desc = desc_mod.load(path)
+    except desc_mod.DescriptionError as exc:
+        return [f'{where}: {DESCRIPTION_KEY} {name!r}: {p}' for p in exc.problems]
+    errors = []
+    for key, value in node_params(doc, 'planner', namespace).items():
+        expected = description_value(desc, key)
+        if expected is None:
+            continue
+        same = value == expected if isinstance(expected, (bool, str)) else \
+            isinstance(value, (int, float)) and not isinstance(value, bool) and abs(float(value) - expected) <= 1e-9 + 1e-6 * abs(expected)
+        if not same:
+            errors.append(f'{where}: planner: {key}: {value!r} contradicts the collector description '
+                          f'{path}: {expected!r}')
+    return errors
+
+
+def description_value(desc, key: str):
+    """The value a planner ``collector.*`` parameter must have for description ``desc``
+    (None: the description does not fix it)."""
+    import math
+    o = desc.optics
+    values = {'collector.law': desc.longitudinal_law, 'collector.azimuth': o.azimuth,
+              'collector.n_per_side': o.n_per_side, 'collector.central_mirror': o.central_line,
+              'collector.mirror_width': o.line_width, 'collector.gap': o.gap,
+              'collector.receiver_height': o.receiver_height - o.tube_diameter / 2.0,
+              'collector.tube_diameter': o.tube_diameter}
+    m = desc.movements.get('mirrors')
+    if m is not None and m.law == 'seed003_linkage':
+        values['collector.tracking_step'] = m.law_params['step_s']
+    v = values.get(key)
+    return float(v) if isinstance(v, float) and math.isfinite(v) else v
 
 
 def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
@@ -477,7 +528,22 @@ def checked_params(ns: NodeSet, config: str | os.PathLike, namespace: str | None
     problems = check_config(ns, params, namespace, where=str(config))
     if problems:
         raise NodeSetError('invalid site config, nothing started:\n  ' + '\n  '.join(problems))
-    return params
+    return absolute_description(params, config)
+
+
+def absolute_description(params: Mapping[str, Any], config: str | os.PathLike) -> dict:
+    """``params`` with every relative ``collector.description`` made absolute (relative
+    to the config's directory), so a copy of the config written elsewhere (a namespace's
+    site.params.yaml) still names the same file."""
+    out = {}
+    for key, section in params.items():
+        values = section.get('ros__parameters') if isinstance(section, Mapping) else None
+        name = values.get(DESCRIPTION_KEY) if isinstance(values, Mapping) else None
+        if isinstance(name, str) and name and not Path(name).expanduser().is_absolute():
+            section = {**section, 'ros__parameters': {**values, DESCRIPTION_KEY: str(
+                (Path(config).resolve().parent / name).resolve())}}
+        out[key] = section
+    return out
 
 
 def site_config(config: str | os.PathLike, namespace: str, write_dir: str | os.PathLike,

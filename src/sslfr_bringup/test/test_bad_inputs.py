@@ -18,7 +18,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Temperature
 
 from sslfr_bringup import cli
-from sslfr_bringup.bag import BagWriter, WriterOptions, profile
+from sslfr_recording.bag import BagWriter, WriterOptions, profile
 
 ROOT = Path(__file__).resolve().parents[3]
 PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))

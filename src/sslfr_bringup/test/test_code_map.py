@@ -1,8 +1,11 @@
-"""The code map of docs/architecture.md, checked: no import cycle anywhere, the product
-never imports the simulators, the layers import downward only, node files stay thin."""
+"""The code map of docs/architecture.md, checked: no import cycle anywhere, the layers
+import downward only, no product module imports the simulation package (the `sslfr`
+dispatcher names its `sim` command by module name, the one documented edge) or the
+test harness, node files stay thin."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[2]      # src/
@@ -11,12 +14,21 @@ SRC = Path(__file__).resolve().parents[2]      # src/
 LAYERS = {
     'sslfr_common': set(),
     'sslfr_planner': {'sslfr_common'},
-    'sslfr_drivers': {'sslfr_common', 'sslfr_planner'},
-    'sslfr_bringup': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers'},
+    'sslfr_drivers': {'sslfr_common'},
+    'sslfr_safety': {'sslfr_common'},
+    'sslfr_bringup': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety'},
+    'sslfr_recording': {'sslfr_common', 'sslfr_planner', 'sslfr_bringup'},
+    'sslfr_web': {'sslfr_common', 'sslfr_safety', 'sslfr_recording'},
+    'sslfr_sim': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety', 'sslfr_bringup',
+                  'sslfr_recording', 'sslfr_web'},
 }
-#: modules allowed to import the simulators (sslfr_drivers.sim): the simulators
-#: themselves and the `sslfr sim` command with its fault and scenario helpers
-SIM_USERS = ('sslfr_drivers.sim', 'sslfr_bringup.sim', 'sslfr_bringup.scenario', 'sslfr_bringup.faults')
+#: the simulation package: imported by no product module
+SIM = 'sslfr_sim'
+#: the one product edge to it: the `sslfr` dispatcher's table entry naming the `sim`
+#: command's module (a string, imported by importlib only when that command runs)
+SIM_COMMAND = ('sim', 'sslfr_sim.sim_cli')
+#: the test harness and the shared test helpers (tests/*.py, conftest.py)
+TEST_MODULES = {p.stem for p in (SRC.parent / 'tests').glob('*.py')} | {'conftest'}
 NODE_FILE_MAX_LINES = 300
 
 
@@ -96,6 +108,7 @@ def _cycles() -> list[list[str]]:
 
 def test_the_map_sees_every_package():
     assert {n.split('.')[0] for n in MODULES} == set(LAYERS)
+    assert {p.name for p in SRC.iterdir() if (p / 'package.xml').is_file()} == set(LAYERS) | {'sslfr_interfaces'}
     assert len(MODULES) > 80
 
 
@@ -122,7 +135,38 @@ def test_layers_import_downward_only():
 
 def test_product_code_never_imports_the_simulators():
     wrong = [f'{m} imports {t}' for m, deps in GRAPH.items() for t in deps
-             if t.startswith('sslfr_drivers.sim') and not m.startswith(SIM_USERS)]
+             if t.split('.')[0] == SIM and m.split('.')[0] != SIM]
+    assert wrong == []
+
+
+#: a module path in a string (``pkg.mod``, ``pkg.mod:attr``): what importlib can be handed
+_MODULE_STRING = re.compile(r'^[a-z_][a-z0-9_]*(\.[a-z_][a-z0-9_]*)+(:[A-Za-z_][A-Za-z0-9_]*)?$')
+
+
+def test_the_dispatcher_names_the_sim_command_and_no_other_simulation_module():
+    """The one product reference to a module of sslfr_sim: `sslfr sim` in the
+    dispatcher's table, by module name (importlib, only when that command runs). A
+    module path of sslfr_sim in any other string of product code fails here."""
+    from sslfr_bringup import cli
+    assert [(k, v[0]) for k, v in cli.SUBCOMMANDS.items() if v[0].split('.')[0] == SIM] == [SIM_COMMAND]
+    found = [f'{name}: {node.value}' for name, path in MODULES.items() if name.split('.')[0] != SIM
+             for node in ast.walk(ast.parse(path.read_text(), str(path)))
+             if isinstance(node, ast.Constant) and isinstance(node.value, str)
+             and _MODULE_STRING.match(node.value) and node.value.split('.')[0] == SIM]
+    assert found == [f'sslfr_bringup.cli: {SIM_COMMAND[1]}']
+
+
+def test_product_code_never_imports_the_test_harness():
+    wrong = []
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                names = [node.module or '']
+            else:
+                continue
+            wrong += [f'{name} imports {n}' for n in names if n.split('.')[0] in TEST_MODULES]
     assert wrong == []
 
 

@@ -21,7 +21,7 @@ from sslfr_drivers.link.protocol import (MAX_PAYLOAD, SEQ_MOD, Frame, Framer, cr
                                          encode_frame)
 from sslfr_drivers.link.siphash import SipHash, siphash24_bytes
 from sslfr_drivers.link.transport import SerialTransport
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
+from sslfr_sim.axis import AxisConfig, AxisSim
 
 from drivers_testutil import wait_for
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from sslfr_drivers.sensors import nmea
-from sslfr_drivers.sim.world import GpsReceiver
+from sslfr_sim.world import GpsReceiver
 
 CAPTURE = Path(__file__).parent / 'data' / 'gps_capture.nmea'
 # The capture: 60 one-second epochs (RMC, GGA, GSA, GSV) of the simulated receiver at

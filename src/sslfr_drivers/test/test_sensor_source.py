@@ -12,8 +12,8 @@ from sslfr_drivers.sensors.debounce import BoardClock, SwitchTracker
 from sslfr_drivers.sensors.health import RateMeter, board_report, fix_report
 from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD, GPS, IRRADIANCE, TABLES
 from sslfr_drivers.sensors.source import BoardSource, SampleQueue
-from sslfr_drivers.sim.runner import SimThread
-from sslfr_drivers.sim.sensors import GpsSim, IrradianceSim
+from sslfr_sim.runner import SimThread
+from sslfr_sim.sensors import GpsSim, IrradianceSim
 
 from drivers_testutil import wait_for
 

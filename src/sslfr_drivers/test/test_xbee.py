@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sslfr_drivers.link.board_link import BoardLink, BoardLinkState
-from sslfr_drivers.sim.axis import AxisConfig, AxisSim
-from sslfr_drivers.sim.base import FaultInjector
-from sslfr_drivers.sim.runner import SimControl, SimThread
-from sslfr_drivers.sim.xbee import ApiParser, XBeeSimCoordinator, api_frame
+from sslfr_sim.axis import AxisConfig, AxisSim
+from sslfr_sim.base import FaultInjector
+from sslfr_sim.runner import SimControl, SimThread
+from sslfr_sim.xbee import ApiParser, XBeeSimCoordinator, api_frame
 from sslfr_drivers.link.transport import make_transport
 
 from drivers_testutil import wait_for
@@ -104,7 +104,7 @@ def test_two_boards_behind_one_coordinator(xbee_sim):
 def test_runner_xbee_process(tmp_path):
     ctl = str(tmp_path / 'ctl')
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'sslfr_drivers.sim.runner', '--xbee',
+        [sys.executable, '-m', 'sslfr_sim.runner', '--xbee',
          '--board', f'axis:mirrors@{ADDR_A}', '--board', f'axis:secondary_reflector@{ADDR_B}',
          '--control', ctl, '--seed', '1'], stdout=subprocess.PIPE, text=True)
     try:

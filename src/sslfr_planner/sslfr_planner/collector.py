@@ -63,6 +63,9 @@ class FieldGeometry:
         L_a^l and L_a^r, positions of the tube's ends along the tube from its pivot,
         +p positive [m] (seed 000 section 5.1, the three-movement tracker: +/-1.005;
         the classic horizontal LFR's tube is at -2.037..-0.037).
+    central_mirror : bool
+        True: 2n+1 mirrors with one on the axis (seed 000); False: 2n mirrors, none on
+        the axis (seeds 003 and 004), at +/-(i - 1/2)(W_M + d).
     """
 
     n_per_side: int = 12
@@ -73,12 +76,17 @@ class FieldGeometry:
     tube_diameter: float = 0.0486
     tube_left: float = 1.005
     tube_right: float = -1.005
+    central_mirror: bool = True
 
     def __post_init__(self):
         _finite('collector', self, ('mirror_width', 'mirror_length', 'gap', 'receiver_height', 'tube_diameter',
                                     'tube_left', 'tube_right'))
         if isinstance(self.n_per_side, bool) or not isinstance(self.n_per_side, int) or self.n_per_side < 0:
             raise ValueError(f'n_per_side must be an integer >= 0, got {self.n_per_side!r}')
+        if not isinstance(self.central_mirror, bool):
+            raise ValueError(f'central_mirror must be true or false, got {self.central_mirror!r}')
+        if not self.central_mirror and self.n_per_side < 1:
+            raise ValueError('a field without a central mirror needs n_per_side >= 1')
         checks = [
             (self.mirror_width > 0, 'mirror_width must be > 0 m'),
             (self.mirror_length > 0, 'mirror_length must be > 0 m'),
@@ -93,8 +101,8 @@ class FieldGeometry:
 
     @property
     def n_mirrors(self) -> int:
-        """2n + 1 [-]."""
-        return 2 * self.n_per_side + 1
+        """2n + 1 with a central mirror, else 2n [-]."""
+        return 2 * self.n_per_side + (1 if self.central_mirror else 0)
 
     @property
     def aim_height(self) -> float:
@@ -108,8 +116,9 @@ class FieldGeometry:
         return (self.tube_right, self.tube_left)
 
     def mirror_positions(self) -> np.ndarray:
-        """Pivot positions x_i of the 2n+1 mirrors, west positive [m] (seed 000 eq. 15)."""
-        return _geometry.mirror_positions(self.n_per_side, self.mirror_width, self.gap)
+        """Pivot positions x_i of the mirrors, west positive [m] (seed 000 eq. 15; 2n without
+        a central mirror)."""
+        return _geometry.mirror_positions(self.n_per_side, self.mirror_width, self.gap, self.central_mirror)
 
     def receiver_angles(self) -> np.ndarray:
         """Signed angle psi_i from each mirror to the aim point [rad] (seed 000 eq. 14)."""
@@ -118,11 +127,14 @@ class FieldGeometry:
     def mirror_labels(self) -> list[str]:
         """Labels as in seed 000 Figs. 21-24: '12L', ..., '1L', 'C', '1R', ..., '12R'."""
         n = self.n_per_side
-        return [f'{n - k}L' for k in range(n)] + ['C'] + [f'{k}R' for k in range(1, n + 1)]
+        return [f'{n - k}L' for k in range(n)] + (['C'] if self.central_mirror else []) \
+            + [f'{k}R' for k in range(1, n + 1)]
 
     def field_width(self) -> float:
-        """Mirror field width W = 2 n (W_M + d) + W_M [m] (seed 000 eq. 28, seed 001 eq. 22)."""
-        return 2 * self.n_per_side * (self.mirror_width + self.gap) + self.mirror_width
+        """Mirror field width [m]: W = 2 n (W_M + d) + W_M (seed 000 eq. 28, seed 001 eq. 22);
+        without a central mirror 2 n W_M + (2 n - 1) d."""
+        k = self.n_mirrors
+        return k * self.mirror_width + (k - 1) * self.gap
 
 
 @dataclass(frozen=True)
@@ -168,6 +180,10 @@ class Collector:
     lepten_positions : tuple of floats
         Rotation-axis positions x_i of the LEPTEN lines (west positive) [m]; empty
         for the seed 000 field (positions from n_per_side, mirror_width, gap).
+    description : sslfr_planner.description.Description or None
+        The collector description whose mirror law the tracker follows
+        (:func:`sslfr_planner.prototype.commanded_lines`: seed 004 eq. 5, seed 003 eqs.
+        5-6); None or a 'half_transversal' law: beta_0 = theta_t' / 2 (seed 000 eq. 13).
     """
 
     geometry: FieldGeometry = field(default_factory=FieldGeometry)
@@ -186,6 +202,7 @@ class Collector:
     tracking_step: float = 0.0
     lepten_radius: float = 0.0
     lepten_positions: tuple = field(default_factory=tuple)
+    description: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not isinstance(self.geometry, FieldGeometry):
@@ -216,6 +233,13 @@ class Collector:
             raise ValueError(f'gear_ratio must be three positive numbers, got {self.gear_ratio!r}')
         if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in self.lepten_positions):
             raise ValueError('lepten_positions must be finite numbers [m]')
+
+    @property
+    def mirror_law(self) -> str:
+        """The mirror law: the description's, else 'half_transversal' (seed 000 eq. 13)."""
+        if self.description is None:
+            return 'half_transversal'
+        return self.description.movements[AXES[0]].law
 
     @property
     def axis_steps(self) -> tuple:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sslfr_common.contract import JOINTS, Phase
+from sslfr_common.contract import JOINT_RANGE, JOINTS, Phase
 
 from . import tracking_table, spa
 from .collector import Collector, FieldGeometry
@@ -54,14 +54,26 @@ def make_site(cfg: dict, fix: SiteFix) -> Site:
                              delta_t=None if cfg['site.delta_t_model'] else float(cfg['site.delta_t']))
 
 
-def make_collector(cfg: dict) -> Collector:
-    """Core :class:`Collector` from the collector.* parameters (SI, radians)."""
+def make_collector(cfg: dict, description=None) -> Collector:
+    """Core :class:`Collector` from the collector.* parameters (SI, radians).
+
+    ``description`` (:class:`sslfr_planner.description.Description`): the mirrors follow
+    its law, within its mirror range and sleeping at its sleep position; the range is
+    kept inside the contract's mirror range, which the axis drivers enforce today.
+    """
     geometry = FieldGeometry(n_per_side=int(cfg['collector.n_per_side']),
                              mirror_width=float(cfg['collector.mirror_width']),
                              gap=float(cfg['collector.gap']),
                              receiver_height=float(cfg['collector.receiver_height']),
-                             tube_diameter=float(cfg['collector.tube_diameter']))
-    return Collector(geometry=geometry,
+                             tube_diameter=float(cfg['collector.tube_diameter']),
+                             central_mirror=bool(cfg['collector.central_mirror']))
+    extra = {}
+    if description is not None:
+        m = description.movements[JOINTS[0]]
+        lo = max(m.range[0], JOINT_RANGE[JOINTS[0]][0])
+        hi = min(m.range[1], JOINT_RANGE[JOINTS[0]][1])
+        extra = dict(description=description, mirror_min=lo, mirror_max=hi, sleeping=min(max(m.sleep, lo), hi))
+    return Collector(geometry=geometry, **extra,
                      azimuth=float(cfg['collector.azimuth']),
                      law=cfg['collector.law'],
                      pre_dawn_lead=float(cfg['collector.pre_dawn_lead']),
@@ -122,6 +134,8 @@ class DayCycle:
         Validated planner parameters (:mod:`sslfr_planner.planner_params`).
     site_fix : SiteFix
         Where to plan for [deg, m].
+    description : Description, optional
+        The collector description whose mirror law the mirrors follow (:func:`make_collector`).
 
     Raises
     ------
@@ -129,11 +143,12 @@ class DayCycle:
         When the core refuses the site or collector (message says why).
     """
 
-    def __init__(self, cfg: dict, site_fix: SiteFix):
+    def __init__(self, cfg: dict, site_fix: SiteFix, description=None):
         self.cfg = cfg
         self.site_fix = site_fix
+        self.description = description
         self.site = make_site(cfg, site_fix)
-        self.collector = make_collector(cfg)
+        self.collector = make_collector(cfg, description)
         ts, te = float(cfg['collector.tracking_start']), float(cfg['collector.tracking_end'])
         self.window = (ts, te) if ts >= 0 and te >= 0 else None
         self.utc_offset = float(cfg['collector.utc_offset'])

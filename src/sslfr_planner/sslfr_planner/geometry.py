@@ -68,13 +68,19 @@ def projection_angles(zenith, azimuth, collector_azimuth=0.0):
     return np.arctan2(-sz * np.sin(rel), cz), np.arctan2(-sz * np.cos(rel), cz)
 
 
-def mirror_positions(n_per_side: int, mirror_width: float, gap: float) -> np.ndarray:
-    """Pivot positions x_i of the 2n+1 mirrors, west (+x) positive [m].
+def mirror_positions(n_per_side: int, mirror_width: float, gap: float, central: bool = True) -> np.ndarray:
+    """Pivot positions x_i of the mirrors, west (+x) positive [m], east to west.
 
     Seed 000 eq. 15: L_i = i (W_M + d); left (east) mirrors at -L_i, right (west) at
-    +L_i, ordered from the n-th left mirror through the central one to the n-th right.
+    +L_i, ordered from the n-th left mirror through the central one to the n-th right
+    (2n+1 mirrors). ``central=False``: no mirror on the axis, 2n mirrors at
+    +/-(i - 1/2)(W_M + d), i = 1..n (seed 003: 10 mirrors 0.15 m apart; seed 004: 10 lines).
     """
-    i = np.arange(-n_per_side, n_per_side + 1)
+    if central:
+        i = np.arange(-n_per_side, n_per_side + 1, dtype=float)
+    else:
+        k = np.arange(1, n_per_side + 1) - 0.5
+        i = np.concatenate([-k[::-1], k])
     return i * (mirror_width + gap)
 
 

@@ -6,9 +6,8 @@ Thin ROS 2 shell around pure cores:
   ephemeris core), the automatic phase and setpoints at any instant;
 * :mod:`sslfr_planner.phase_control` -- the phase in force (operator modes and the
   safety override), the stow ramp and hold poses, when to tick, replan and publish;
-* :mod:`sslfr_planner.site_source` (GPS fix / persisted fix / parameters),
-  :mod:`sslfr_planner.timejump` (ROS-time jumps against the steady clock),
-  :mod:`sslfr_planner.planner_params` (every parameter, in one table).
+* :mod:`sslfr_planner.site_source` (GPS fix / persisted fix / parameters), :mod:`sslfr_planner.timejump`
+  (ROS-time jumps), :mod:`sslfr_planner.planner_params` (every parameter, in one table).
 
 Interface (docs/architecture.md): publishes ``tracker/sun`` (SunPosition, R10,
 ``sun_period``), ``tracker/phase`` (TrackerPhase, TL1, on change and every
@@ -36,6 +35,7 @@ from sslfr_common.contract import PHASE_NAMES
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_ns, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
+from sslfr_planner.description import for_node
 from sslfr_planner.messages import phase_msg, sun_msg, trajectory_msg
 from sslfr_planner.phase_control import (PHASE, SUN, TRAJECTORY, PhaseControl, diagnostic_summary,
                                          immediate_step)
@@ -64,7 +64,8 @@ class PlannerNode(LeanEvents, Node):
         self.selector = SiteSelector.from_params(self.cfg)
         self._selector_errors_seen = 0
         self._note_selector_errors(loading=True)
-        self.cycle = DayCycle(self.cfg, self.selector.current())   # ValueError: exit 2
+        self.cycle = DayCycle(self.cfg, self.selector.current(),   # ValueError: exit 2 (also a bad description)
+                              for_node(self.cfg['collector.description'], kwargs.get('cli_args') or sys.argv))
         self.control = PhaseControl(self.cfg['initial_mode'])
         self._last_plan_ms = float('nan')
         self._last_error = ''
@@ -84,11 +85,10 @@ class PlannerNode(LeanEvents, Node):
         self._jump_step, self._jump_handle = None, None
         self._watch_ros_time()
         self.create_timer(TICK_PERIOD, self._tick)                 # ROS time
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._steady_tick, clock=steady)    # diagnostics, jumps
+        self.create_timer(1.0, self._steady_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))  # diag, jumps
         self.get_logger().info(
             f'planner ready: mode {self.control.mode}, site {self.selector.current().describe()}, '
-            f'law {self.cfg["collector.law"]}, horizon {self.cfg["horizon"]} s at {self.cfg["step"]} s')
+            f'laws {self.cycle.collector.mirror_law}/{self.cfg["collector.law"]}, horizon {self.cfg["horizon"]} s at {self.cfg["step"]} s')
 
     def _watch_ros_time(self) -> None:
         """(Re)register the ROS-time jump callback (:func:`phase_control.immediate_step`)."""
@@ -242,7 +242,7 @@ class PlannerNode(LeanEvents, Node):
     def _replan(self, now: float, reason: str) -> None:
         site = self.selector.current()
         if site != self.cycle.site_fix or self.cycle.cfg is not self.cfg:
-            self.cycle = DayCycle(self.cfg, site)
+            self.cycle = DayCycle(self.cfg, site, self.cycle.description)
         t0 = time.process_time()
         schedule = self.cycle.plan(now)
         self._last_plan_ms = (time.process_time() - t0) * 1e3

@@ -68,6 +68,11 @@ _SPECS = (
               'Directory of the persisted site file planner_site.json ("" disables persistence); '
               'must be a directory the planner can write in, or create', validator=writable_directory),
     # --- collector (see sslfr_planner.collector.Collector)
+    ParamSpec('collector.description', '',
+              'The collector description file (docs/collectors.md), relative to the site config '
+              "that names it or absolute; '' = none (the collector.* parameters alone, seed 000 by "
+              'default). sslfr up / sim / doctor and the launch file validate it and refuse '
+              'collector.* values that contradict it (read-only)', read_only=True),
     ParamSpec('collector.law', 'continuous',
               'Longitudinal law of mobile structure and secondary reflector: continuous '
               '(rays centred on the tube at every instant, 3-D trace; the most annual energy '

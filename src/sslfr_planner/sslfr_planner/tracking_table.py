@@ -14,7 +14,9 @@ Day cycle (phase codes = sslfr_interfaces/TrackerPhase):
   secondary_reflector = the collector's longitudinal law (:mod:`laws`); mirrors =
   beta_0 = theta_t'/2, seed 000 eq. 13 with the transversal angle measured in the
   plane perpendicular to the tilted rows (:func:`raytrace.central_mirror_tilt`;
-  theta_t/2 when the rows are horizontal); all clipped to the mechanical ranges.
+  theta_t/2 when the rows are horizontal), or the common drive of the collector
+  description's mirror law (:mod:`mirror_laws`: seed 004 eq. 5, seed 003 eqs. 5-6);
+  all clipped to the mechanical ranges.
   With ``collector.tracking_step`` > 0 the commands are those of the middle of the
   current step interval (kept inside [sunrise, sunset]): seed 003's 15-min steps.
 * PRE_DAWN (1): less than ``pre_dawn_lead`` before the next sunrise: the initial
@@ -39,7 +41,7 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, Phase
 
-from . import laws, raytrace, spa
+from . import laws, prototype, raytrace, spa
 from .collector import MOVING_LAWS, Collector
 from .events import SCAN_STEP, SunEvents, crossings, events_around, events_from_crossings, solar_transit
 from .site import Site
@@ -115,7 +117,11 @@ def _commands(zenith, azimuth, t, site: Site, c: Collector):
     """
     sun = raytrace.sun_vector(zenith, azimuth, c.azimuth)
     bm, ba = _longitudinal(zenith, azimuth, t, site, c, sun)
-    mirrors = np.clip(raytrace.central_mirror_tilt(sun, bm), c.mirror_min, c.mirror_max)
+    if c.mirror_law == 'half_transversal':
+        drive = raytrace.central_mirror_tilt(sun, bm)
+    else:   # the description's common-drive law (seed 004 eq. 5, seed 003 eqs. 5-6)
+        drive, _ = prototype.commanded_lines(c.description, raytrace.transversal_angle(sun, bm))
+    mirrors = np.clip(drive, c.mirror_min, c.mirror_max)
     return mirrors, bm, ba
 
 

@@ -104,7 +104,10 @@ def test_seed_numbers_in_configs():
     assert (b['collector.tracking_start'], b['collector.tracking_end']) == (7 * 3600.0, 17 * 3600.0)
     f = _cfg_from('florianopolis_lepten.yaml')
     assert math.degrees(f['collector.azimuth']) == pytest.approx(4.6, abs=1e-5)
-    assert f['collector.receiver_height'] == 3.75 and f['collector.mirror_width'] == 0.45
+    # seed 004: Z_abs = 3.75 m is the aim point (f + D/2); the lines 0.45 m wide
+    assert f['collector.receiver_height'] + f['collector.tube_diameter'] / 2 == pytest.approx(3.75, abs=1e-4)
+    assert f['collector.mirror_width'] == 0.45
+    assert b['collector.receiver_height'] + b['collector.tube_diameter'] / 2 == pytest.approx(0.75, abs=1e-4)
 
 
 # ------------------------------------------------------------------- day schedules

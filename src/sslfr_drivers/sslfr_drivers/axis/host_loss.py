@@ -17,7 +17,7 @@ until the driver commands again.
 """
 from __future__ import annotations
 
-from sslfr_drivers.axis.core import HOME_SWITCHES
+from sslfr_drivers.axis.commands import HOME_SWITCHES
 from sslfr_drivers.axis.joint import Calibration
 from sslfr_drivers.link import messages as m
 

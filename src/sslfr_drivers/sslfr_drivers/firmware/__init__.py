@@ -2,8 +2,8 @@
 build it, and what is missing when the toolchain is not installed.
 
 Modules: :mod:`.native` (the firmware's protocol code as a host library, ctypes),
-:mod:`sslfr_drivers.sim.fw_harness` (one simavr harness process, ``firmware/sim/fwsim.c``),
-:mod:`sslfr_drivers.sim.fw_board` (``fw_board``: firmware boards as a drop-in replacement of
+:mod:`sslfr_sim.fw_harness` (one simavr harness process, ``firmware/sim/fwsim.c``),
+:mod:`sslfr_sim.fw_board` (``fw_board``: firmware boards as a drop-in replacement of
 ``sim_board``; both are simulators, the product never imports them), :mod:`.flash`
 (``sslfr flash``). Pure Python, no rclpy.
 """

@@ -3,7 +3,7 @@ port (with a stable symlink, unplug and re-plug), a UNIX control socket answerin
 command per line, and the serve-until-SIGTERM loop.
 
 Used by the production tool ``xbee_hub`` (one pty per remote board) and by the
-simulated boards (``sim_board``, :mod:`sslfr_drivers.sim.runner`); production code
+simulated boards (``sim_board``, :mod:`sslfr_sim.runner`); production code
 imports them from here, never from the simulators.
 """
 from __future__ import annotations

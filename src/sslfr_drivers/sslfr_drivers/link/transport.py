@@ -225,7 +225,7 @@ class XBeeCoordinator:
     -----
     ``open()`` uses digi-xbee's ``Raw802Device.open()``, which reads the local
     module's parameters (AP, HV, VR, SH, SL, NI, MY, CE) with AT commands; the
-    simulated coordinator (``sslfr_drivers.sim.xbee``) answers them. Transmission
+    simulated coordinator (``sslfr_sim.xbee``) answers them. Transmission
     uses digi-xbee's packet classes (see :meth:`send`). Counters:
     ``tx_ok``, ``tx_failures``, ``rx_frames``, ``rx_unknown`` (data from an address no
     board transport is registered for).

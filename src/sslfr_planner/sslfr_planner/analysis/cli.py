@@ -108,6 +108,11 @@ def load_config(path: str | None) -> tuple[AnalysisSite, OpticalParameters, dict
         key = f'collector.{name}'
         if key in params:
             geo[name] = _number(params, key, None, lo, hi, where)
+    if 'collector.central_mirror' in params:                 # seeds 003, 004: no central line
+        if not isinstance(params['collector.central_mirror'], bool):
+            raise CliError(f'config {where}: collector.central_mirror must be true or false, '
+                           f'got {params["collector.central_mirror"]!r}')
+        geo['central_mirror'] = params['collector.central_mirror']
     known = {f.name for f in fields(OpticalParameters)} - {'geometry'}
     optic = {}
     for key, value in params.items():

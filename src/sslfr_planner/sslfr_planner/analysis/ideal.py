@@ -1,0 +1,110 @@
+"""Absorbed power of a described collector: ideal, under its law, or with held angles (pure).
+
+For the day report's ideal and ``./sslfr analyse`` on any prototype: the collector's
+geometry comes from its description (:mod:`sslfr_planner.description`), the power from
+seed 000's optical model on the 3-D trace (:func:`sslfr_planner.analysis.optics.power`,
+docs/optics.md) with the receiver's width as the cavity opening. Lines are flat mirrors
+turning about their own surface in the trace (seed 004's r = 0.065 m displaces a line's
+centre by at most r sin(theta_m), ~4 cm; it enters the line ANGLES through eqs. 3-4, not
+the trace); seed 004's curved mirrors are modelled flat; the optical constants are seed
+000 Table 3's for every prototype (the other seeds give none but seed 003's eta_0).
+W, W/m^2, radians.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .. import laws, raytrace
+from ..description import Description
+from ..prototype import MIRRORS, commanded_lines, exact_lines, field_geometry
+from .optics import OpticalParameters, incidence_factor, optical_yield, power
+
+
+def optical_parameters(desc: Description) -> OpticalParameters:
+    """Seed 000 Table 3's optical constants on ``desc``'s geometry; the cavity opening is
+    the receiver's width."""
+    return OpticalParameters(geometry=field_geometry(desc), cavity_aperture=desc.optics.receiver_width)
+
+
+def aperture_area(desc: Description) -> float:
+    """Mirror area: lines x width x length [m^2] (seed 003: 1 m^2; seed 004: 54 m^2)."""
+    o = desc.optics
+    return o.lines * o.line_width * o.line_length
+
+
+def longitudinal(desc: Description, sun):
+    """(beta_M, beta_a) [rad] of the description's longitudinal law ('continuous' traced;
+    0 when the collector has no longitudinal movement). Laws needing the date or the
+    latitude ('eq16', 'optimum_fixed', 'daily') are the planner's: ValueError here."""
+    law = desc.longitudinal_law
+    shape = np.shape(sun)[:-1]
+    if law == 'horizontal':
+        return np.zeros(shape), np.zeros(shape)
+    if law == 'continuous':
+        bm, ba = laws.continuous(sun, field_geometry(desc))
+        lo, hi = desc.movements['mobile_structure'].range
+        return np.clip(bm, lo, hi), np.clip(ba, lo, hi)
+    raise ValueError(f'longitudinal law {law!r} needs the site and date: use the planner table')
+
+
+def absorbed_power(desc: Description, zenith, azimuth, dni, lines, beta_m=None, beta_a=None):
+    """Power absorbed by the receiver [W] with the mirror lines at ``lines`` [rad] (..., n_lines).
+
+    ``zenith``, ``azimuth`` [rad] of the sun (azimuth clockwise from north), ``dni``
+    [W/m^2]; ``beta_m``, ``beta_a`` [rad] the longitudinal tilts (default: the law's).
+    """
+    o = desc.optics
+    sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
+    if beta_m is None or beta_a is None:
+        bm, ba = longitudinal(desc, sun)
+        beta_m = bm if beta_m is None else beta_m
+        beta_a = ba if beta_a is None else beta_a
+    lines = np.asarray(lines, dtype=float)
+    drive = lines.mean(axis=-1)
+    p = replace(optical_parameters(desc), mirror_aim='fixed')
+    # the trace places line i at beta_0 + psi_i / 2 (raytrace.mirror_normals): psi_i = 2 (line - drive)
+    tr_offsets = 2.0 * (lines - drive[..., None])
+    tr = raytrace.trace(sun, drive, beta_m, beta_a, p.geometry, offsets=tr_offsets)
+    cap = raytrace.receiver_capture(tr, p.cavity_aperture, p.cavity_reflectivity)
+    q = np.asarray(dni, dtype=float)[..., None] * optical_yield(p) * incidence_factor(tr, sun, beta_m) * cap
+    return q.sum(axis=-1)
+
+
+def ideal_absorbed_power(desc: Description, zenith, azimuth, dni):
+    """Power [W] with every line at its exact angle (one drive per line, no law error).
+
+    With longitudinal movements (seed 000) this is :func:`optics.power` at the central
+    mirror's theta_t'/2 with the mirrors focused on the tilted receiver, as the day
+    report's ideal today; else every line at seed 004 eqs. 3-4 (r = 0: seed 000 eqs.
+    11-14, seed 003 eqs. 5-6).
+    """
+    o = desc.optics
+    sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
+    if desc.longitudinal_law != 'horizontal':
+        bm, ba = longitudinal(desc, sun)
+        return power(dni, sun, raytrace.central_mirror_tilt(sun, bm), bm, ba, optical_parameters(desc))
+    theta_t = raytrace.transversal_angle(sun)
+    return absorbed_power(desc, zenith, azimuth, dni, exact_lines(desc, theta_t))
+
+
+def law_absorbed_power(desc: Description, zenith, azimuth, dni, law_zenith=None, law_azimuth=None):
+    """Power [W] with the lines where the description's law puts them.
+
+    ``law_zenith``, ``law_azimuth``: the sun the law was evaluated for (seed 003 holds
+    the middle of each 15-minute step: :func:`sslfr_planner.mirror_laws.step_instants`);
+    default the same sun.
+    """
+    if desc.longitudinal_law != 'horizontal':
+        return ideal_absorbed_power(desc, zenith, azimuth, dni)
+    o = desc.optics
+    lz = zenith if law_zenith is None else law_zenith
+    la = azimuth if law_azimuth is None else law_azimuth
+    theta_t = raytrace.transversal_angle(raytrace.sun_vector(lz, la, o.azimuth))
+    _, lines = commanded_lines(desc, theta_t)
+    return absorbed_power(desc, zenith, azimuth, dni, lines)
+
+
+__all__ = ['MIRRORS', 'aperture_area', 'optical_parameters', 'longitudinal', 'absorbed_power',
+           'ideal_absorbed_power', 'law_absorbed_power']

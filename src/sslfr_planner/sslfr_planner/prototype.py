@@ -1,0 +1,61 @@
+"""A collector description turned into the planner's geometry and line angles (pure numpy).
+
+:func:`field_geometry` is the :class:`~sslfr_planner.collector.FieldGeometry` of a
+:class:`~sslfr_planner.description.Description` (2n lines without a central line);
+:func:`commanded_lines` the angles its law gives the drive and every line;
+:func:`exact_lines` the angles every line would need with its own drive (the ideal).
+Angles radians, lengths metres, theta_t the transversal angle (afternoon positive).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sslfr_common.contract import JOINTS
+
+from . import mirror_laws
+from .collector import FieldGeometry
+from .description import Description
+
+MIRRORS = JOINTS[0]
+
+
+def field_geometry(desc: Description) -> FieldGeometry:
+    """The mirror field and receiver of ``desc`` (receiver_height there is the aim point,
+    FieldGeometry's f = aim - D/2)."""
+    o = desc.optics
+    ends = o.tube_ends if o.tube_ends is not None else (-o.receiver_length / 2.0, o.receiver_length / 2.0)
+    return FieldGeometry(n_per_side=o.n_per_side, mirror_width=o.line_width, mirror_length=o.line_length,
+                         gap=o.gap, receiver_height=o.receiver_height - o.tube_diameter / 2.0,
+                         tube_diameter=o.tube_diameter, tube_left=ends[1], tube_right=ends[0],
+                         central_mirror=o.central_line)
+
+
+def line_positions(desc: Description) -> np.ndarray:
+    """Rotation-axis positions x_i of the lines, east to west, west positive [m]."""
+    return field_geometry(desc).mirror_positions()
+
+
+def commanded_lines(desc: Description, theta_t):
+    """(drive, lines) [rad] of the description's mirror law at transversal angles ``theta_t``.
+
+    seed003_linkage: the caller passes the sun of the step's middle instant
+    (:func:`sslfr_planner.mirror_laws.step_instants`, ``law_params['step_s']``).
+    """
+    m = desc.movements[MIRRORS]
+    x, h = line_positions(desc), desc.optics.receiver_height
+    if m.law == 'lepten_linear':
+        p = m.law_params
+        return mirror_laws.lepten_linear(theta_t, p['pace'], p['offsets'], p['transversal_limit'])
+    if m.law == 'seed003_linkage':
+        return mirror_laws.seed003_linkage(theta_t, x, h, m.law_params['max_inclination'])
+    drive, lines = mirror_laws.half_transversal(theta_t, x, h)
+    lo, hi = m.range
+    clipped = np.clip(drive, lo, hi)
+    return clipped, lines + (clipped - drive)[..., None]
+
+
+def exact_lines(desc: Description, theta_t):
+    """Every line's exact angle [rad], (..., n_lines): seed 004 eqs. 3-4 with the rotation
+    radius r (exactly seed 000 eqs. 11-14 / seed 003 eqs. 5-6 when r = 0)."""
+    o = desc.optics
+    return mirror_laws.lepten_exact(theta_t, line_positions(desc), o.receiver_height, o.rotation_radius)

@@ -1,0 +1,24 @@
+from setuptools import find_packages, setup
+
+package_name = 'sslfr_recording'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='SSLFR tracker maintainers',
+    maintainer_email='maintainers@sslfr-tracker.org',
+    description='SSLFR recorded days: bag library, recorder, player, replay, what-if, report',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'recorder = sslfr_recording.recorder_node:main',
+        ],
+    },
+)

@@ -1,0 +1,482 @@
+"""The operator page's HTTP application (aiohttp; no rclpy: the node hands it a
+:class:`Backend`).
+
+Routes (JSON unless said; *view* = open when ``open_view``, else login needed;
+*command* = login + CSRF token):
+
+=========================================  =====  ======================================
+``GET /``, ``GET /static/<file>``           view   the page and its assets (all local)
+``GET /api/state``                          view   live snapshot (:meth:`LiveState.snapshot`)
+``GET /api/events``                         view   Server-Sent Events: ``state`` (at most
+                                                   every ``push_period`` when changed),
+                                                   ``sample`` (a new day-plot sample)
+``GET /api/history``                        view   the day buffer (plots)
+``GET /api/session``                        --     logged in?, CSRF token, password set?
+``POST /api/login`` ``{"password"}``        --     rate-limited; sets the session cookie
+``POST /api/logout``                        cmd    ends the session
+``POST /api/command/<name>``                cmd    :mod:`.commands`; the service's answer
+``GET /api/bags``                           view   recorded days
+``GET /api/bags/<name>/report``             view   the day report (made once, cached)
+``GET /api/bags/<name>/report/<file>.png``  view   its plots
+``GET /api/bags/<name>/download``           view   the bag as a zip
+=========================================  =====  ======================================
+
+Security: the session cookie is HttpOnly and SameSite=Strict; a POST must carry the
+session's CSRF token in ``X-CSRF-Token`` and, when the browser sends ``Origin`` or
+``Sec-Fetch-Site``, come from this same origin; bodies above ``max_request_bytes`` are
+refused (413) before they are read; every command, and every refused one, is logged
+with its origin (client address, session) to the node's log and the audit file.
+"""
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import json
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Protocol
+
+from aiohttp import web
+
+from . import bags as bags_mod
+from . import commands
+from .auth import LoginLimiter, PasswordFile, SessionStore, verify_password
+from .live import DayBuffer, LiveState
+
+STATIC = Path(__file__).resolve().parent / 'static'
+COOKIE = 'sslfr_session'
+PUSHER = web.AppKey('pusher', asyncio.Task)
+REPORT_TIMEOUT = 300.0
+POLL = 0.05            # [s] how often the pusher looks for a change (a lone change waits <= this)
+
+
+class Backend(Protocol):
+    """What the app needs from the node (see sslfr_web.web_node)."""
+
+    state: LiveState
+    buffer: DayBuffer
+
+    def ros_time(self) -> float | None: ...
+
+    def jog_limits(self) -> dict[str, commands.JogLimits]: ...
+
+    def bag_dir(self) -> str | None: ...
+
+    async def call(self, cmd: commands.Command) -> dict: ...
+
+    def log(self, level: str, text: str) -> None: ...
+
+
+def _json(data: Any, status: int = 200) -> web.Response:
+    return web.json_response(data, status=status, dumps=lambda d: json.dumps(d, allow_nan=False))
+
+
+def _refuse(status: int, message: str, **extra) -> web.Response:
+    return _json({'ok': False, 'success': False, 'message': message, **extra}, status)
+
+
+class OperatorApp:
+    """State of one running page: sessions, limiter, audit, broadcaster."""
+
+    def __init__(self, cfg: dict, backend: Backend, clock: Callable[[], float] = time.monotonic):
+        self.cfg, self.backend, self.clock = cfg, backend, clock
+        self.passwords = PasswordFile(cfg['password_file'])
+        self.sessions = SessionStore(timeout=float(cfg['session_timeout']), clock=clock)
+        self.limiter = LoginLimiter(int(cfg['login_max_failures']), float(cfg['login_window']), clock)
+        self.audit_path = Path(cfg['audit_file']).expanduser() if cfg.get('audit_file') else None
+        self.counters = {'commands': 0, 'commands_refused': 0, 'logins': 0, 'login_failures': 0,
+                         'login_rate_limited': 0, 'events_sent': 0, 'clients': 0}
+        self._clients: set[asyncio.Queue] = set()
+        self._report_lock = asyncio.Lock()
+
+    # ------------------------------------------------------------------ helpers
+    def origin(self, request: web.Request, session=None) -> str:
+        fwd = request.remote or '?'
+        sid = f' session {session.token[:6]}' if session else ''
+        return f'{fwd}{sid}'
+
+    def session_of(self, request: web.Request):
+        return self.sessions.get(request.cookies.get(COOKIE))
+
+    def can_view(self, request: web.Request) -> bool:
+        return bool(self.cfg['open_view']) or self.session_of(request) is not None
+
+    def audit(self, origin: str, what: str, request: Any, result: dict, level: str = 'info') -> None:
+        line = {'time': dt.datetime.now(dt.timezone.utc).isoformat(timespec='milliseconds'),
+                'ros_time': self.backend.ros_time(), 'origin': origin, 'command': what,
+                'request': request, 'success': bool(result.get('success')), 'message': result.get('message', '')}
+        self.backend.log(level, f'command {what} {json.dumps(request)} from {origin}: '
+                                f'{"done" if line["success"] else "refused"}: {line["message"]}')
+        if self.audit_path is None:
+            return
+        try:
+            self.audit_path.parent.mkdir(parents=True, exist_ok=True)
+            with open(self.audit_path, 'a', encoding='utf-8') as fh:
+                fh.write(json.dumps(line, allow_nan=False, default=str) + '\n')
+        except OSError as exc:
+            self.backend.log('error', f'audit file {self.audit_path}: {exc}')
+
+    def _same_origin(self, request: web.Request) -> bool:
+        site = request.headers.get('Sec-Fetch-Site')
+        if site and site not in ('same-origin', 'none'):
+            return False
+        origin = request.headers.get('Origin')
+        if origin and origin != 'null':
+            return origin == f'{request.scheme}://{request.host}'
+        return origin != 'null'
+
+    async def _read_json(self, request: web.Request) -> dict:
+        return commands.parse_body(await request.read())
+
+    # ------------------------------------------------------------------ middleware
+    @web.middleware
+    async def middleware(self, request: web.Request, handler):
+        limit = int(self.cfg['max_request_bytes'])
+        if request.content_length is not None and request.content_length > limit:
+            return _refuse(413, f'request body too large ({request.content_length} bytes > {limit})')
+        if request.method == 'POST' and not self._same_origin(request):
+            self.audit(self.origin(request), request.path, None,
+                       {'success': False, 'message': 'refused: cross-site request'}, 'warn')
+            return _refuse(403, 'refused: the request does not come from this page (cross-site)')
+        try:
+            resp = await handler(request)
+        except web.HTTPRequestEntityTooLarge:
+            resp = _refuse(413, f'request body too large (> {limit} bytes)')
+        resp.headers.setdefault('X-Content-Type-Options', 'nosniff')
+        resp.headers.setdefault('Referrer-Policy', 'no-referrer')
+        resp.headers.setdefault('X-Frame-Options', 'DENY')
+        resp.headers.setdefault('Content-Security-Policy',
+                                "default-src 'self'; img-src 'self' data:; style-src 'self'; "
+                                "script-src 'self'; connect-src 'self'; frame-ancestors 'none'; base-uri 'none'")
+        if request.path.startswith('/api/'):
+            resp.headers.setdefault('Cache-Control', 'no-store')
+        return resp
+
+    # ------------------------------------------------------------------ page and live data
+    async def index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC / 'index.html', headers={'Cache-Control': 'no-cache'})
+
+    async def static(self, request: web.Request) -> web.StreamResponse:
+        name = request.match_info['name']
+        allowed = {p.name for p in STATIC.iterdir() if p.is_file()}
+        if name not in allowed:
+            raise web.HTTPNotFound()
+        return web.FileResponse(STATIC / name, headers={'Cache-Control': 'no-cache'})
+
+    def _view_refused(self, request):
+        if self.can_view(request):
+            return None
+        return _refuse(401, 'log in to see the tracker (open_view is off)')
+
+    async def state(self, request: web.Request) -> web.Response:
+        return self._view_refused(request) or _json(self.backend.state.snapshot(self.backend.ros_time()))
+
+    async def history(self, request: web.Request) -> web.Response:
+        return self._view_refused(request) or _json(self.backend.buffer.to_json())
+
+    async def events(self, request: web.Request) -> web.StreamResponse:
+        refused = self._view_refused(request)
+        if refused:
+            return refused
+        resp = web.StreamResponse(headers={'Content-Type': 'text/event-stream', 'Cache-Control': 'no-store',
+                                           'X-Accel-Buffering': 'no'})
+        await resp.prepare(request)
+        queue: asyncio.Queue = asyncio.Queue(maxsize=4)
+        self._clients.add(queue)
+        self.counters['clients'] = len(self._clients)
+        try:
+            await resp.write(b'retry: 1000\n\n')
+            await resp.write(self._event('state', self.backend.state.snapshot(self.backend.ros_time())))
+            while True:
+                try:
+                    data = await asyncio.wait_for(queue.get(), 15.0)
+                except asyncio.TimeoutError:
+                    data = b': keep-alive\n\n'
+                await resp.write(data)
+        except (ConnectionResetError, asyncio.CancelledError, RuntimeError):
+            pass
+        finally:
+            self._clients.discard(queue)
+            self.counters['clients'] = len(self._clients)
+        return resp
+
+    @staticmethod
+    def _event(name: str, data: Any) -> bytes:
+        return f'event: {name}\ndata: {json.dumps(data, allow_nan=False, separators=(",", ":"))}\n\n'.encode()
+
+    def _broadcast(self, data: bytes) -> None:
+        for q in list(self._clients):
+            if q.full():
+                try:
+                    q.get_nowait()          # a slow client gets the newest state, not a backlog
+                except asyncio.QueueEmpty:
+                    pass
+            q.put_nowait(data)
+            self.counters['events_sent'] += 1
+
+    async def pusher(self) -> None:
+        """Send the state to every connected page when it changed: within
+        :data:`POLL` of a change, at most once per ``push_period``; a new day-plot
+        sample as soon as it is taken."""
+        last_state, last_buf = -1, self.backend.buffer.version
+        period = float(self.cfg['push_period'])
+        tick = min(POLL, period)
+        loop = asyncio.get_running_loop()
+        last_push = 0.0
+        while True:
+            await asyncio.sleep(tick)
+            if not self._clients:
+                continue
+            st = self.backend.state
+            if st.version != last_state and loop.time() - last_push >= period - 1e-3:
+                last_state, last_push = st.version, loop.time()
+                self._broadcast(self._event('state', st.snapshot(self.backend.ros_time())))
+            buf = self.backend.buffer
+            if buf.version != last_buf:
+                last_buf = buf.version
+                j = buf.to_json()
+                if j['t']:
+                    self._broadcast(self._event('sample', {'t': j['t'][-1], 'day': j['day'],
+                                                           'row': {c: v[-1] for c, v in j['columns'].items()}}))
+
+    # ------------------------------------------------------------------ login
+    async def session_info(self, request: web.Request) -> web.Response:
+        s = self.session_of(request)
+        line = self.passwords.line()
+        return _json({'logged_in': s is not None, 'csrf': s.csrf if s else None,
+                      'password_set': line is not None, 'problem': self.passwords.problem,
+                      'open_view': bool(self.cfg['open_view'])})
+
+    async def login(self, request: web.Request) -> web.Response:
+        addr = request.remote or '?'
+        wait = self.limiter.retry_after(addr)
+        if wait > 0:
+            self.counters['login_rate_limited'] += 1
+            self.audit(addr, 'login', None, {'success': False, 'message': f'rate limited ({wait:.0f} s)'}, 'warn')
+            return _refuse(429, f'too many failed logins: try again in {wait:.0f} s',
+                           retry_after=round(wait, 1))
+        try:
+            body = await self._read_json(request)
+        except commands.CommandError as exc:
+            return _refuse(400, str(exc))
+        password = body.get('password')
+        if set(body) - {'password'} or not isinstance(password, str):
+            return _refuse(400, 'login: expected {"password": "..."}')
+        line = self.passwords.line()
+        if line is None:
+            return _refuse(503, self.passwords.problem)
+        loop = asyncio.get_running_loop()
+        ok = await loop.run_in_executor(None, verify_password, password, line)
+        if not ok:
+            self.limiter.failure(addr)
+            self.counters['login_failures'] += 1
+            self.audit(addr, 'login', None, {'success': False, 'message': 'wrong password'}, 'warn')
+            return _refuse(401, 'wrong password')
+        self.limiter.success(addr)
+        s = self.sessions.create(addr)
+        self.counters['logins'] += 1
+        self.audit(self.origin(request, s), 'login', None, {'success': True, 'message': 'logged in'})
+        resp = _json({'ok': True, 'success': True, 'message': 'logged in', 'csrf': s.csrf})
+        resp.set_cookie(COOKIE, s.token, httponly=True, samesite='Strict', path='/',
+                        max_age=int(self.cfg['session_timeout']), secure=request.secure)
+        return resp
+
+    def _command_session(self, request: web.Request):
+        """(session, None) when logged in with a valid CSRF token, else (None, refusal)."""
+        s = self.session_of(request)
+        if s is None:
+            return None, _refuse(401, 'log in first: commands need the operator password')
+        if not self.sessions.check_csrf(s, request.headers.get('X-CSRF-Token')):
+            return None, _refuse(403, 'refused: missing or wrong CSRF token (reload the page)')
+        return s, None
+
+    async def logout(self, request: web.Request) -> web.Response:
+        s, refused = self._command_session(request)
+        if refused:
+            return refused
+        self.sessions.end(s.token)
+        resp = _json({'ok': True, 'success': True, 'message': 'logged out'})
+        resp.del_cookie(COOKIE, path='/')
+        return resp
+
+    # ------------------------------------------------------------------ commands
+    async def command(self, request: web.Request) -> web.Response:
+        name = request.match_info['name']
+        s, refused = self._command_session(request)
+        if refused:
+            self.counters['commands_refused'] += 1
+            self.audit(self.origin(request), name, None, {'success': False, 'message': 'not logged in / bad CSRF'},
+                       'warn')
+            return refused
+        origin = self.origin(request, s)
+        try:
+            body = await self._read_json(request)
+            cmd = commands.validate(name, body, self.backend.jog_limits())
+        except commands.CommandError as exc:
+            self.counters['commands_refused'] += 1
+            self.audit(origin, name, None, {'success': False, 'message': str(exc)}, 'warn')
+            return _refuse(400, str(exc))
+        try:
+            result = await self.backend.call(cmd)
+        except Exception as exc:  # noqa: BLE001 - a failed call is an answer for the operator
+            result = {'success': False, 'message': f'{cmd.service} failed: {exc}'}
+        self.counters['commands'] += 1
+        self.audit(origin, cmd.name, dict(cmd.request), result)
+        return _json({'ok': True, 'command': cmd.name, 'service': cmd.service, 'summary': cmd.summary, **result})
+
+    # ------------------------------------------------------------------ recorded days
+    def _bag(self, request):
+        root = self.backend.bag_dir()
+        if not root:
+            raise web.HTTPServiceUnavailable(text='bag directory unknown (recorder not answering)')
+        bag = bags_mod.find_bag(root, request.match_info['name'])
+        if bag is None:
+            raise web.HTTPNotFound(text='no such bag')
+        return bag
+
+    async def bag_list(self, request: web.Request) -> web.Response:
+        refused = self._view_refused(request)
+        if refused:
+            return refused
+        root = self.backend.bag_dir()
+        if not root:
+            return _json({'bag_dir': None, 'bags': [], 'message': 'bag directory unknown: recorder not answering'})
+        entries = await asyncio.get_running_loop().run_in_executor(None, bags_mod.list_bags, root)
+        return _json({'bag_dir': str(root), 'bags': [e.to_json() for e in entries]})
+
+    def _report_dir(self, bag: Path) -> Path:
+        return Path(self.cfg['report_dir']).expanduser() / bag.name
+
+    async def report(self, request: web.Request) -> web.Response:
+        refused = self._view_refused(request)
+        if refused:
+            return refused
+        bag = self._bag(request)
+        out = self._report_dir(bag)
+        async with self._report_lock:              # one report at a time (CPU on the Pi)
+            if not bags_mod.report_is_fresh(bag, out):
+                code, text = await self._make_report(bag, out)
+                if code != 0:
+                    return _refuse(500, f'the report failed (exit {code}): {text[-2000:]}')
+        text = (out / 'report.txt').read_text(encoding='utf-8', errors='replace')
+        plots = sorted(p.name for p in out.glob('*.png'))
+        base = f'/api/bags/{bag.name}/report/'
+        return _json({'bag': bag.name, 'text': text, 'plots': [base + p for p in plots]})
+
+    async def _make_report(self, bag: Path, out: Path) -> tuple[int, str]:
+        out.mkdir(parents=True, exist_ok=True)
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, '-m', 'sslfr_bringup.cli', 'report', str(bag), '--out', str(out),
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+            env={**os.environ, 'MPLBACKEND': 'Agg'})
+        try:
+            data, _ = await asyncio.wait_for(proc.communicate(), REPORT_TIMEOUT)
+        except asyncio.TimeoutError:
+            proc.kill()
+            await proc.wait()
+            return -1, f'no report after {REPORT_TIMEOUT:.0f} s'
+        text = data.decode('utf-8', errors='replace')
+        if proc.returncode == 0 and not text.strip():
+            return 1, 'the report printed nothing'
+        if proc.returncode == 0:
+            (out / 'report.txt').write_text(text, encoding='utf-8')
+        return proc.returncode, text
+
+    async def report_file(self, request: web.Request) -> web.StreamResponse:
+        refused = self._view_refused(request)
+        if refused:
+            return refused
+        bag = self._bag(request)
+        name = request.match_info['file']
+        out = self._report_dir(bag)
+        files = {p.name for p in out.glob('*.png')} if out.is_dir() else set()
+        if name not in files:
+            raise web.HTTPNotFound(text='no such plot')
+        return web.FileResponse(out / name)
+
+    async def download(self, request: web.Request) -> web.StreamResponse:
+        refused = self._view_refused(request)
+        if refused:
+            return refused
+        bag = self._bag(request)
+        resp = web.StreamResponse(headers={
+            'Content-Type': 'application/zip',
+            'Content-Disposition': f'attachment; filename="{bag.name}.zip"'})
+        await resp.prepare(request)
+        loop = asyncio.get_running_loop()
+        gen = bags_mod.iter_zip(bag)
+        try:
+            while True:
+                piece = await loop.run_in_executor(None, next, gen, None)
+                if piece is None:
+                    break
+                await resp.write(piece)
+        finally:
+            gen.close()
+        await resp.write_eof()
+        return resp
+
+    # ------------------------------------------------------------------ assembly
+    def application(self) -> web.Application:
+        app = web.Application(middlewares=[self.middleware], client_max_size=int(self.cfg['max_request_bytes']))
+        app.add_routes([
+            web.get('/', self.index), web.get('/static/{name}', self.static),
+            web.get('/api/state', self.state), web.get('/api/history', self.history),
+            web.get('/api/events', self.events), web.get('/api/session', self.session_info),
+            web.post('/api/login', self.login), web.post('/api/logout', self.logout),
+            web.post('/api/command/{name}', self.command),
+            web.get('/api/bags', self.bag_list), web.get('/api/bags/{name}/report', self.report),
+            web.get('/api/bags/{name}/report/{file}', self.report_file),
+            web.get('/api/bags/{name}/download', self.download),
+        ])
+
+        async def start_pusher(app_):
+            app_[PUSHER] = asyncio.create_task(self.pusher())
+
+        async def stop_pusher(app_):
+            app_[PUSHER].cancel()
+
+        app.on_startup.append(start_pusher)
+        app.on_cleanup.append(stop_pusher)
+        return app
+
+
+class Server:
+    """The app served from its own thread and asyncio loop (the ROS executor keeps
+    the main thread). ``start()`` returns once listening (or raises OSError)."""
+
+    def __init__(self, op: OperatorApp, host: str, port: int):
+        self.op, self.host, self.port = op, host, int(port)
+        self.loop = asyncio.new_event_loop()
+        self._runner: web.AppRunner | None = None
+        self._thread = threading.Thread(target=self.loop.run_forever, name='web', daemon=True)
+        self.url = ''
+
+    def start(self) -> str:
+        self._thread.start()
+        fut = asyncio.run_coroutine_threadsafe(self._start(), self.loop)
+        self.url = fut.result(30)
+        return self.url
+
+    async def _start(self) -> str:
+        self._runner = web.AppRunner(self.op.application(), access_log=None, shutdown_timeout=1.0)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.host, self.port, reuse_address=True)
+        await site.start()
+        sock = site._server.sockets[0]                     # noqa: SLF001 - the bound port (port 0)
+        host, port = sock.getsockname()[:2]
+        shown = f'[{host}]' if ':' in host else host
+        return f'http://{shown}:{port}/'
+
+    def stop(self) -> None:
+        if self._runner is not None and self.loop.is_running():
+            try:
+                asyncio.run_coroutine_threadsafe(self._runner.cleanup(), self.loop).result(5)
+            except Exception:  # noqa: BLE001 - stopping anyway
+                pass
+        if self.loop.is_running():
+            self.loop.call_soon_threadsafe(self.loop.stop)
+        self._thread.join(5)

@@ -1,0 +1,211 @@
+"""``web`` node: the operator page (issue 20), served by the tracker itself.
+
+Thin node over :mod:`sslfr_web` (pure modules): it subscribes to the topics
+the page shows and feeds :class:`~sslfr_web.live.LiveState`, samples the day
+plots on ROS time, asks the other nodes for the limits the page needs
+(:mod:`~sslfr_web.remote`), calls the existing services for the page's
+commands and serves :mod:`~sslfr_web.app` (aiohttp) from its own thread.
+Contract: docs/architecture.md, section "Operator page"; for people: docs/operator.md.
+"""
+from __future__ import annotations
+
+import asyncio
+import importlib
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.srv import GetParameters
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import NavSatFix, Temperature
+from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase, Wind
+from sslfr_common.contract import JOINTS
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now, to_sec
+
+from . import commands, remote
+from .app import OperatorApp, Server
+from .live import DayBuffer, LiveState
+from .params import WEB_PARAMS
+
+REMOTE_RETRY, REMOTE_REFRESH = 2.0, 60.0       # [s, steady] get_parameters: until answered / then
+SAMPLE_PERIOD = 0.5                            # [s, steady] check whether a day-plot sample is due
+DISCOVERY_WAIT = 2.0                           # [s, wall] a service client's wait for its server
+
+
+def _srv_class(type_name: str):
+    pkg, _, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{pkg}.srv'), name)
+
+
+class WebNode(LeanEvents, Node):
+    """Live view, day plots, commands through services, recorded days."""
+
+    def __init__(self, **kwargs):
+        super().__init__('web', **kwargs)
+        self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
+        self.state = LiveState(JOINTS)
+        self.buffer = DayBuffer(float(self.cfg['plot_period']))
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        st = self.state
+        sub = self.create_subscription        # no QoS-event handlers: LeanEvents
+        sub(TrackerPhase, 'tracker/phase', st.on_phase, latched)
+        sub(SafetyState, 'safety/state', st.on_safety, 10)
+        sub(SunPosition, 'tracker/sun', st.on_sun, 10)
+        sub(Irradiance, 'irradiance/beam', st.on_beam, 10)
+        sub(NavSatFix, 'gps/fix', st.on_fix, 10)
+        sub(Wind, 'wind', st.on_wind, 10)
+        for name in ('inlet', 'outlet'):
+            sub(Temperature, f'absorber/{name}_temperature', lambda m, n=name: st.on_temperature(n, m), 10)
+        for axis in JOINTS:
+            sub(AxisStatus, f'axes/{axis}/status', st.on_axis, 10)
+        # Service clients are made when first needed: every entity costs the executor
+        # time at each wake-up (~45 messages/s), so idle clients are not kept around.
+        # (the e-stop's client is made at once: no discovery wait when it is pressed)
+        self._service_types = commands.all_service_names(JOINTS)
+        self.clients_ = {'safety/estop': self.create_client(_srv_class(self._service_types['safety/estop'][1]),
+                                                            'safety/estop')}
+        self._param_clients: dict = {}
+        self._remote_asked: dict = {}
+        self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
+        self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
+        self.create_timer(1.0, self._steady_tick, clock=steady)
+        self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self.op = OperatorApp(self.cfg, self)
+        self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))
+        self.url = self.server.start()                 # OSError (address in use ...) -> main
+        self.get_logger().info(
+            f'operator page at {self.url} (bind {self.cfg["bind_address"]}; view '
+            f'{"open" if self.cfg["open_view"] else "after login"}; commands need the operator password'
+            f'{"" if self.op.passwords.line() else ": NONE SET, run ./sslfr web-password"})')
+
+    # ------------------------------------------------------------------ Backend (web thread)
+    def ros_time(self) -> float | None:
+        t = to_sec(self.get_clock().now())
+        return t if t > 0 else None
+
+    def bag_dir(self) -> str | None:
+        return self.cfg['bag_dir'] or self.state.info.get('bag_dir')
+
+    def jog_limits(self) -> dict[str, commands.JogLimits]:
+        info = self.state.info
+        out = {}
+        for axis in JOINTS:
+            measured = (self.state.get('axes', axis) or {}).get('measured')
+            out[axis] = commands.JogLimits(float(self.cfg['max_jog']), info.get(f'{axis}.max_jog'),
+                                           info.get(f'{axis}.lower_limit'), info.get(f'{axis}.upper_limit'),
+                                           measured)
+        return out
+
+    def log(self, level: str, text: str) -> None:
+        logger = self.get_logger()       # one call site per severity (rclpy refuses to mix them)
+        if level == 'error':
+            logger.error(text)
+        elif level == 'warn':
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+    async def call(self, cmd: commands.Command) -> dict:
+        client = self.clients_.get(cmd.service)
+        if client is None:        # first use (from the web thread; rclpy's node calls are locked)
+            client = self.clients_[cmd.service] = self.create_client(
+                _srv_class(self._service_types[cmd.service][1]), cmd.service)
+        for _ in range(int(DISCOVERY_WAIT / 0.05)):       # let discovery match the client
+            if client.service_is_ready():
+                break
+            await asyncio.sleep(0.05)
+        else:
+            return {'success': False, 'message': f'service {cmd.service} is not available (is its node running?)'}
+        loop = asyncio.get_running_loop()
+        sent: list = []
+
+        def send() -> asyncio.Future:
+            done = loop.create_future()
+            fut = client.call_async(client.srv_type.Request(**cmd.request))
+            fut.add_done_callback(lambda f: loop.call_soon_threadsafe(lambda: done.done() or done.set_result(f)))
+            sent.append(fut)
+            return done
+
+        timeout = float(self.cfg['service_timeout'])
+        f, n = await commands.first_answer(send, timeout, commands.RESEND_S if cmd.resend else None)
+        for fut in sent:
+            if not fut.done():
+                client.remove_pending_request(fut)
+        if f is None:
+            return {'success': False, 'message': f'no answer from {cmd.service} within {timeout:g} s'
+                                                 + (f' ({n} requests)' if n > 1 else '')}
+        if n > 1:
+            self.get_logger().warning(f'{cmd.service}: answered after {n} requests (a response lost or late)')
+        resp = f.result()
+        return {k: getattr(resp, k) for k in resp.get_fields_and_field_types()}
+
+    # ------------------------------------------------------------------ timers (ROS thread)
+    def _sample(self) -> None:
+        t = self.ros_time()
+        if t is not None:
+            self.buffer.maybe_sample(t, self.state)
+
+    def _steady_tick(self) -> None:
+        now = steady_now(self._steady)
+        for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
+            client = self._param_clients.get(node)
+            if now < due:
+                continue
+            if client is None:
+                self._param_clients[node] = self.create_client(GetParameters, f'{node}/get_parameters')
+                continue
+            asked = self._remote_asked.get(node)
+            if asked is None and client.service_is_ready():
+                self._remote_asked[node] = now
+                names = list(remote.REMOTE_PARAMS[node])
+                fut = client.call_async(GetParameters.Request(names=names))
+                fut.add_done_callback(lambda f, n=node, nm=names, t=now: self._on_remote(n, nm, f, t))
+            elif asked is not None and now - asked > REMOTE_RETRY:      # no answer: start again
+                self._drop_param_client(node)
+        self._publish_diagnostics()
+
+    def _drop_param_client(self, node: str) -> None:
+        self._remote_asked.pop(node, None)
+        client = self._param_clients.pop(node, None)
+        if client is not None:
+            self.destroy_client(client)
+
+    def _on_remote(self, node: str, names: list[str], fut, asked: float) -> None:
+        self._drop_param_client(node)
+        try:
+            values = fut.result().values
+        except Exception as exc:  # noqa: BLE001 - retried at the next tick
+            self.get_logger().warning(f'{node}/get_parameters failed: {exc}', throttle_duration_sec=30.0)
+            return
+        for key, value in remote.apply(node, names, values).items():
+            self.state.set_info(key, value)
+        self._remote_due[node] = asked + REMOTE_REFRESH
+
+    def _publish_diagnostics(self) -> None:
+        c = self.op.counters
+        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id='web',
+                             level=DiagnosticStatus.OK if self.op.passwords.line() else DiagnosticStatus.WARN,
+                             message=f'serving {self.url}' if self.op.passwords.line()
+                             else self.op.passwords.problem)
+        s.values = [KeyValue(key=k, value=str(v)) for k, v in
+                    {**c, 'sessions': len(self.op.sessions), 'url': self.url,
+                     'day_samples': len(self.buffer.t)}.items()]
+        arr = DiagnosticArray(status=[s])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self._diag.publish(arr)
+
+    def on_exit(self) -> None:
+        """Stop the HTTP server; called by run_node once spinning ends."""
+        self.server.stop()
+
+
+def main(args=None) -> int:
+    """Entry point of ``ros2 run sslfr_web web``; a port that cannot be bound
+    refuses to start (exit 2, one line)."""
+    return run_node('web', WebNode, args=args, config_errors=CONFIG_ERRORS + (OSError,))
+
+
+if __name__ == '__main__':
+    sys.exit(main())
