@@ -36,7 +36,7 @@ def plant(tmp_path, launch, ros):
         ros.node.create_subscription(typ, topic, lambda m, k=key: box[k].append((time.monotonic(), m)), 10)
     nodes = [
         launch('sslfr_drivers', 'absorber_board', params={'port': str(tmp_path / 'abs0'), 'anemometer_pin': 7}),
-        launch('sslfr_drivers', 'safety', params={
+        launch('sslfr_safety', 'safety', params={
             'require_site_and_time': False, 'watchdog.nodes': ['absorber_board'], 'watchdog.timeouts': [3.0],
             'watchdog.actions': ['STOW'], 'watchdog.startup_grace': 10.0, 'wind.enabled': True,
             'wind.gust_limit': GUST, 'wind.mean_limit': 14.0, 'wind.hysteresis': 3.0, 'wind.hold': HOLD,
