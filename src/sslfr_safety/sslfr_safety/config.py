@@ -94,9 +94,7 @@ class SafetyConfig:
     wind_stuck_beam_swing: float = 300.0  # [W/m^2] beam max - min over that window
     watchdogs: dict = field(default_factory=lambda: {
         'planner': (5.0, 'STOW'),
-        'mirrors_driver': (2.0, 'STOW'),
-        'mobile_structure_driver': (2.0, 'STOW'),
-        'secondary_reflector_driver': (2.0, 'STOW'),
+        **{driver_node(joint): (2.0, 'STOW') for joint in JOINTS},
         'absorber_board': (2.0, 'STOW'),
         'irradiance': (5.0, 'WARN'),
         'gps': (5.0, 'WARN'),

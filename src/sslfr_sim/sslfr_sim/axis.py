@@ -23,7 +23,9 @@ Model
   closes, except the switch a HOME is looking for.
 * Position sensor (inclinometer/encoder): ``angle + N(0, sensor_noise)`` [rad].
 * Faults: ``stalled`` (counter advances, joint does not), watchdog (1 s silence ->
-  decelerate to stop, fault WATCHDOG), reset (power cycle).
+  decelerate to stop, fault WATCHDOG), reset (power cycle), a slipping coupling
+  (:meth:`AxisSim.slip`: the joint, and so the sensor, turns away from the motor at a
+  steady rate until the slip is complete; the counter does not see it).
 * Host-loss stow (SET_HOST_LOSS_STOW, kept like the firmware's EEPROM across resets):
   ``delay_ms`` after the watchdog stop, with the host still silent, the board drives by
   itself to the stow steps (only when HOMED) or toward the stow switch until it closes,
@@ -38,7 +40,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
+from sslfr_common.contract import JOINT_RANGE, MIRRORS, STOW_POSITION
 from sslfr_drivers.link import messages as m
 from sslfr_sim.base import Refuse, SimBoard
 
@@ -52,10 +54,10 @@ WATCHDOG_STOP_S = 0.15
 class AxisConfig:
     """Physical parameters of one simulated axis (SI units, radians)."""
 
-    axis: str = 'mirrors'
-    lo: float = JOINT_RANGE['mirrors'][0]     # [rad] LOW switch
-    hi: float = JOINT_RANGE['mirrors'][1]     # [rad] HIGH switch
-    sleep: float = STOW_POSITION['mirrors']   # [rad] SLEEP switch centre
+    axis: str = MIRRORS
+    lo: float = JOINT_RANGE[MIRRORS][0]       # [rad] LOW switch
+    hi: float = JOINT_RANGE[MIRRORS][1]       # [rad] HIGH switch
+    sleep: float = STOW_POSITION[MIRRORS]     # [rad] SLEEP switch centre
     step_rad: float = m.DEFAULT_STEP_RAD    # [rad/step]
     max_speed: float = 3000.0           # [steps/s]
     accel: float = 6000.0               # [steps/s^2]
@@ -88,6 +90,8 @@ class AxisSim(SimBoard):
         c = self.cfg
         self.angle = c.sleep if c.initial_angle is None else c.initial_angle
         self.stalled = False
+        self.slip_left = 0.0         # [rad] of a slipping coupling still to come
+        self.slip_rate = 0.0         # [rad/s] its rate (wall time, as the motion)
         super().__init__(board_id=board_id, rng=rng, **kw)
         axis = m.ConfigRecord.AXES.index(c.axis) if c.axis in m.ConfigRecord.AXES else 0
         self.config = dataclasses.replace(self.config, axis=axis, max_speed=c.max_speed, accel=c.accel)
@@ -107,7 +111,7 @@ class AxisSim(SimBoard):
             kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
         if opts.get('no_sensor') in ('1', 'true', True):
             kw['has_sensor'] = False
-        cfg = AxisConfig.for_axis(opts.get('axis', 'mirrors'), **kw)
+        cfg = AxisConfig.for_axis(opts.get('axis', MIRRORS), **kw)
         return cls(cfg, board_id=board_id, rng=rng)
 
     # ------------------------------------------------------------------ state
@@ -320,6 +324,15 @@ class AxisSim(SimBoard):
         self.homed = True
         self.faults &= ~m.FaultBits.RESET
 
+    def slip(self, angle: float, duration: float) -> None:
+        """Let the coupling slip: the joint turns ``angle`` [rad] relative to the motor,
+        at a steady rate over ``duration`` [s of the board's time], and stays there (the
+        step counter does not see it; the sensor does). A power cycle does not undo it."""
+        if duration <= 0:
+            raise ValueError('slip duration must be > 0 s')
+        self.slip_left += angle
+        self.slip_rate = abs(self.slip_left) / duration
+
     def update(self, dt: float) -> None:
         if dt <= 0:
             return
@@ -327,6 +340,10 @@ class AxisSim(SimBoard):
         if self.hl_stowing and not self.busy():
             self.hl_stowing = False
         c = self.cfg
+        if self.slip_left:
+            d = math.copysign(min(abs(self.slip_left), self.slip_rate * dt), self.slip_left)
+            self.slip_left -= d
+            self.angle = min(max(self.angle + d, c.lo - c.overtravel), c.hi + c.overtravel)
         # integrate in sub-steps of <= 2 ms so switches are not jumped over
         n = max(1, int(math.ceil(dt / 0.002)))
         h = dt / n

@@ -49,6 +49,7 @@ from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
+from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float
 
 
@@ -117,6 +118,8 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
         return [f'disconnect {f.duration / speed:.3f}'] if active else []
     if f.kind == 'board-reset':
         return ['reset'] if active else []
+    if f.kind == 'slip':     # the slip stays after its duration (the coupling is not repaired)
+        return [f'slip {f.amount:g} {f.duration / speed:.3f}'] if active else []
     cmd = {'cmd': 'fault', 'kind': f.kind, 'active': active}
     if f.kind == 'thermocouple-open':
         cmd['target'] = f.target
@@ -155,8 +158,8 @@ def _watch_topics(ns) -> dict:
     """Sensor topics whose first message tells the simulation that a node is fed."""
     from sensor_msgs.msg import NavSatFix, Temperature
     from sslfr_interfaces.msg import Irradiance
-    by_node = {'gps': ('gps/fix', NavSatFix), 'absorber_board': ('absorber/outlet_temperature', Temperature),
-               'irradiance': ('irradiance/beam', Irradiance)}
+    by_node = {'gps': (GPS_FIX.name, NavSatFix), 'absorber_board': (ABSORBER_TEMPERATURE.of('outlet'), Temperature),
+               'irradiance': (IRRADIANCE_BEAM.name, Irradiance)}
     return dict(by_node[n.name] for n in ns.nodes if n.name in by_node)
 
 
@@ -302,10 +305,14 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
             print(f'sslfr sim: fault {f.spec}: board {f.board} is not simulated in this node set', file=sys.stderr)
             return 2
+        if f.kind == 'slip' and args.boards == 'firmware':
+            print(f'sslfr sim: fault {f.spec}: a slipping coupling is simulated by the Python boards only '
+                  '(--boards sim), not by the firmware harness', file=sys.stderr)
+            return 2
         if f.kind == 'wind' and f.duration / speed < faults_mod.WIND_MIN_WALL_S:
-            print(f'sslfr sim: warning: fault {f.spec} lasts {f.duration / speed:.1f} wall seconds at --speed '
-                  f'{speed:g}: the anemometer\'s 3 s gust and 10 min mean and the wind hold run on the boards\' '
-                  f'and the supervisor\'s steady clocks, not on simulated time; give it at least '
+            print(f'sslfr sim: warning: fault {f.spec} lasts {f.duration / speed:.2f} wall seconds at --speed '
+                  f'{speed:g}, less than two of the absorber board\'s pulse samples (4 Hz, the board\'s clock): '
+                  f'its wind is averaged with the calm around it; give it at least '
                   f'{faults_mod.WIND_MIN_WALL_S * speed:.0f} s or a lower --speed', file=sys.stderr)
     out = Path(args.out or f'out/sim-{date}').resolve()
     out.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ import stat as stat_mod
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION, WIND_STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
+from sslfr_common import accuracy
 from sslfr_drivers.axis.commands import HOME_SWITCHES
 from sslfr_drivers.axis.stall import StallDetector
 from sslfr_drivers.axis.supervisor import AxisTuning
@@ -91,6 +92,7 @@ _SPECS = [
        'stall_window [rad]', 'rad', 1e-5, 1.0),
     _P('max_jog', 0.2, 'largest |delta| of a jog [rad]', 'rad', 0.0, math.pi),
     _P('jog_speed', 0.02, 'default jog speed [rad/s]', 'rad/s', *_SPEED),
+    *accuracy.PARAM_SPECS,
 ]
 
 
@@ -112,7 +114,7 @@ def cross_check(p: dict) -> list[str]:
                 errors.append(f"{key} {p[key]:.4f} rad outside the soft limits")
     if p['min_speed'] > p['max_speed']:
         errors.append('min_speed > max_speed')
-    return errors
+    return errors + accuracy.cross_check(p)
 
 
 #: The driver's parameters with the mirrors' defaults (:func:`params_for` per axis).

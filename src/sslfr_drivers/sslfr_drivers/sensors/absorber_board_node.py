@@ -36,8 +36,8 @@ from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches, Wind
 
-from sslfr_common.contract import SWITCHES, THERMOCOUPLES
-from sslfr_common.node import run_node, stamp, to_sec
+from sslfr_common.contract import ABSORBER_TEMPERATURE, LIMIT_SWITCHES, SWITCHES, THERMOCOUPLES, WIND
+from sslfr_common.node import qos, run_node, stamp, to_sec
 from sslfr_drivers.link.sensor_messages import PULSE_PIN_OFF, PulseSample, SetPulseInput, SwitchSample, ThermocoupleSample
 from sslfr_drivers.sensors import anemometer, max6675
 from sslfr_drivers.sensors.debounce import SwitchTracker
@@ -65,10 +65,10 @@ class AbsorberBoardNode(SensorBoardNode):
         self._faults = {w: max6675.FAULT_NONE for w in THERMOCOUPLES}
         self._fault_counts = {w: 0 for w in THERMOCOUPLES}
         self._last_temp = {w: math.nan for w in THERMOCOUPLES}
-        self._pub_t = {s: self.create_publisher(Temperature, f'absorber/{s}_temperature', 10)
+        self._pub_t = {s: self.create_publisher(Temperature, ABSORBER_TEMPERATURE.of(s), qos(ABSORBER_TEMPERATURE))
                        for s in THERMOCOUPLES}
-        self._pub_sw = self.create_publisher(LimitSwitches, 'limit_switches', 10)
-        self._pub_wind = self.create_publisher(Wind, 'wind', 10)
+        self._pub_sw = self.create_publisher(LimitSwitches, LIMIT_SWITCHES.name, qos(LIMIT_SWITCHES))
+        self._pub_wind = self.create_publisher(Wind, WIND.name, qos(WIND))
         self._pulses = anemometer.PulseCounter()
         self._wind = anemometer.WindStats(self._values['anemometer_slope'], self._values['anemometer_offset'])
         self._wind_last: anemometer.WindReading | None = None
