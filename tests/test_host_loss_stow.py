@@ -17,6 +17,7 @@ import time
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.contract import AXIS_STATUS, MIRRORS, SAFETY_STATE
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -38,9 +39,9 @@ def test_killed_driver_leaves_a_board_that_stows_by_itself(launch, ros, ros_env,
             assert sim.running() and time.monotonic() < deadline, sim.output()
             time.sleep(0.05)
         board = SimControl(ctl)
-        status = ros.collect(AxisStatus, 'axes/mirrors/status')
+        status = ros.collect(AxisStatus, AXIS_STATUS.of(MIRRORS))
         from sslfr_interfaces.msg import SafetyState
-        pub = ros.node.create_publisher(SafetyState, 'safety/state', 10)
+        pub = ros.node.create_publisher(SafetyState, SAFETY_STATE.name, 10)
         safety = {'on': True, 'seq': 0}
 
         def beat():                       # the test plays a safety supervisor saying OK

@@ -4,7 +4,9 @@ simulated cup anemometer on pin 7 of the simulated absorber board), ``safety`` a
 simulated board, as ``./sslfr sim --fault wind:...`` and ``overtemp`` do.
 
 Compressed, honestly: the release hold is 15 s (default 1800 s) and the gust limit
-12 m/s (default 20 m/s); the simulated wind runs on the real clock (speed 1).
+12 m/s (default 20 m/s); the nodes run on the system clock at real time (ROS time =
+wall time, so the hold and the windows, on ROS time, are measured here in wall seconds;
+src/sslfr_safety/test/test_wind_rules.py checks the hold at simulation speed).
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import time
 
 import pytest
 
+from sslfr_common.contract import SAFETY_STATE, TRACKER_TRAJECTORY, WIND
 from sslfr_sim.runner import SimThread
 from sslfr_sim.sensors import AbsorberSim
 
@@ -31,8 +34,8 @@ def plant(tmp_path, launch, ros):
     sim = SimThread.plain(AbsorberSim({'start_utc': START, 'speed': 1.0, 'seed': 11}),
                           link=str(tmp_path / 'abs0')).start()
     box = {'wind': [], 'safety': [], 'traj': []}
-    for key, typ, topic in (('wind', Wind, 'wind'), ('safety', SafetyState, 'safety/state'),
-                            ('traj', JointTrajectory, 'tracker/trajectory')):
+    for key, typ, topic in (('wind', Wind, WIND.name), ('safety', SafetyState, SAFETY_STATE.name),
+                            ('traj', JointTrajectory, TRACKER_TRAJECTORY.name)):
         ros.node.create_subscription(typ, topic, lambda m, k=key: box[k].append((time.monotonic(), m)), 10)
     nodes = [
         launch('sslfr_drivers', 'absorber_board', params={'port': str(tmp_path / 'abs0'), 'anemometer_pin': 7}),

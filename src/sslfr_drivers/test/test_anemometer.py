@@ -63,3 +63,26 @@ def test_gust_is_the_highest_3s_mean_and_mean_covers_10_minutes():
     for _ in range(4 * 303):                # + 3 s: the 3 s means that hold part of the burst
         r = w.add(0.25, calm * 0.25)
     assert r.gust == pytest.approx(5.0) and r.mean == pytest.approx(5.0)
+
+
+def test_windows_run_on_ros_time_at_simulation_speed():
+    """At --speed 400 the board samples every 0.25 s of its clock = 100 s of ROS time:
+    the 3 s window holds the newest sample alone, the 10 min mean the last six, and
+    ``window`` says 600 s of ROS time once full (a fault acts as in real time)."""
+    w = an.WindStats()
+    calm, storm = an.frequency(5.0), an.frequency(25.0)
+    t = 1000.0
+    for _ in range(10):                                         # 1000 s of calm
+        t += 100.0
+        r = w.add(0.25, calm * 0.25, t)
+    assert r.window == pytest.approx(600.0) and r.mean == pytest.approx(5.0)
+    t += 100.0
+    r = w.add(0.25, storm * 0.25, t)                            # one 100 s sample of storm
+    assert r.speed == pytest.approx(25.0) and r.gust == pytest.approx(25.0)
+    assert r.mean == pytest.approx((5.0 * 5 + 25.0) / 6)
+    for _ in range(6):                                          # 600 s later it is forgotten
+        t += 100.0
+        r = w.add(0.25, calm * 0.25, t)
+    assert r.speed == pytest.approx(5.0) and r.gust == pytest.approx(5.0) and r.mean == pytest.approx(5.0)
+    r = w.add(0.25, storm * 0.25, t - 5000.0)                   # ROS time went back: windows restart
+    assert r.mean == pytest.approx(25.0) and r.window == pytest.approx(0.25)

@@ -32,7 +32,7 @@ from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, STOW_POSITION, SW
                                    WIND_STOW_POSITION, Level, LinkState, Phase, driver_node)
 
 from sslfr_safety.config import WATCHABLE, FakeClock, SafetyConfig, SystemClock, with_changes
-from sslfr_safety.rules import LATCHED, RECOVERS, RULES, Clear, Fault, Rule, key_of, link_name
+from sslfr_safety.rules import LATCHED, RECOVERS, RULES, WIND_RULE, Clear, Fault, Rule, key_of, link_name
 
 __all__ = ['WATCHABLE', 'FakeClock', 'SafetyConfig', 'SystemClock', 'with_changes', 'Condition',
            'Verdict', 'Transition', 'SafetyCore']
@@ -123,7 +123,8 @@ class _Wind:
     speed: float = math.nan            # 3 s mean [m/s]
     gust: float = math.nan             # highest 3 s mean over the window [m/s]
     mean: float = math.nan             # window mean [m/s]
-    calm_since: float | None = None    # steady time the mean went below limit - hysteresis
+    stamp: float | None = None         # ROS time of the last wind message [s]
+    calm_since: float | None = None    # ROS time [s] the mean went below limit - hysteresis
     zero_since: float | None = None    # first of the current run of 0 m/s readings
     beams: collections.deque = field(default_factory=collections.deque)   # (t, beam) during it
 
@@ -328,47 +329,52 @@ class SafetyCore:
             self.counters['bad_inputs'] += 1
 
     def on_wind(self, speed: float, gust: float, mean: float, window: float,
-                arrival: float | None = None) -> None:
-        """A ``wind`` message: 3 s mean, gust, mean over ``window`` [s] (all m/s).
-        A gust or a mean over its limit raises the wind stow at once; the mean's
-        calm run (below limit - hysteresis) starts or ends the release hold."""
+                stamp: float | None = None, arrival: float | None = None) -> None:
+        """A ``wind`` message: 3 s mean, gust, mean over ``window`` [s] (all m/s),
+        ``stamp`` its header stamp [s, ROS time; None: the arrival]. A gust or a mean
+        over its limit raises the wind stow at once; the mean's calm run (below limit -
+        hysteresis) starts or ends the release hold, which is measured between the
+        stamps (control logic on ROS time: sim and replay hold as long as a real day);
+        the anemometer's silence is judged on the steady arrival times (a watchdog)."""
         now = self._now(arrival)
+        stamp = now if stamp is None else float(stamp)
         cfg, w = self.config, self.wind
         vals = [float(v) for v in (speed, gust, mean, window)]
-        if not all(math.isfinite(v) and v >= 0.0 for v in vals):
+        if not (all(math.isfinite(v) and v >= 0.0 for v in vals) and math.isfinite(stamp)):
             self.counters['bad_inputs'] += 1
             return
         speed, gust, mean, window = vals
-        if w.arrival is None or now - w.arrival > cfg.wind_silent_warn:
-            w.calm_since = None               # after a silence the calm run starts again
-        w.arrival, w.speed, w.gust, w.mean = now, speed, gust, mean
+        if (w.arrival is None or now - w.arrival > cfg.wind_silent_warn
+                or (w.stamp is not None and stamp < w.stamp)):
+            w.calm_since = None               # after a silence or a step back of ROS time: start again
+        w.arrival, w.stamp, w.speed, w.gust, w.mean = now, stamp, speed, gust, mean
         if not cfg.wind_enabled:
             return
         threshold = cfg.wind_mean_limit - cfg.wind_hysteresis
         gusty, windy = speed > cfg.wind_gust_limit, mean > cfg.wind_mean_limit
-        if (gusty or windy) and 'wind' not in self.faults:
+        if (gusty or windy) and WIND_RULE not in self.faults:
             self._notes.append(f'wind stow: releases once the mean wind stays below {threshold:.1f} m/s '
                                f'for {cfg.wind_hold:.0f} s')
         if gusty:
             # the 3 s running mean crossing the limit is a gust above it (WMO); the gust
             # field (its highest value over 10 min) would re-raise a released stow
-            self._raise('wind', '', 'gust', {'gust': speed, 'limit': cfg.wind_gust_limit}, now)
+            self._raise(WIND_RULE, '', 'gust', {'gust': speed, 'limit': cfg.wind_gust_limit}, now)
         if windy:
-            self._raise('wind', '', 'mean', {'mean': mean, 'limit': cfg.wind_mean_limit, 'window': window}, now)
+            self._raise(WIND_RULE, '', 'mean', {'mean': mean, 'limit': cfg.wind_mean_limit, 'window': window}, now)
         if gusty or windy:
-            w.calm_since = now if mean < threshold else None     # every exceedance restarts the hold
+            w.calm_since = stamp if mean < threshold else None     # every exceedance restarts the hold
             return self._zero_run(speed, now)
-        stowed = 'wind' in self.faults
+        stowed = WIND_RULE in self.faults
         if mean < threshold:
             if w.calm_since is None:
-                w.calm_since = now
+                w.calm_since = stamp
                 if stowed:
                     self._notes.append(f'wind stow: mean {mean:.1f} m/s below {threshold:.1f} m/s, '
                                        f'release after {cfg.wind_hold:.0f} s of calm')
         else:
             if w.calm_since is not None and stowed:
                 self._notes.append(f'wind stow: mean {mean:.1f} m/s back at or above {threshold:.1f} m/s '
-                                   f'after {now - w.calm_since:.0f} s of calm: hold restarts')
+                                   f'after {stamp - w.calm_since:.0f} s of calm: hold restarts')
             w.calm_since = None
         self._zero_run(speed, now)
 
@@ -384,14 +390,15 @@ class SafetyCore:
             w.beams.clear()
 
     def wind_release_in(self, now: float) -> float:
-        """[s] left before a wind stow may release: NaN without one, inf while the
-        anemometer is silent or the mean not below its release threshold."""
-        if 'wind' not in self.faults:
+        """[s of ROS time] left before a wind stow may release (the hold counts up to
+        the newest sample's stamp): NaN without one, inf while the anemometer is silent
+        (steady ``now``) or the mean not below its release threshold."""
+        if WIND_RULE not in self.faults:
             return math.nan
         w, cfg = self.wind, self.config
         if w.arrival is None or now - w.arrival > cfg.wind_silent_warn or w.calm_since is None:
             return math.inf
-        return max(0.0, cfg.wind_hold - (now - w.calm_since))
+        return max(0.0, cfg.wind_hold - (w.stamp - w.calm_since))
 
     def drain_notes(self) -> list[str]:
         """Log lines about the wind stow's release hold since the last call."""
@@ -550,7 +557,7 @@ class SafetyCore:
         axes = tuple(a for a in JOINTS if any(a in c.axes for c in conds if c.level == Level.ESTOP))
         stowing = [c for c in conds if c.level == Level.STOW or c.stow_others]
         stow = bool(stowing)
-        wind_stow = stow and all(c.key == 'wind' for c in stowing)
+        wind_stow = stow and all(c.key == WIND_RULE for c in stowing)
         since = self._state.since if level == self._state.level else now
         return Verdict(level, reasons, axes, stow, since, wind_stow, self.wind_release_in(now))
 

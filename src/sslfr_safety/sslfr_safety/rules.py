@@ -32,7 +32,7 @@ import string
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
-from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, THERMOCOUPLES, Level,
+from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, THERMOCOUPLES, WIND, Level,
                                    LinkState, driver_node)
 
 
@@ -262,15 +262,16 @@ def _anemometer(core, _name: str, now: float):
 
 # ------------------------------------------------------------------ blockers
 def _wind_blocker(core, _fault: Fault, now: float) -> str | None:
-    """Why a wind stow cannot release yet: the anemometer must be fresh and the mean
-    below ``wind_mean_limit - wind_hysteresis`` for ``wind_hold``."""
+    """Why a wind stow cannot release yet: the anemometer must be fresh (steady
+    ``now``) and the mean below ``wind_mean_limit - wind_hysteresis`` for ``wind_hold``
+    [s of ROS time, between the samples' stamps]."""
     cfg, w = core.config, core.wind
     if w.arrival is None or now - w.arrival > cfg.wind_silent_warn:
         return 'anemometer silent: the wind is unknown'
     threshold = cfg.wind_mean_limit - cfg.wind_hysteresis
     if w.calm_since is None:
         return f'wind mean {w.mean:.1f} m/s, must stay < {threshold:.1f} m/s for {cfg.wind_hold:.0f} s'
-    held = now - w.calm_since
+    held = w.stamp - w.calm_since
     if held < cfg.wind_hold:
         return f'wind mean below {threshold:.1f} m/s for {held:.0f} s of {cfg.wind_hold:.0f} s'
     return None
@@ -323,6 +324,9 @@ def _acknowledge_switch(core, name: str) -> None:
 
 
 # ------------------------------------------------------------------ the table
+#: The wind stow's rule key: named after the topic it judges.
+WIND_RULE = WIND.name
+
 RULES: tuple[Rule, ...] = (
     # A valid sample above ``temperature_limit`` [degC] trips at once (raised by
     # SafetyCore.on_temperature, which the node calls in the subscription callback).
@@ -396,7 +400,7 @@ RULES: tuple[Rule, ...] = (
     # stamps); every gust or mean above its limit restarts the hold. While only wind rules
     # stow, Verdict.wind_stow says so (the axes go face-up, not to the sleeping position);
     # Verdict.wind_release_in is the time left [s].
-    Rule('wind', Level.STOW, Clear.RECOVERY,
+    Rule(WIND_RULE, Level.STOW, Clear.RECOVERY,
          {'gust': 'wind gust {gust:.1f} m/s > {limit:.1f} m/s (3 s mean): wind stow',
           'mean': 'wind mean {mean:.1f} m/s > {limit:.1f} m/s ({window:.0f} s mean): wind stow',
           'silent': 'anemometer silent > {timeout:.0f} s: wind unknown, wind stow'},

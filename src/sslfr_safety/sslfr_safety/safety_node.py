@@ -180,7 +180,7 @@ class SafetyNode(LeanEvents, Node):
         self.core.on_beam(msg.beam)
 
     def _on_wind(self, msg: Wind) -> None:
-        self.core.on_wind(msg.speed, msg.gust, msg.mean, msg.window)
+        self.core.on_wind(msg.speed, msg.gust, msg.mean, msg.window, stamp=to_sec(msg.header.stamp))
         self._evaluate(publish_on_change=True)
 
     # ------------------------------------------------------------ services

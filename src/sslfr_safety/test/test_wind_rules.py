@@ -18,7 +18,7 @@ from test_safety_core import feed
 # ------------------------------------------------------------------ safety wind rules
 def make(**changes):
     clock = FakeClock()
-    cfg = with_changes(SafetyConfig(), wind_enabled=True, wind_hold=60.0, **changes)
+    cfg = with_changes(SafetyConfig(), **{'wind_enabled': True, 'wind_hold': 60.0, **changes})
     return SafetyCore(cfg, clock), clock
 
 
@@ -139,3 +139,37 @@ def test_wind_parameters_documented_and_refused_when_bad():
     core, _ = make()
     core.on_wind(math.nan, 1.0, 1.0, 600.0)
     assert core.counters['bad_inputs'] == 1
+
+
+def test_the_hold_runs_on_ros_time_the_silence_on_the_steady_clock():
+    """At --speed 400 the samples' stamps advance 100 s per 0.25 s of steady time: the
+    1800 s hold ends after 1800 s of stamps (4.5 s steady), not 1800 steady seconds; a
+    silence is still judged in steady seconds; ROS time stepping back restarts the hold."""
+    core, clock = make(wind_hold=1800.0)
+    ros = 50_000.0
+
+    def sim_blow(speed, seconds, speed_x=400.0, dt=0.25):
+        nonlocal ros
+        for _ in range(max(1, round(seconds / dt))):
+            feed(core, clock, dt=dt)
+            ros += speed_x * dt
+            core.on_wind(speed, speed, 8.0, 600.0, stamp=ros)    # a gusty spell, a calm mean
+            core.evaluate()
+        return core.state
+    assert sim_blow(5.0, 15).level == Level.OK
+    st = sim_blow(25.0, 0.25)
+    assert st.level == Level.STOW and st.wind_stow and st.wind_release_in == pytest.approx(1800.0)
+    st = sim_blow(5.0, 4.25)                         # 17 samples = 1700 s of ROS time after the calm began
+    assert st.level == Level.STOW and st.wind_release_in == pytest.approx(100.0)
+    assert sim_blow(5.0, 0.25).level == Level.OK    # 1800 s of ROS time in 4.5 s steady
+    # time going back (a replay looped) restarts the calm run
+    sim_blow(25.0, 0.25)
+    sim_blow(5.0, 2.0)
+    ros -= 10_000.0
+    st = sim_blow(5.0, 0.25)
+    assert st.level == Level.STOW and st.wind_release_in == pytest.approx(1800.0)
+    # silence: judged on the steady clock whatever ROS time does (60 s steady -> stow)
+    core2, clock2 = make(wind_silent_warn=5.0, wind_silent_stow=30.0)
+    core2.on_wind(5.0, 5.0, 5.0, 600.0, stamp=1e6)
+    st = feed(core2, clock2, dt=0.5, steps=12)
+    assert st.level == Level.WARN and rule_for(st.reasons[0]).kind == 'anemometer'

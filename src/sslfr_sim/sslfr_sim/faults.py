@@ -56,10 +56,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from sslfr_common.contract import JOINTS, MIRRORS
+from sslfr_common.contract import JOINTS, MIRRORS, WIND
+
+#: The wind fault's kind: named after the topic whose sensor it disturbs.
+WIND_FAULT = WIND.name
 
 KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang', 'slip',
-         'wind')
+         WIND_FAULT)
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -70,11 +73,11 @@ _RULES = {
     'kill': (True, 'optional'),
     'hang': (True, 'forbidden'),
     'slip': (True, 'required'),
-    'wind': (True, 'required'),
+    WIND_FAULT: (True, 'required'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
-FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps', 'wind': 'absorber'}
+FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps', WIND_FAULT: 'absorber'}
 #: [m/s] the largest wind mean a fault may inject
 WIND_MAX = 100.0
 #: [s wall] a wind fault shorter than this spans fewer than two of the absorber board's
@@ -150,7 +153,7 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         if target not in (None, 'inlet', 'outlet'):
             raise FaultSpecError(f'fault {spec!r}: thermocouple is inlet or outlet, not {target!r}')
         target = target or 'outlet'
-    elif kind == 'wind':
+    elif kind == WIND_FAULT:
         try:
             mean = float(target or '')
         except ValueError:

@@ -58,7 +58,7 @@ import random
 import time
 
 from sslfr_common.contract import (JOINT_RANGE, MIRRORS, MOBILE_STRUCTURE, STOW_POSITION, SWITCH_AXIS, SWITCH_POSITION,
-                                   SWITCHES)
+                                   SWITCHES, WIND)
 from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
@@ -323,7 +323,7 @@ class AbsorberSim(_SensorSim):
         self.thermo_period = float(o.get('thermo_period', 0.25))
         self.switch_period = float(o.get('switch_period', 0.05))
         self.noise = float(o.get('noise', 0.2))
-        self.calm_wind = float(o.get('wind', 2.0))
+        self.calm_wind = float(o.get(WIND.name, 2.0))
         self.wind = GustyWind(self.calm_wind, random.Random(self.rng.random()))
         self.pulse_pin = PULSE_PIN_OFF
         self.pulses = 0.0                  # falling edges since SetPulseInput (fractional: phase)
@@ -452,7 +452,7 @@ class AbsorberSim(_SensorSim):
             self.sky.cloud_factor = float(cmd.get('value', 1.0))
         elif kind == 'flow':
             self.thermal.p.flow_capacity = float(cmd.get('value', 20.0))
-        elif kind == 'wind':
+        elif kind == WIND.name:       # the control kind is the sslfr sim fault's (faults.WIND_FAULT)
             value = float(cmd.get('value', self.calm_wind)) if active else self.calm_wind
             if not (math.isfinite(value) and 0.0 <= value <= 100.0):
                 return {'ok': False, 'error': f'wind mean {value!r}: 0..100 m/s'}

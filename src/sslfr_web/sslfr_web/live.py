@@ -29,7 +29,7 @@ import time
 from collections import deque
 from typing import Any, Callable
 
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import JOINTS, WIND
 from sslfr_common.timeconv import to_sec
 from sslfr_common import accuracy as accuracy_mod
 from sslfr_safety.rules import hint_for
@@ -148,7 +148,7 @@ class LiveState:
     #: key -> converter of its messages
     CONVERT: dict[str, Callable] = {'phase': phase_dict, 'safety': safety_dict, 'sun': sun_dict,
                                     'beam': beam_dict, 'gps': fix_dict, 'axes': axis_dict,
-                                    'temperatures': temperature_dict, 'wind': wind_dict}
+                                    'temperatures': temperature_dict, WIND.name: wind_dict}
     NESTED = ('axes', 'temperatures')
 
     def __init__(self, axes: tuple[str, ...] = JOINTS, wall: Callable[[], float] = time.time):
@@ -195,7 +195,7 @@ class LiveState:
         self._set('gps', m)
 
     def on_wind(self, m) -> None:
-        self._set('wind', m)
+        self._set(WIND.name, m)
 
     def set_info(self, key: str, value: Any) -> None:
         with self._lock:

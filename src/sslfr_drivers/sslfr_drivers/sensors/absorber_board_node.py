@@ -174,7 +174,7 @@ class AbsorberBoardNode(SensorBoardNode):
             self._wind_counts['restarts'] += 1
             self._wind.restart()
             return
-        r = self._wind.add(*interval)
+        r = self._wind.add(*interval, t=to_sec(received))     # windows on ROS time (the stamp)
         self._wind_last = r
         msg = Wind()
         msg.header.stamp = received.to_msg()

@@ -15,7 +15,10 @@ its millisecond tick at 4 Hz (``PulseSample``, docs/protocol.md). Here:
   Vol. I ch. 5): the wind is sampled at 4 Hz (0.25 s), a *gust* is the highest 3 s
   running mean within the reporting period, the *mean* wind is averaged over 10 min.
 
-Units: m/s, Hz, seconds of the board's clock.
+Units: m/s, Hz. The pulse frequency is measured on the board's clock (the count and
+its tick come together); the gust and mean windows run on ROS time, the samples'
+stamps (control logic: a simulation or a replay at any speed averages the wind over
+its own seconds), each sample weighted by its board interval.
 """
 from __future__ import annotations
 
@@ -96,9 +99,10 @@ class WindReading:
 class WindStats:
     """Running 3 s mean, gust and 10 min mean of the wind from pulse intervals.
 
-    Every interval (``dt`` [s], ``pulses``) becomes a speed by the calibration; means
-    are time-weighted over the intervals that ended within the window. A gap (the
-    caller passes ``restart``) empties every window.
+    Every interval (``dt`` [s] of the board's clock, ``pulses``) becomes a speed by the
+    calibration; means are weighted by ``dt`` over the intervals whose end ``t`` [s of
+    ROS time] lies within the window. A gap (the caller passes ``restart``) or ROS time
+    going back empties every window.
     """
 
     def __init__(self, slope: float = SLOPE, offset: float = OFFSET,
@@ -110,19 +114,27 @@ class WindStats:
 
     def restart(self) -> None:
         """Forget every sample (a gap, a board reset)."""
-        self._t = 0.0
+        self._t: float | None = None      # end of the last interval [s, ROS time]
+        self._origin = 0.0                 # start of the first interval since the restart [s]
         self._short: collections.deque = collections.deque()   # (t_end, dt, v)
         self._long: collections.deque = collections.deque()
         self._short_sum = [0.0, 0.0]      # sum v*dt, sum dt
         self._long_sum = [0.0, 0.0]
         self._runs: collections.deque = collections.deque()    # (t, 3 s mean), decreasing means
 
-    def add(self, dt: float, pulses: int) -> WindReading:
-        """One interval of ``dt`` [s] with ``pulses`` counted; the reading after it."""
+    def add(self, dt: float, pulses: int, t: float | None = None) -> WindReading:
+        """One interval of ``dt`` [s, board clock] with ``pulses`` counted, ending at
+        ``t`` [s, ROS time: the sample's stamp; None: the previous end + ``dt``, the
+        board's own clock]; the reading after it."""
         rate = pulses / dt
         v = speed(rate, self.slope, self.offset)
-        self._t += dt
-        t = self._t
+        if t is None:
+            t = dt if self._t is None else self._t + dt
+        elif self._t is not None and t < self._t:
+            self.restart()                 # ROS time went back (a replay looped): start again
+        if self._t is None:
+            self._origin = t - dt
+        self._t = t
         for q, s, w in ((self._short, self._short_sum, self.gust_window),
                         (self._long, self._long_sum, self.mean_window)):
             q.append((t, dt, v))
@@ -138,6 +150,6 @@ class WindStats:
         self._runs.append((t, run))
         while self._runs[0][0] <= t - self.mean_window:
             self._runs.popleft()
-        covered = self._long_sum[1]
-        return WindReading(max(0.0, run), max(0.0, self._runs[0][1]), max(0.0, self._long_sum[0] / covered),
+        covered = t - self._origin
+        return WindReading(max(0.0, run), max(0.0, self._runs[0][1]), max(0.0, self._long_sum[0] / self._long_sum[1]),
                            min(covered, self.mean_window), rate)
