@@ -136,6 +136,18 @@ class LinkState(enum.IntEnum):
     LINK_FAULT = 3
 
 
+class DriveKind(str, enum.Enum):
+    """How a movement is driven and where its position comes from (docs/collectors.md)."""
+
+    STEPPER_SWITCHES = 'stepper_switches'                          # seed 000: stepper, limit switches, encoder
+    LINEAR_ACTUATOR_INCLINOMETER = 'linear_actuator_inclinometer'  # seed 004: PWM actuator, inclinometer
+    STEPPER_NO_SWITCHES = 'stepper_no_switches'                    # seed 003: stepper, referenced by the operator
+
+
+#: The drive kinds' names, the first the default.
+DRIVE_KINDS: tuple[str, ...] = tuple(k.value for k in DriveKind)
+
+
 #: Lifecycle states in which an axis driver does not drive its axis
 #: (``AxisStatus.state`` carries the lifecycle label then).
 IDLE_DRIVER_STATES: frozenset[str] = frozenset({'unconfigured', 'inactive', 'finalized'})
