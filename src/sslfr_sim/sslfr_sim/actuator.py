@@ -170,10 +170,14 @@ class ActuatorSim(SimBoard):
     # --------------------------------------------------------------- requests
     def handle(self, msg: m.Message, frame) -> m.Message | None:
         c = self.cfg
-        answer = self._motion_request(msg)
-        if answer is not None:
-            return answer
+        if isinstance(msg, m.GetStatus):
+            return self.status()
+        if isinstance(msg, m.Stop):
+            self._stop()
+            return m.Ack(msg.TYPE)
         if isinstance(msg, m.MoveTo):
+            if not self.homed:
+                raise Refuse(m.ErrorCode.NOT_HOMED)
             target = (msg.steps - self.zero) * c.step_rad
             if not 0 < msg.speed or not c.range[0] <= target <= c.range[1]:
                 raise Refuse(m.ErrorCode.OUT_OF_RANGE)

@@ -193,19 +193,6 @@ class SimBoard:
     def watchdog_expired(self) -> None:
         """Nothing heard for 1 s. Override (axis: stop the motor, latch the fault)."""
 
-    def _motion_request(self, msg: m.Message) -> m.Message | None:
-        """The requests every motion board (axis, actuator) answers alike: GET_STATUS,
-        STOP, and MOVE_TO refused before homing. None: the board's own handling goes on.
-        Needs the board's ``status()``, ``_stop()`` and ``homed``."""
-        if isinstance(msg, m.GetStatus):
-            return self.status()
-        if isinstance(msg, m.Stop):
-            self._stop()
-            return m.Ack(msg.TYPE)
-        if isinstance(msg, m.MoveTo) and not self.homed:
-            raise Refuse(m.ErrorCode.NOT_HOMED)
-        return None
-
     def handle(self, msg: m.Message, frame: Frame) -> m.Message | None:
         """Answer one request. Return the answer, ``None`` for no answer, or raise
         :class:`Refuse`. The base class answers PING, GET_INFO and RESET."""
