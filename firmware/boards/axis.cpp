@@ -13,6 +13,10 @@
  * counter. Host silence for 1 s decelerates to a stop within AXIS_WATCHDOG_STOP_S (fault
  * WATCHDOG), faster than `accel` when needed.
  *
+ * Built with -DAXIS_NO_SWITCHES (build/axis_noswitch.elf, seed 003's rig: no switch
+ * wired): the switch inputs are never read (limit bits 0), HOME is not implemented
+ * (UNKNOWN_TYPE) and SET_ZERO is the only reference (docs/collectors.md "Drives").
+ *
  * Pins (Arduino Pro Mini): D3 STEP, D4 DIR, D5 /ENABLE, D6 /DRIVER_FAULT (input,
  * pull-up), D7 LOW switch, D8 HIGH switch, D9 SLEEP switch (inputs, pull-ups, switch to
  * GND), D10 /CS, D11 MOSI, D12 MISO, D13 SCK of the optional AS5048A absolute encoder.
@@ -47,6 +51,9 @@ static uint8_t g_sensor_ok;
 /* closed switches as LIM_* bits, from the pins (inline: used in the step ISR) */
 static inline uint8_t read_switches(void)
 {
+#ifdef AXIS_NO_SWITCHES
+    return 0;
+#endif
     uint8_t raw = 0;
     if (!(PIND & LOW_BIT)) raw |= LIM_LOW;
     if (!(PINB & HIGH_BIT)) raw |= LIM_HIGH;
@@ -336,6 +343,7 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
     return session_ack(req, ans);
 }
 
+#ifndef AXIS_NO_SWITCHES
 static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
 {
     msg_home_t m;
@@ -362,6 +370,7 @@ static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
     }
     return session_ack(req, ans);
 }
+#endif
 
 static uint8_t handle_status(const proto_frame_t *req, proto_frame_t *ans)
 {
@@ -405,8 +414,10 @@ static uint8_t axis_handle(const proto_frame_t *req, proto_frame_t *ans)
             return session_nack(req, ans, ERR_BAD_PAYLOAD);
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { stop_motion(0.0f); }
         return session_ack(req, ans);
+#ifndef AXIS_NO_SWITCHES
     case MSG_HOME:
         return handle_home(req, ans);
+#endif
     case MSG_SET_ZERO: {
         int32_t p;
         if (msg_parse_i32(req, &p))
@@ -440,6 +451,11 @@ static uint8_t axis_busy(void) { return moving(); }
 static uint8_t axis_may_sleep(void) { return 1; }
 
 const BoardDef BOARD = {
-    KIND_AXIS_STEPPER, "sslfr-axis", axis_setup, axis_poll, axis_handle,
+#ifdef AXIS_NO_SWITCHES
+    KIND_AXIS_STEPPER, "sslfr-axis-nosw",
+#else
+    KIND_AXIS_STEPPER, "sslfr-axis",
+#endif
+    axis_setup, axis_poll, axis_handle,
     axis_host_silent, axis_busy, axis_may_sleep,
 };

@@ -32,7 +32,8 @@ CONFIG_KEYS = {
     'sensor_zero': ('sensor_zero', int),
 }
 KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'absorber': m.BoardKind.ABSORBER,
-         'irradiance': m.BoardKind.IRRADIANCE, 'gps': m.BoardKind.GPS}
+         'irradiance': m.BoardKind.IRRADIANCE, 'gps': m.BoardKind.GPS,
+         'axis_noswitch': m.BoardKind.AXIS_STEPPER}
 
 
 def parser() -> argparse.ArgumentParser:
