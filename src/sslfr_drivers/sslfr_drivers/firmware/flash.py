@@ -33,7 +33,7 @@ CONFIG_KEYS = {
 }
 KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'absorber': m.BoardKind.ABSORBER,
          'irradiance': m.BoardKind.IRRADIANCE, 'gps': m.BoardKind.GPS,
-         'axis_noswitch': m.BoardKind.AXIS_STEPPER}
+         'axis_noswitch': m.BoardKind.AXIS_STEPPER, 'actuator': m.BoardKind.AXIS_ACTUATOR}
 
 
 def parser() -> argparse.ArgumentParser:
