@@ -48,6 +48,27 @@ def test_shipped_site_configs_name_a_valid_collector():
         assert nodeset.check_config(ns, params, where=str(CONFIG / site)) == []
 
 
+def test_wind_supervision_needs_an_anemometer_in_the_description(tmp_path):
+    """Almeria's description lists the cup anemometer the site added (seed 000 has none);
+    without it the config's anemometer_pin and wind.enabled are refused."""
+    ns = nodeset.load()
+    desc = yaml.safe_load((CONFIG / 'collectors' / 'almeria_three_movement.yaml').read_text())
+    added = [s for s in desc['sensors'] if s['kind'] == 'anemometer']
+    assert len(added) == 1 and added[0]['site_addition'] is True
+    (tmp_path / 'collectors').mkdir()
+    site = tmp_path / 'almeria_sslfr.yaml'
+    shutil.copy(CONFIG / site.name, site)
+    (tmp_path / 'collectors' / 'almeria_three_movement.yaml').write_text(yaml.safe_dump(
+        {**desc, 'sensors': [s for s in desc['sensors'] if s['kind'] != 'anemometer']}))
+    errors = nodeset.check_config(ns, nodeset.read_params(site), where=str(site))
+    assert any('absorber_board: anemometer_pin: 7 but the collector description' in e for e in errors), errors
+    assert any('safety: wind.enabled: true but the collector description' in e for e in errors), errors
+    text = site.read_text().replace('anemometer_pin: 7 ', 'anemometer_pin: -1 ').replace(
+        'wind.enabled: true ', 'wind.enabled: false ')
+    site.write_text(text)
+    assert nodeset.check_config(ns, nodeset.read_params(site), where=str(site)) == []
+
+
 @pytest.mark.parametrize('command', ['doctor', 'sim', 'up'])
 def test_a_broken_description_starts_nothing(command, ros_env, tmp_path):
     site, desc = _copy(tmp_path, lambda d: d['movements']['mirrors'].update(drive='hydraulic_ram'))

@@ -242,6 +242,91 @@ def test_host_killed_motor_stopped_within_1_2_s(tmp_path):
         h.stop()
 
 
+STOW_HOST_SCRIPT = r'''
+import sys, time
+from sslfr_drivers.link import messages as m
+from sslfr_drivers.link.board_link import BoardLink
+from sslfr_drivers.link.transport import SerialTransport
+link = BoardLink(SerialTransport(sys.argv[1]), heartbeat=0.25, key=bytes.fromhex(sys.argv[2])).start()
+assert link.wait_up(5)
+link.request(m.SetZero(0))
+assert isinstance(link.request(m.SetHostLossStow(m.HostLossMode.POSITION, 0, 14000, 3000.0, 2000)), m.Ack)
+link.request(m.MoveTo(-2000, 3000.0))
+while link.request(m.GetStatus()).moving:
+    time.sleep(0.05)
+print('ready', flush=True)
+while True:
+    link.request(m.GetStatus())
+    time.sleep(0.1)
+'''
+
+
+def test_host_killed_axis_drives_to_its_host_loss_stow_by_itself(tmp_path):
+    """Issue 35: the host dies; the board stops (watchdog, 1 s), waits the stored delay
+    (2 s) and drives to its host-loss stow (14000 steps = 84 deg, 16000 steps away at
+    3000 steps/s: ~5.8 s of travel) by itself; a host that comes back reads fault
+    HOST_LOSS, a PING does not move it, a MOVE_TO does."""
+    from sslfr_sim.fw_board import config_record
+    from sslfr_sim.fw_harness import axis_mech
+    rec = config_record('axis', {'axis': 'mirrors'}, 1)
+    h = _harness('axis', tmp_path, rec, mech=axis_mech('mirrors', 0.0), pace=1.0)
+    proc = subprocess.Popen([sys.executable, '-c', STOW_HOST_SCRIPT, h.path, KEY.hex()], stdout=subprocess.PIPE,
+                            text=True)
+    host = None
+    try:
+        assert proc.stdout.readline().strip() == 'ready'
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(5)
+        st = h.wait(lambda s: s['counter'] == 14000 and s['speed'] == 0.0, 20)
+        travel = 16000 / 3000.0 + 3000.0 / 6000.0          # cruise + one ramp (accel 6000 steps/s^2)
+        took = st['last_step_s'] - st['last_rx_s']
+        print(f'last byte -> host-loss stow reached: {took:.2f} s (simulated; bound 1 + 2 + {travel:.2f} s)')
+        assert 3.0 + travel - 0.5 <= took <= 3.0 + travel + 0.3, took
+        assert abs(st['angle'] - math.radians(84.0)) <= 2 * STEP
+        assert st['faults'] & m.FaultBits.HOST_LOSS and not st['faults'] & m.FaultBits.LIMIT
+        host = fw_host(h.path)
+        status = host.request(m.GetStatus())
+        assert status.fault_bits & m.FaultBits.HOST_LOSS and status.position == 14000 and not status.moving
+        assert not status.flags & m.StatusFlags.HOST_LOSS_STOWING
+        time.sleep(0.5)
+        assert h.status()['counter'] == 14000                   # the host's PING/STATUS: no motion
+        assert host.request(m.MoveTo(13000, 3000.0)) == m.Ack(m.MoveTo.TYPE)
+        assert not host.request(m.GetStatus()).fault_bits & m.FaultBits.HOST_LOSS
+        # a stow record the configuration cannot run is refused
+        nack = host.request(m.SetHostLossStow(m.HostLossMode.SWITCH, 3, 0, 3000.0, 2000))
+        assert nack == m.Nack(m.SetHostLossStow.TYPE, m.ErrorCode.OUT_OF_RANGE)
+    finally:
+        if host is not None:
+            host.close()
+        if proc.poll() is None:
+            proc.kill()
+        h.stop()
+
+
+def test_host_loss_stow_toward_a_switch_and_kept_in_eeprom(tmp_path):
+    """SWITCH mode works without a reference: toward the SLEEP switch until it closes
+    (no LIMIT fault); the record survives a reset (EEPROM)."""
+    h = _harness('axis', tmp_path)
+    host = fw_host(h.path)
+    try:
+        assert host.request(m.SetHostLossStow(m.HostLossMode.SWITCH, m.Switch.SLEEP, 0, 3000.0, 1000)) == \
+            m.Ack(m.SetHostLossStow.TYPE)
+        h.cmd(f'set_angle {math.radians(80)}')
+        boots = h.status()['boot_count']
+        assert host.request(m.Reset()) == m.Ack(m.Reset.TYPE)      # not homed after the reset
+        host.close()
+        h.wait(lambda s: s['boot_count'] > boots, 5)
+        host = fw_host(h.path)
+        assert host.request(m.Ping(0)) == m.Ack(m.Ping.TYPE)       # then silent
+        st = h.wait(lambda s: s['speed'] == 0.0 and s['limit_bits'] & m.LimitBits.SLEEP and not s['hl_stowing'],
+                    20)
+        assert abs(st['angle'] - (math.pi / 2 - math.radians(0.1))) <= 2 * STEP     # the switch's edge
+        assert st['faults'] & m.FaultBits.HOST_LOSS and not st['faults'] & m.FaultBits.LIMIT and not st['homed']
+    finally:
+        host.close()
+        h.stop()
+
+
 def test_hung_firmware_reset_by_the_avr_watchdog(axis):
     """The firmware hangs with interrupts off: the AVR watchdog (0.5 s) resets it; the
     board sends BOOT and is not HOMED (position lost, fault RESET)."""
@@ -359,6 +444,38 @@ def test_absorber_thermocouples_and_switches(tmp_path):
         steady = _samples(host, ms.SwitchSample, 1.0)
         gaps = {b.board_ms - a.board_ms for a, b in zip(steady, steady[1:])}
         assert len(steady) >= 5 and gaps <= {50, 51}, gaps                # 20 Hz when steady
+    finally:
+        host.close()
+        h.stop()
+
+
+def test_absorber_counts_anemometer_pulses(tmp_path):
+    """Issue 35: the cup anemometer's square wave on the pin the host set (D8 here; simavr
+    drives the pin the firmware counts on): every falling edge counted; 20 Hz -> 0.765 *
+    20 + 0.35 = 15.65 m/s."""
+    from sslfr_drivers.sensors import anemometer
+    h = _harness('absorber', tmp_path)
+    host = _in_session(h.path)
+    try:
+        assert not _samples(host, ms.PulseSample, 0.6)                  # no input set: no samples
+        nack = host.request(ms.SetPulseInput(9))                         # D9: a MAX6675 /CS
+        assert nack == m.Nack(ms.SetPulseInput.TYPE, m.ErrorCode.OUT_OF_RANGE)
+        assert host.request(ms.SetPulseInput(8)) == m.Ack(ms.SetPulseInput.TYPE)
+        h.cmd('pulses 20')
+        s = _samples(host, ms.PulseSample, 4.2)
+        assert len(s) >= 15 and all(x.pin == 8 for x in s)
+        assert all(b.board_ms - a.board_ms == 250 for a, b in zip(s, s[1:]))            # 4 Hz
+        rate = (s[-1].count - s[1].count) / ((s[-1].board_ms - s[1].board_ms) / 1000.0)
+        assert rate == pytest.approx(20.0, abs=0.3), rate
+        counter, stats = anemometer.PulseCounter(), anemometer.WindStats()
+        readings = [stats.add(*iv) for x in s[1:] if (iv := counter.add(x.board_ms, x.count))]
+        assert readings[-1].speed == pytest.approx(15.65, abs=0.3)
+        st = h.status()
+        assert abs(st['fw_pulses'] - st['pulses_sent']) <= 1             # every edge counted
+        h.cmd('pulses 0')                                                # calm: the count stops
+        host.poll(0.6)
+        s = _samples(host, ms.PulseSample, 1.2)
+        assert len(s) >= 4 and len({x.count for x in s}) == 1
     finally:
         host.close()
         h.stop()

@@ -196,7 +196,8 @@ def test_tracker_random(seqs, start):
 REQUESTS = {m.Ping.TYPE: m.Ping, m.GetInfo.TYPE: m.GetInfo, m.GetStatus.TYPE: m.GetStatus,
             m.Reset.TYPE: m.Reset, m.GetConfig.TYPE: m.GetConfig, m.SetConfig.TYPE: m.SetConfig,
             m.MoveTo.TYPE: m.MoveTo, m.Stop.TYPE: m.Stop, m.Home.TYPE: m.Home, m.SetZero.TYPE: m.SetZero,
-            m.Hello.TYPE: m.Hello, m.Provision.TYPE: m.Provision}
+            m.Hello.TYPE: m.Hello, m.Provision.TYPE: m.Provision, m.SetHostLossStow.TYPE: m.SetHostLossStow,
+            ms.SetPulseInput.TYPE: ms.SetPulseInput}
 
 
 def test_request_registry_equal():
@@ -234,6 +235,22 @@ def test_request_payload_verdicts_equal(mtype, payload):
             assert (sw, speed, pos) == (msg.switch, msg.speed, msg.position)
 
 
+@settings(deadline=None, max_examples=300)
+@given(st.one_of(st.binary(max_size=16),
+                 st.builds(lambda *a: struct.pack('<BBifI', *a), st.integers(0, 255), st.integers(0, 255),
+                           st.integers(-2**31, 2**31 - 1), st.floats(width=32), st.integers(0, 2**32 - 1))))
+def test_host_loss_stow_payload_verdicts_equal(payload):
+    """SET_HOST_LOSS_STOW: BAD_PAYLOAD exactly where messages.decode raises; same values."""
+    try:
+        msg = m.decode(Frame(m.SetHostLossStow.TYPE, 0, payload))
+    except Exception:  # noqa: BLE001 - PayloadError
+        msg = None
+    code, mode, sw, steps, speed, delay = native().parse_host_loss(payload)
+    assert (code == 0) == (msg is not None)
+    if msg is not None:
+        assert (mode, sw, steps, speed, delay) == (msg.mode, msg.switch, msg.steps, msg.speed, msg.delay_ms)
+
+
 i32, u8, u16, u32 = (st.integers(-2**31, 2**31 - 1), st.integers(0, 255), st.integers(0, 65535),
                      st.integers(0, 2**32 - 1))
 f32 = st.floats(width=32, allow_nan=False)
@@ -257,7 +274,8 @@ def test_info_payload_equal(info):
 @settings(deadline=None)
 @given(st.one_of(st.builds(ms.ThermocoupleSample, u32, u16, u16),
                  st.builds(ms.SwitchSample, u32, st.integers(0, 31)),
-                 st.builds(ms.AlsSample, u32, u16, u8, u8)))
+                 st.builds(ms.AlsSample, u32, u16, u8, u8),
+                 st.builds(ms.PulseSample, u32, u32, u8)))
 def test_sample_payloads_equal(sample):
     assert native().pack_sample(sample) == sample.pack()
 

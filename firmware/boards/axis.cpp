@@ -15,7 +15,15 @@
  *
  * Built with -DAXIS_NO_SWITCHES (build/axis_noswitch.elf, seed 003's rig: no switch
  * wired): the switch inputs are never read (limit bits 0), HOME is not implemented
- * (UNKNOWN_TYPE) and SET_ZERO is the only reference (docs/collectors.md "Drives").
+ * (UNKNOWN_TYPE) and SET_ZERO is the only reference (docs/collectors.md "Drives"); a
+ * host-loss stow toward a switch is refused (OUT_OF_RANGE), a step target is allowed.
+ *
+ * Host-loss stow (SET_HOST_LOSS_STOW, kept in EEPROM at HL_EEPROM_ADDR): when the host
+ * stays silent for `delay_ms` after that stop, the board drives by itself to the stow
+ * target (a step position, only when HOMED; or toward a switch until it closes), with the
+ * same switch and step-range checks as any move, and latches fault HOST_LOSS (STATUS flag
+ * HOST_LOSS_STOWING while it drives). A host that comes back sees it in STATUS; the
+ * board goes on to the stow until the host commands (MOVE_TO, HOME or STOP).
  *
  * Pins (Arduino Pro Mini): D3 STEP, D4 DIR, D5 /ENABLE, D6 /DRIVER_FAULT (input,
  * pull-up), D7 LOW switch, D8 HIGH switch, D9 SLEEP switch (inputs, pull-ups, switch to
@@ -25,7 +33,9 @@
 #include "axis_state.h"
 
 #include <SPI.h>
+#include <avr/eeprom.h>
 #include <math.h>
+#include <string.h>
 #include <util/atomic.h>
 
 volatile axis_state_t ax __attribute__((used));
@@ -46,6 +56,9 @@ static uint8_t g_switch_nc;
 static uint8_t g_dir_invert;
 static volatile uint8_t g_profile_busy;
 static uint16_t g_sensor_raw;      /* last AS5048A angle, 14 bits */
+static msg_host_loss_t g_hl;       /* the host-loss stow in force (EEPROM) */
+static uint8_t g_hl_armed;         /* the watchdog stopped the motor: waiting for the delay */
+static uint32_t g_hl_since;        /* [ms] when it did */
 static uint8_t g_sensor_ok;
 
 /* closed switches as LIM_* bits, from the pins (inline: used in the step ISR) */
@@ -91,6 +104,11 @@ static inline uint8_t check_switches(int8_t d)
 {
     uint8_t sw = read_switches();
     ax.limit_bits = sw;
+    if (ax.seek_switch != 0xFF && (sw & (1u << ax.seek_switch))) {
+        ax.goal = ax.pos;
+        ax.events |= AX_EV_SEEK;
+        return 1;
+    }
     if (ax.homing && (sw & (1u << ax.home_switch))) {
         ax.pos = ax.home_position;
         ax.goal = ax.home_position;
@@ -147,6 +165,7 @@ static void kick_stepping(void)
 static void stop_motion(float decel)
 {
     ax.homing = 0;
+    ax.seek_switch = 0xFF;
     ax.decel = decel > g_accel ? decel : 0.0f;
     float v = ax.v;
     float d = v * v / (2.0f * (decel > g_accel ? decel : g_accel));
@@ -169,8 +188,11 @@ static void profile_tick(void)
     }
     if (ev & AX_EV_LIMIT) {
         ax.homing = 0;
+        ax.seek_switch = 0xFF;
         ax.faults |= FAULT_LIMIT;
     }
+    if (ev & AX_EV_SEEK)
+        ax.seek_switch = 0xFF;
     if (ev) {
         int32_t p;
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { p = ax.pos; }
@@ -266,6 +288,107 @@ static float sensor_angle(void)
     return (g_config.flags & CFG_SENSOR_INVERT) ? -a : a;
 }
 
+/* ---- host-loss stow --------------------------------------------------------------- */
+static uint8_t hl_valid(const msg_host_loss_t *h)
+{
+    if (h->mode == HL_OFF)
+        return 1;
+    if (h->mode > HL_SWITCH || !(h->speed != 0.0f) || h->delay_ms == 0 || h->delay_ms > HL_MAX_DELAY_MS)
+        return 0;
+    if (h->mode == HL_POSITION)
+        return h->steps >= g_config.min_steps && h->steps <= g_config.max_steps;
+#ifdef AXIS_NO_SWITCHES
+    return 0;                       /* no switch to stow toward */
+#else
+    return h->sw <= 2;
+#endif
+}
+
+/* The record in EEPROM: HL_SIZE payload bytes + CRC-16; blank, damaged or invalid for
+ * this configuration: off. */
+static void hl_load(void)
+{
+    uint8_t raw[HL_SIZE + 2];
+    eeprom_read_block(raw, (const void *)HL_EEPROM_ADDR, sizeof raw);
+    proto_frame_t f;
+    f.len = HL_SIZE;
+    memcpy(f.payload, raw, HL_SIZE);
+    g_hl.mode = HL_OFF;
+    msg_host_loss_t h;
+    if (proto_crc16(raw, HL_SIZE, 0xFFFFu) == proto_get_u16(raw + HL_SIZE)
+            && !msg_parse_host_loss(&f, &h) && hl_valid(&h))
+        g_hl = h;
+}
+
+static uint8_t handle_host_loss(const proto_frame_t *req, proto_frame_t *ans)
+{
+    msg_host_loss_t h;
+    if (msg_parse_host_loss(req, &h))
+        return session_nack(req, ans, ERR_BAD_PAYLOAD);
+    if (!hl_valid(&h))
+        return session_nack(req, ans, ERR_OUT_OF_RANGE);
+    uint8_t raw[HL_SIZE + 2];
+    memcpy(raw, req->payload, HL_SIZE);
+    proto_put_u16(raw + HL_SIZE, proto_crc16(raw, HL_SIZE, 0xFFFFu));
+    eeprom_update_block(raw, (void *)HL_EEPROM_ADDR, sizeof raw);     /* writes changed bytes only */
+    uint8_t back[HL_SIZE + 2];
+    eeprom_read_block(back, (const void *)HL_EEPROM_ADDR, sizeof back);
+    if (memcmp(raw, back, sizeof raw))
+        return session_nack(req, ans, ERR_INTERNAL);
+    g_hl = h;
+    return session_ack(req, ans);
+}
+
+/* Main loop: start the stow once the host has stayed silent for the delay after the
+ * watchdog stop; a new request from the host (the watchdog re-armed) cancels the wait. */
+static void hl_poll(uint32_t now)
+{
+    if (!g_hl_armed)
+        return;
+    if (!g_session.watchdog_tripped || g_hl.mode == HL_OFF) {
+        g_hl_armed = 0;
+        return;
+    }
+    if ((uint32_t)(now - g_hl_since) < g_hl.delay_ms)
+        return;
+    g_hl_armed = 0;
+    if (!(PIND & FAULT_BIT))
+        return;                                    /* driver fault: nothing moves */
+    float s = fabsf(g_hl.speed);
+    s = s < g_config.max_speed ? s : g_config.max_speed;
+    int32_t p;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { p = ax.pos; }
+    if (g_hl.mode == HL_POSITION) {
+        if (!ax.homed)
+            return;                                /* position unknown: stay */
+        int8_t d = g_hl.steps > p ? 1 : (g_hl.steps < p ? -1 : 0);
+        if (blocked(read_switches(), d))
+            return;
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+            ax.target = g_hl.steps;
+            ax.decel = 0.0f;
+            ax.cmd_speed = s;
+            ax.faults |= FAULT_HOST_LOSS;
+            ax.hl_stowing = 1;
+        }
+    } else {
+        if (read_switches() & (1u << g_hl.sw)) {
+            ax.faults |= FAULT_HOST_LOSS;           /* already there */
+            return;
+        }
+        if (blocked(read_switches(), g_hl.speed > 0 ? 1 : -1))
+            return;
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+            ax.seek_switch = g_hl.sw;
+            ax.decel = 0.0f;
+            ax.cmd_speed = s;
+            ax.target = ax.pf_int + (g_hl.speed > 0 ? 1000000000L : -1000000000L);
+            ax.faults |= FAULT_HOST_LOSS;
+            ax.hl_stowing = 1;
+        }
+    }
+}
+
 static void axis_setup(void)
 {
     g_accel = g_config.accel;
@@ -273,6 +396,8 @@ static void axis_setup(void)
     g_dir_invert = (g_config.flags & CFG_INVERT_DIR) ? 1 : 0;
     ax.faults = FAULT_RESET;
     ax.cmd_speed = g_config.max_speed;
+    ax.seek_switch = 0xFF;
+    hl_load();
     DDRD |= STEP_BIT | DIR_BIT | EN_BIT;
     PORTD &= (uint8_t)~(STEP_BIT | DIR_BIT | EN_BIT);   /* driver enabled, holding */
     DDRD &= (uint8_t)~(FAULT_BIT | LOW_BIT);
@@ -310,9 +435,13 @@ static void axis_poll(uint32_t now)
         last_sensor = now;
         sensor_read();
     }
+    hl_poll(now);
     if (!moving()) {
         uint8_t sw = read_switches();
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { ax.limit_bits = sw; }
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+            ax.limit_bits = sw;
+            ax.hl_stowing = 0;
+        }
     }
 }
 
@@ -337,8 +466,10 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         ax.target = m.steps;
         ax.decel = 0.0f;
+        ax.seek_switch = 0xFF;
+        ax.hl_stowing = 0;
         ax.cmd_speed = m.speed < g_config.max_speed ? m.speed : g_config.max_speed;
-        ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT);
+        ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT | FAULT_HOST_LOSS);
     }
     return session_ack(req, ans);
 }
@@ -361,7 +492,9 @@ static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
         ax.decel = 0.0f;
         ax.cmd_speed = s < g_config.max_speed ? s : g_config.max_speed;
         ax.target = ax.pf_int + (m.speed > 0 ? 1000000000L : -1000000000L);
-        ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT);
+        ax.seek_switch = 0xFF;
+        ax.hl_stowing = 0;
+        ax.faults &= (uint16_t)~(FAULT_WATCHDOG | FAULT_LIMIT | FAULT_HOST_LOSS);
         if (read_switches() & (1u << m.sw)) {      /* already on the switch */
             ax.pos = m.position;
             ax.goal = m.position;
@@ -389,6 +522,7 @@ static uint8_t handle_status(const proto_frame_t *req, proto_frame_t *ans)
     if (ax.homed || (ev & AX_EV_HOME)) s.flags |= ST_HOMED;
     if (homing) s.flags |= ST_HOMING;
     if (g_config.flags & CFG_HAS_SENSOR) s.flags |= ST_HAS_SENSOR;
+    if (ax.hl_stowing) s.flags |= ST_HOST_LOSS_STOWING;
     s.limit_bits = read_switches();
     s.fault_bits = ax.faults;
     if (ev & AX_EV_LIMIT) s.fault_bits |= FAULT_LIMIT;
@@ -412,8 +546,13 @@ static uint8_t axis_handle(const proto_frame_t *req, proto_frame_t *ans)
     case MSG_STOP:
         if (req->len != 0)
             return session_nack(req, ans, ERR_BAD_PAYLOAD);
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { stop_motion(0.0f); }
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+            stop_motion(0.0f);
+            ax.hl_stowing = 0;
+        }
         return session_ack(req, ans);
+    case MSG_SET_HOST_LOSS_STOW:
+        return handle_host_loss(req, ans);
 #ifndef AXIS_NO_SWITCHES
     case MSG_HOME:
         return handle_home(req, ans);
@@ -444,7 +583,10 @@ static void axis_host_silent(void)
         if (was_moving)
             ax.faults |= FAULT_WATCHDOG;
         stop_motion(fabsf(ax.v) / AXIS_WATCHDOG_STOP_S);
+        ax.hl_stowing = 0;
     }
+    g_hl_armed = g_hl.mode != HL_OFF;
+    g_hl_since = millis();
 }
 
 static uint8_t axis_busy(void) { return moving(); }

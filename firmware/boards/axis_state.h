@@ -23,6 +23,8 @@ typedef struct __attribute__((packed)) {
     uint8_t limit_bits;     /* LIM_* closed switches (last sample) */
     uint32_t steps_total;   /* step pulses since boot */
     float decel;            /* deceleration of the current stop [steps/s^2] (0: accel) */
+    uint8_t seek_switch;    /* host-loss stow toward a switch: its index (0xFF none) */
+    uint8_t hl_stowing;     /* driving to the host-loss stow by itself */
 } axis_state_t;
 
 /* The host-silence watchdog stops within this time [s], decelerating faster than the
@@ -31,5 +33,6 @@ typedef struct __attribute__((packed)) {
 
 #define AX_EV_LIMIT 0x01    /* a switch in the direction of travel stopped the motor */
 #define AX_EV_HOME 0x02     /* the home switch closed: counter set, homed */
+#define AX_EV_SEEK 0x04     /* the switch a host-loss stow drives to closed */
 
 #endif

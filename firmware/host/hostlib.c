@@ -131,6 +131,18 @@ uint8_t hl_parse_home(const uint8_t *p, uint8_t len, uint8_t *sw, float *speed, 
     return r;
 }
 
+uint8_t hl_parse_host_loss(const uint8_t *p, uint8_t len, uint8_t *mode, uint8_t *sw, int32_t *steps,
+                           float *speed, uint32_t *delay_ms)
+{
+    proto_frame_t f;
+    msg_host_loss_t m;
+    memset(&m, 0, sizeof m);
+    frame_of(&f, MSG_SET_HOST_LOSS_STOW, p, len);
+    uint8_t r = msg_parse_host_loss(&f, &m);
+    *mode = m.mode; *sw = m.sw; *steps = m.steps; *speed = m.speed; *delay_ms = m.delay_ms;
+    return r;
+}
+
 uint8_t hl_msg_status(uint8_t *out, int32_t position, int32_t target, float speed, uint8_t flags,
                       uint8_t limit_bits, uint16_t fault_bits, float sensor_angle, uint32_t uptime)
 {
@@ -148,6 +160,7 @@ uint8_t hl_msg_samples(uint8_t *out, uint8_t which, uint32_t ms, uint16_t a, uin
     switch (which) {
     case 0: return msg_thermocouple(out, ms, a, b);
     case 1: return msg_switches(out, ms, c);
+    case 3: return msg_pulses(out, ms, ((uint32_t)b << 16) | a, c);
     default: return msg_als(out, ms, a, c, d);
     }
 }

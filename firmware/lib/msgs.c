@@ -15,6 +15,8 @@ int8_t msg_request_size(uint8_t type)
     case MSG_MOVE_TO: return 8;
     case MSG_HOME: return 9;
     case MSG_SET_ZERO: return 4;
+    case MSG_SET_HOST_LOSS_STOW: return HL_SIZE;
+    case MSG_SET_PULSE_INPUT: return 1;
     default: return -1;
     }
 }
@@ -46,6 +48,18 @@ uint8_t msg_parse_i32(const proto_frame_t *f, int32_t *v)
         return ERR_BAD_PAYLOAD;
     *v = (int32_t)proto_get_u32(f->payload);
     return 0;
+}
+
+uint8_t msg_parse_host_loss(const proto_frame_t *f, msg_host_loss_t *m)
+{
+    if (f->len != HL_SIZE)
+        return ERR_BAD_PAYLOAD;
+    m->mode = f->payload[0];
+    m->sw = f->payload[1];
+    m->steps = (int32_t)proto_get_u32(f->payload + 2);
+    m->speed = proto_get_f32(f->payload + 6);
+    m->delay_ms = proto_get_u32(f->payload + 10);
+    return finite_f(m->speed) ? 0 : ERR_BAD_PAYLOAD;
 }
 
 uint8_t msg_ack(uint8_t *p, uint8_t request_type) { p[0] = request_type; return 1; }
@@ -105,6 +119,14 @@ uint8_t msg_als(uint8_t *p, uint32_t board_ms, uint16_t count, uint8_t gain_code
     p[6] = gain_code;
     p[7] = it_code;
     return 8;
+}
+
+uint8_t msg_pulses(uint8_t *p, uint32_t board_ms, uint32_t count, uint8_t pin)
+{
+    proto_put_u32(p, board_ms);
+    proto_put_u32(p + 4, count);
+    p[8] = pin;
+    return 9;
 }
 
 void config_defaults(board_config_t *c, uint8_t kind)

@@ -25,6 +25,8 @@ extern "C" {
 #define MSG_STOP 0x11
 #define MSG_HOME 0x12        /* u8 switch, f32 speed [steps/s] (sign = direction), i32 position */
 #define MSG_SET_ZERO 0x13    /* i32 position */
+#define MSG_SET_HOST_LOSS_STOW 0x14  /* u8 mode, u8 switch, i32 steps, f32 speed, u32 delay_ms -> ACK (EEPROM) */
+#define MSG_SET_PULSE_INPUT 0x40     /* u8 pin (0xFF off) -> ACK; sensor boards (absorber) */
 /* board -> host */
 #define MSG_ACK 0x80         /* u8 request type */
 #define MSG_NACK 0x81        /* u8 request type, u8 error code */
@@ -37,6 +39,7 @@ extern "C" {
 #define MSG_THERMOCOUPLE_SAMPLE 0xC1
 #define MSG_SWITCH_SAMPLE 0xC2
 #define MSG_ALS_SAMPLE 0xC3
+#define MSG_PULSE_SAMPLE 0xC4        /* u32 board_ms, u32 count, u8 pin */
 
 /* NACK error codes */
 #define ERR_UNKNOWN_TYPE 1
@@ -65,6 +68,7 @@ extern "C" {
 #define ST_HOMED 0x02
 #define ST_HOMING 0x04
 #define ST_HAS_SENSOR 0x08
+#define ST_HOST_LOSS_STOWING 0x10   /* driving to the host-loss stow by itself */
 #define LIM_LOW 0x01
 #define LIM_HIGH 0x02
 #define LIM_SLEEP 0x04
@@ -74,6 +78,7 @@ extern "C" {
 #define FAULT_SENSOR 0x0008
 #define FAULT_DRIVER 0x0010
 #define FAULT_RESET 0x0020
+#define FAULT_HOST_LOSS 0x0040      /* stowed by itself after host loss (cleared by MOVE_TO/HOME) */
 
 #define INFO_SIZE 25
 #define STATUS_SIZE 24
@@ -83,6 +88,15 @@ extern "C" {
  * exactly where messages.decode raises PayloadError) */
 typedef struct { int32_t steps; float speed; } msg_move_to_t;
 typedef struct { uint8_t sw; float speed; int32_t position; } msg_home_t;
+/* host-loss stow (docs/protocol.md): mode HL_*, switch index, target [steps], speed
+ * [steps/s] (sign = direction for HL_SWITCH), delay after the watchdog stop [ms] */
+typedef struct { uint8_t mode, sw; int32_t steps; float speed; uint32_t delay_ms; } msg_host_loss_t;
+#define HL_OFF 0
+#define HL_POSITION 1
+#define HL_SWITCH 2
+#define HL_SIZE 14
+#define HL_MAX_DELAY_MS 86400000UL
+#define PULSE_PIN_OFF 0xFF
 
 /* Expected payload size of a request type this protocol defines, -1 if the type is not
  * a v1 request (-2: variable). */
@@ -91,6 +105,7 @@ int8_t msg_request_size(uint8_t type);
 uint8_t msg_parse_move_to(const proto_frame_t *f, msg_move_to_t *m);
 uint8_t msg_parse_home(const proto_frame_t *f, msg_home_t *m);
 uint8_t msg_parse_i32(const proto_frame_t *f, int32_t *v);
+uint8_t msg_parse_host_loss(const proto_frame_t *f, msg_host_loss_t *m);
 
 /* ---- answer payloads: fill payload + len of an outgoing frame, return len */
 uint8_t msg_ack(uint8_t *p, uint8_t request_type);
@@ -111,6 +126,7 @@ uint8_t msg_status(uint8_t *p, const msg_status_t *s);
 uint8_t msg_thermocouple(uint8_t *p, uint32_t board_ms, uint16_t inlet, uint16_t outlet);
 uint8_t msg_switches(uint8_t *p, uint32_t board_ms, uint8_t bits);
 uint8_t msg_als(uint8_t *p, uint32_t board_ms, uint16_t count, uint8_t gain_code, uint8_t it_code);
+uint8_t msg_pulses(uint8_t *p, uint32_t board_ms, uint32_t count, uint8_t pin);
 
 /* ---- the board configuration record (EEPROM address 0, GET_CONFIG / SET_CONFIG
  * payload; docs/firmware.md "EEPROM configuration"). Little-endian, packed:
@@ -148,6 +164,8 @@ typedef struct {
 #define KEY_EEPROM_ADDR 64
 #define KEY_EEPROM_SIZE 18
 #define BOOT_EEPROM_ADDR 96
+/* the axis board's host-loss stow: HL_SIZE bytes (the SET_HOST_LOSS_STOW payload) + CRC-16 */
+#define HL_EEPROM_ADDR 112
 
 void config_defaults(board_config_t *c, uint8_t kind);
 void config_pack(const board_config_t *c, uint8_t *p);            /* CONFIG_SIZE bytes */

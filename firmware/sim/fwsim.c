@@ -34,7 +34,7 @@
  *   mark                           remember "now" for latency figures (first step after)
  *   quit
  *   model commands (models.c): stall 0|1, set_angle RAD, driver_fault 0|1, temps W W,
- *                              switches B..., lux L, nmea HEX
+ *                              switches B..., pulses HZ [PIN], lux L, nmea HEX
  * Events: "FWSIM pty PATH" when a pty is (re)created, "FWSIM reset N" after every reset.
  */
 #define _GNU_SOURCE
@@ -91,7 +91,7 @@ static char cmdbuf[65536];
 static size_t cmd_len;
 static int running = 1;
 static uint64_t last_rx_cycle, mark_cycle;
-static uint32_t sym_ax, sym_session, sym_stop;
+static uint32_t sym_ax, sym_session, sym_stop, sym_pulses, sym_pulse_pin;
 enum { PENDING_NONE, PENDING_RESET, PENDING_HANG };
 static int pending;                        /* CPU state changes asked for by a command */
 
@@ -318,6 +318,12 @@ static void status_json(void)
         printf(",\"goal\":%d,\"pf\":%.3f,\"counter\":%d,\"target\":%d,\"speed\":%.3f,\"homed\":%s,\"homing\":%s,\"faults\":%u,"
                "\"steps_total\":%u", a.goal, a.pf_int + a.pf_frac, a.pos, a.homing ? a.pos : a.target, a.v, a.homed ? "true" : "false",
                a.homing ? "true" : "false", a.faults, a.steps_total);
+        printf(",\"hl_stowing\":%s,\"seek_switch\":%u", a.hl_stowing ? "true" : "false", a.seek_switch);
+    }
+    if (sym_pulses) {
+        uint32_t n;
+        ram_read(sym_pulses, 0, &n, sizeof n);
+        printf(",\"fw_pulses\":%u", n);
     }
     model_status_json(model, stdout);
     printf("}\n");
@@ -538,6 +544,8 @@ int main(int argc, char **argv)
         sym_ax = symbol(&f, "ax");
         sym_session = symbol(&f, "g_session");
         sym_stop = symbol(&f, "_exit");        /* cli; rjmp . */
+        sym_pulses = symbol(&f, "g_pulses");
+        sym_pulse_pin = symbol(&f, "g_pulse_pin");
     }
     if (symbols && !elf) {                 /* the application's symbols, its code not loaded */
         if (elf_read_firmware(symbols, &f) != 0) {
@@ -582,6 +590,7 @@ int main(int argc, char **argv)
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_hook, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), xoff_hook, NULL);
     model = model_create(avr, boot && !elf ? B_BOOTLOADER : kind, &mech);
+    model_set_pulse_pin_addr(model, sym_pulse_pin);
     fcntl(0, F_SETFL, fcntl(0, F_GETFL) | O_NONBLOCK);
     if (external_fd)
         fcntl(uart_fd, F_SETFL, fcntl(uart_fd, F_GETFL) | O_NONBLOCK);

@@ -36,6 +36,9 @@ model_t *model_create(avr_t *avr, enum board_kind kind, mech_t *mech);
 void model_after_reset(model_t *m);              /* re-apply pin levels, timers */
 int model_command(model_t *m, const char *cmd, char *reply, size_t n);  /* 0 = handled */
 void model_status_json(model_t *m, FILE *out);   /* ,"key":value... */
+/* RAM address of the firmware's pulse-input pin (absorber g_pulse_pin; 0: unknown): a
+ * "pulses HZ" command without PIN drives the pin the firmware counts on */
+void model_set_pulse_pin_addr(model_t *m, uint32_t addr);
 uint64_t model_total_cycles(avr_t *avr);         /* cycles since the harness started */
 
 #endif

@@ -60,6 +60,13 @@ struct model {
     uint16_t spi_answer;   /* AS5048A: answer shifted out */
     uint16_t tc_words[2];  /* words the host model gives (inlet, outlet) */
     uint32_t spi_reads;
+    /* pulse input (absorber: cup anemometer on D7, D8 or D11) */
+    char pulse_port;       /* 0: none */
+    int pulse_bit, pulse_level;
+    double pulse_hz;       /* [Hz] 0 = at rest */
+    uint32_t pulse_pin_addr;   /* firmware RAM of its pulse pin (0: unknown) */
+    int pulse_follow;      /* drive the pin the firmware counts on */
+    uint64_t pulses_sent;  /* falling edges driven */
     /* switches (absorber) */
     uint8_t sw_seq[16];
     int sw_n, sw_i;
@@ -275,6 +282,46 @@ static avr_cycle_count_t sw_timer(avr_t *avr, avr_cycle_count_t when, void *para
     return m->sw_i < m->sw_n ? when + F_CPU_HZ / 500 : 0;     /* 2 ms apart */
 }
 
+/* ---- pulse input (cup anemometer) ------------------------------------------------------ */
+/* A square wave at pulse_hz on the pin: each period one falling edge (a reed contact
+ * closing to GND once per turn of the cups). */
+static int pulse_pin_port(int pin, char *port, int *bit)
+{
+    if (pin == 7) { *port = 'D'; *bit = 7; return 1; }
+    if (pin == 8) { *port = 'B'; *bit = 0; return 1; }
+    if (pin == 11) { *port = 'B'; *bit = 3; return 1; }
+    return 0;
+}
+
+void model_set_pulse_pin_addr(model_t *m, uint32_t addr) { m->pulse_pin_addr = addr; }
+
+static avr_cycle_count_t pulse_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    model_t *m = (model_t *)param;
+    if (!(m->pulse_hz > 0))
+        return 0;
+    if (m->pulse_follow && m->pulse_pin_addr) {
+        char port;
+        int bit;
+        int pin = avr->data[m->pulse_pin_addr & 0xFFFF];
+        if (pulse_pin_port(pin, &port, &bit) && (port != m->pulse_port || bit != m->pulse_bit)) {
+            if (m->pulse_port)
+                pin_drive(m, m->pulse_port, m->pulse_bit, 1);
+            m->pulse_port = port;
+            m->pulse_bit = bit;
+            m->pulse_level = 1;
+        }
+    }
+    avr_cycle_count_t half = (avr_cycle_count_t)(F_CPU_HZ / (2.0 * m->pulse_hz));
+    if (!m->pulse_port)
+        return when + (half ? half : 1);           /* no pin yet: keep time */
+    m->pulse_level = !m->pulse_level;
+    if (!m->pulse_level)
+        m->pulses_sent++;
+    pin_drive(m, m->pulse_port, m->pulse_bit, m->pulse_level);
+    return when + (half ? half : 1);
+}
+
 /* ---- VEML7700 -------------------------------------------------------------------------- */
 static const double VEML_GAIN[4] = {1.0, 2.0, 0.125, 0.25};
 
@@ -451,6 +498,8 @@ void model_after_reset(model_t *m)
         avr_cycle_timer_register(m->avr, 1, sw_timer, m);
     if (m->kind == B_ACTUATOR)
         avr_cycle_timer_register(m->avr, F_CPU_HZ / 1000, act_timer, m);
+    if (m->kind == B_ABSORBER && m->pulse_hz > 0)
+        avr_cycle_timer_register(m->avr, 1, pulse_timer, m);
 }
 
 static int hexval(int c)
@@ -511,6 +560,35 @@ int model_command(model_t *m, const char *line, char *reply, size_t n)
             avr_cycle_timer_register(m->avr, F_CPU_HZ / 500, sw_timer, m);
         return 0;
     }
+    if (!strcmp(word, "pulses") && m->kind == B_ABSORBER) {
+        /* pulses HZ [PIN]: a square wave of HZ on Arduino pin PIN (7, 8 or 11); without
+         * PIN on the pin the firmware counts on (SET_PULSE_INPUT) */
+        double hz;
+        int pin = -1, k = sscanf(args, "%lf %d", &hz, &pin);
+        char port = 0;
+        int bit = 0;
+        if (k < 1 || !(hz >= 0 && hz <= 2000) || (k == 2 && !pulse_pin_port(pin, &port, &bit))) {
+            snprintf(reply, n, "pulses: HZ (0..2000) [PIN (7, 8 or 11)]");
+            return 1;
+        }
+        avr_cycle_timer_cancel(m->avr, pulse_timer, m);
+        m->pulse_follow = k == 1;
+        if (k == 2 && (port != m->pulse_port || bit != m->pulse_bit)) {
+            if (m->pulse_port)
+                pin_drive(m, m->pulse_port, m->pulse_bit, 1);
+            m->pulse_port = port;
+            m->pulse_bit = bit;
+            m->pulse_level = 0;
+        }
+        if (m->pulse_port && !m->pulse_level) {
+            m->pulse_level = 1;
+            pin_drive(m, m->pulse_port, m->pulse_bit, 1);
+        }
+        m->pulse_hz = hz;
+        if (hz > 0)
+            avr_cycle_timer_register(m->avr, (avr_cycle_count_t)(F_CPU_HZ / (2.0 * hz)) + 1, pulse_timer, m);
+        return 0;
+    }
     if (!strcmp(word, "lux") && m->kind == B_IRRADIANCE) {
         m->lux = atof(args);
         return 0;
@@ -540,8 +618,9 @@ void model_status_json(model_t *m, FILE *out)
                 "\"last_step_s\":%.6f", k->angle, k->stalled ? "true" : "false",
                 (long long)k->steps, m->limit_bits, k->last_step_cycle / (double)F_CPU_HZ);
     } else if (m->kind == B_ABSORBER) {
-        fprintf(out, ",\"switch_bits\":%u,\"words\":[%u,%u],\"spi_reads\":%u", m->sw_bits,
-                m->tc_words[0], m->tc_words[1], m->spi_reads);
+        fprintf(out, ",\"switch_bits\":%u,\"words\":[%u,%u],\"spi_reads\":%u,\"pulse_hz\":%.6f,"
+                "\"pulses_sent\":%llu", m->sw_bits, m->tc_words[0], m->tc_words[1], m->spi_reads,
+                m->pulse_hz, (unsigned long long)m->pulses_sent);
     } else if (m->kind == B_IRRADIANCE) {
         fprintf(out, ",\"lux\":%.3f,\"veml_conf\":%u,\"twi_transactions\":%u", m->lux, m->veml_conf,
                 m->twi_transactions);

@@ -484,7 +484,9 @@ def collector_problems(doc: Mapping[str, Any], namespace: str, where: str) -> li
     """Problems of the collector description a site config names (``collector.description``
     for the planner, relative to the config's directory): every problem of the file
     (:func:`sslfr_planner.description.load`, each naming the file and key) and every
-    planner ``collector.*`` value of the config that contradicts it."""
+    planner ``collector.*`` value of the config that contradicts it, and wind supervision
+    (``absorber_board`` ``anemometer_pin`` >= 0 or ``safety`` ``wind.enabled``) on a
+    collector whose description lists no anemometer."""
     from sslfr_planner import description as desc_mod
     name = node_params(doc, 'planner', namespace).get(DESCRIPTION_KEY)
     if not name or not isinstance(name, str):
@@ -504,6 +506,14 @@ def collector_problems(doc: Mapping[str, Any], namespace: str, where: str) -> li
         if not same:
             errors.append(f'{where}: planner: {key}: {value!r} contradicts the collector description '
                           f'{path}: {expected!r}')
+    if not any(s.kind == 'anemometer' for s in desc.sensors.values()):
+        pin = node_params(doc, 'absorber_board', namespace).get('anemometer_pin', -1)
+        if isinstance(pin, int) and not isinstance(pin, bool) and pin >= 0:
+            errors.append(f'{where}: absorber_board: anemometer_pin: {pin} but the collector description '
+                          f'{path} lists no anemometer (sensors: kind anemometer)')
+        if node_params(doc, 'safety', namespace).get('wind.enabled') is True:
+            errors.append(f'{where}: safety: wind.enabled: true but the collector description {path} '
+                          f'lists no anemometer (sensors: kind anemometer)')
     return errors
 
 

@@ -45,6 +45,15 @@ JOINT_RANGE: dict[str, tuple[float, float]] = {
 STOW_POSITION: dict[str, float] = {MIRRORS: math.pi / 2, MOBILE_STRUCTURE: 0.0,
                                    SECONDARY_REFLECTOR: 0.0}
 
+#: Wind stow position per joint [rad] (the default of the planner's ``stow.wind_pose``
+#: and of each driver's ``wind_stow_position``): every surface face-up. A flat mirror
+#: row edge-on to a horizontal wind (beta_0 = 0) shows it the least area and the least
+#: overturning moment about its axis; the sleeping position (+pi/2, vertical mirrors)
+#: is seed 000's protection against dust at night and turns the rows broadside to the
+#: wind. The longitudinal axes are horizontal at their rest position (0).
+WIND_STOW_POSITION: dict[str, float] = {'mirrors': 0.0, 'mobile_structure': 0.0,
+                                        'secondary_reflector': 0.0}
+
 
 def driver_node(joint: str) -> str:
     """Default node name of the axis driver of ``joint`` (``mirrors_driver``)."""
@@ -195,6 +204,7 @@ JOINT_STATES = Topic('joint_states', 'sensor_msgs/msg/JointState')
 AXIS_STATUS = Topic('axes/{axis}/status', 'sslfr_interfaces/msg/AxisStatus')
 ABSORBER_TEMPERATURE = Topic('absorber/{thermocouple}_temperature', 'sensor_msgs/msg/Temperature')
 LIMIT_SWITCHES = Topic('limit_switches', 'sslfr_interfaces/msg/LimitSwitches')
+WIND = Topic('wind', 'sslfr_interfaces/msg/Wind')
 IRRADIANCE_ILLUMINANCE = Topic('irradiance/illuminance', 'sensor_msgs/msg/Illuminance')
 IRRADIANCE_BEAM = Topic('irradiance/beam', 'sslfr_interfaces/msg/Irradiance')
 SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
@@ -206,7 +216,7 @@ ROSOUT = Topic('/rosout', 'rcl_interfaces/msg/Log', Qos.LOG)
 
 TOPICS: tuple[Topic, ...] = (
     GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
-    AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
+    AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, WIND, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
     SAFETY_STATE, DIAGNOSTICS, CLOCK, ROSOUT)
 
 #: Each family's members: the axes and the thermocouples.

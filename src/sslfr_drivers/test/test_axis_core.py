@@ -389,3 +389,22 @@ def test_time_rate_ignores_a_step_right_after_a_clock_jump():
     assert 80 < r.rate < 100
     r.update(t_ros + 4.5, t_st + 0.002)   # an event-woken step 2 ms later, after a jump
     assert 80 < r.rate < 100, r.rate
+
+
+def test_a_wind_stow_goes_to_the_wind_pose_a_silent_supervisor_to_the_stow_position():
+    """Issue 35: safety's wind_stow -> wind_stow_position (face-up); any other stow, and
+    the fail-safe stow of a silent supervisor, -> stow_position (sleeping)."""
+    import dataclasses
+    sup = _sup()
+    sup.cfg = dataclasses.replace(sup.cfg, wind_stow_position=0.0)
+    cal = Calibration()
+    sup.safety.receive(1.0, 2, True, [], 2, ['wind gust ...'], wind_stow=True)
+    act = sup.tick(150.0, 1.1, _board(steps=cal.steps(0.4), sensor=0.4), True)
+    assert act.kind == 'move' and act.steps == cal.steps(0.0) and sup.state == 'stowing'
+    sup.safety.receive(1.2, 2, True, [], 3, ['wind ...', 'outlet over-temperature ...'], wind_stow=False)
+    act = sup.tick(150.1, 1.3, _board(steps=cal.steps(0.3), sensor=0.3), True)
+    assert act.kind == 'move' and act.steps == cal.steps(math.pi / 2)
+    sup.safety.receive(1.4, 2, True, [], 4, ['wind gust ...'], wind_stow=True)
+    sup.safety.silent_stow_after = 0.5
+    act = sup.tick(150.2, 3.5, _board(steps=cal.steps(0.5), moving=True, sensor=0.5), True)   # 2.1 s silent
+    assert act.kind == 'move' and act.steps == cal.steps(math.pi / 2)

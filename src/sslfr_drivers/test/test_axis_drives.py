@@ -23,6 +23,8 @@ T0 = 1_750_000_000.0
 
 
 def _params(**kw):
+    """The driver's parameters, validated (callers give host_loss_stow_position with
+    stow_position: its default, seed 000's sleeping angle, lies outside narrower limits)."""
     v = {**params_for('mirrors').defaults(), **kw}
     assert PARAMS.validate(v) == [], PARAMS.validate(v)
     return v
@@ -54,7 +56,7 @@ def test_actuator_drive_tracks_a_trajectory_within_the_deadband():
     desc = shipped_description('florianopolis_lepten')
     mv = desc.movement('mirrors')
     p = _params(drive=mv.drive, deadband=mv.deadband, lower_limit=mv.range[0], upper_limit=mv.range[1],
-                stow_position=mv.stow, home_position=mv.stow, max_speed=0.03)
+                stow_position=mv.stow, host_loss_stow_position=mv.stow, home_position=mv.stow, max_speed=0.03)
     cfg, stall = tuning_from(p)
     sup = AxisSupervisor(cfg, stall=stall)
     sup.safety.receive(0.0, 0, False, [], 1)
@@ -89,7 +91,7 @@ def test_actuator_stall_is_a_driver_fault():
     desc = shipped_description('florianopolis_lepten')
     mv = desc.movement('mirrors')
     p = _params(drive=mv.drive, deadband=mv.deadband, lower_limit=mv.range[0], upper_limit=mv.range[1],
-                stow_position=mv.stow, home_position=mv.stow)
+                stow_position=mv.stow, host_loss_stow_position=mv.stow, home_position=mv.stow)
     cfg, stall = tuning_from(p)
     sup = AxisSupervisor(cfg, stall=stall)
     sup.safety.receive(0.0, 0, False, [], 1)
@@ -109,7 +111,7 @@ def test_switchless_drive_waits_for_the_operator_then_references_at_home_positio
     # the driver's mechanical range is still the contract's seed-000 mirrors range
     # (-45..90 deg): the soft limits are the description's range within it
     p = _params(drive=mv.drive, step_angle=mv.step, lower_limit=max(mv.range[0], R(-45.0)), upper_limit=mv.range[1],
-                stow_position=mv.stow, home_position=mv.reference, use_sensor=False, auto_home=False,
+                stow_position=mv.stow, host_loss_stow_position=mv.stow, home_position=mv.reference, use_sensor=False, auto_home=False,
                 max_speed=0.2)
     cfg, stall = tuning_from(p)
     sup = AxisSupervisor(cfg, stall=stall)

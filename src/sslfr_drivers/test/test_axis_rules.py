@@ -323,3 +323,30 @@ def test_a_latched_fault_is_counted_once_and_snapshot():
     snap = sup.snapshot(12.5, b)
     assert snap.stamp == 12.5 and snap.state == 'fault' and snap.measured == 0.0 and snap.board is b
     assert math.isnan(sup.snapshot(13.0, None).measured)
+
+
+def test_host_loss_stow_record_from_the_parameters_and_refused_values():
+    """Issue 35: the driver's host_loss_stow parameters -> the board's SET_HOST_LOSS_STOW."""
+    from sslfr_drivers.axis.host_loss import configure_host_loss, describe, host_loss_request
+    from sslfr_drivers.axis.params import params_for
+    from sslfr_drivers.link import messages as m
+    p = params_for('mirrors').defaults()
+    r = host_loss_request(p)
+    assert (r.mode, r.steps, r.delay_ms) == (m.HostLossMode.POSITION, round((math.pi / 2) / m.DEFAULT_STEP_RAD),
+                                            60000)
+    assert r.speed == pytest.approx(p['max_speed'] / m.DEFAULT_STEP_RAD)
+    sw = host_loss_request({**p, 'host_loss_stow': 'switch', 'invert': True})
+    assert sw.mode == m.HostLossMode.SWITCH and sw.switch == m.Switch.SLEEP and sw.speed < 0   # up = fewer steps
+    assert host_loss_request({**p, 'host_loss_stow': 'off'}).mode == m.HostLossMode.OFF
+    assert describe({**p, 'host_loss_stow': 'off'}) == 'host-loss stow off'
+    table = params_for('mirrors')
+    assert any('host_loss_stow_position' in e for e in table.validate({**p, 'host_loss_stow_position': -1.0}))
+    assert table.validate({**p, 'host_loss_stow_delay': 0.0}) and table.validate({**p, 'host_loss_stow': 'up'})
+
+    class Link:
+        last_status = m.Status(0, 0, 0.0, 0, 0, int(m.FaultBits.HOST_LOSS), 0.0, 0)
+
+        def request(self, msg):
+            raise RuntimeError('NACK UNKNOWN_TYPE')          # an older firmware
+    line = configure_host_loss(Link(), p)
+    assert 'NOT set' in line and 'stowed by itself' in line

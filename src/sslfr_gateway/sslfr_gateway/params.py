@@ -8,18 +8,10 @@ from __future__ import annotations
 import ipaddress
 import re
 
+from sslfr_common.netguard import ip_address_error
 from sslfr_common.params import ParamSpec, ParamTable
 
 _NAMESPACE = re.compile(r'^(/[A-Za-z][A-Za-z0-9_]*)+$')
-
-
-def ip_address_error(addr: str) -> str | None:
-    """None for a literal IPv4/IPv6 address, else the reason."""
-    try:
-        ipaddress.ip_address(addr)
-    except ValueError:
-        return f'{addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)'
-    return None
 
 
 def ip_list_error(addrs: list[str]) -> str | None:

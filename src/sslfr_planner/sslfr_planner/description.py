@@ -54,7 +54,7 @@ MOVEMENT_LIMITS_DEG = {JOINTS[0]: (-180.0, 180.0), **{j: (-90.0, 90.0) for j in 
 BOARD_KINDS = ('axis', 'gps', 'absorber', 'irradiance')
 #: sensor kinds
 SENSOR_KINDS = ('thermocouple', 'limit_switch', 'light_sensor', 'pyrheliometer', 'inclinometer',
-                'laser_sensor', 'encoder', 'flow_meter', 'rtc', 'gps')
+                'laser_sensor', 'encoder', 'flow_meter', 'rtc', 'gps', 'anemometer')
 
 
 class DescriptionError(ValueError):
@@ -119,12 +119,14 @@ class Board:
 
 @dataclass(frozen=True)
 class Sensor:
-    """A sensor present: ``name``, ``kind`` (SENSOR_KINDS), the ``board`` it is on, ``part``."""
+    """A sensor present: ``name``, ``kind`` (SENSOR_KINDS), the ``board`` it is on, ``part``;
+    ``site_addition``: fitted by the site, not part of the prototype the seed describes."""
 
     name: str
     kind: str
     board: str
     part: str = ''
+    site_addition: bool = False
 
 
 @dataclass(frozen=True)
@@ -210,7 +212,8 @@ _ACTUATOR = {'lever_m': ('num', True), 'mount_distance_m': ('num', True), 'mount
 #: the inclinometer: mounting offset (reading - line angle), noise 1-sigma, resolution
 _INCLINOMETER = {'offset_deg': ('num', True), 'noise_deg': ('num', True), 'resolution_deg': ('num', True)}
 _BOARD = {'name': ('str', True), 'kind': ('str', True), 'hardware': ('str', False), 'movement': ('str', False)}
-_SENSOR = {'name': ('str', True), 'kind': ('str', True), 'board': ('str', True), 'part': ('str', False)}
+_SENSOR = {'name': ('str', True), 'kind': ('str', True), 'board': ('str', True), 'part': ('str', False),
+           'site_addition': ('bool', False)}
 _OPTICS = {'lines': ('int', True), 'central_line': ('bool', True), 'line_width': ('num', True),
            'line_length': ('num', True), 'gap': ('num', True), 'receiver_height': ('num', True),
            'receiver_width': ('num', True), 'tube_diameter': ('num', True), 'tube_count': ('int', True),
@@ -579,7 +582,8 @@ def parse(data: Any, where: str = 'description') -> Description:
         if d.get('board') not in named:     # a board named but refused above is reported there
             c.add(f'{k}.board', f'{d.get("board")!r} is not a board of this collector')
             continue
-        sensors[name] = Sensor(name=name, kind=d['kind'], board=d['board'], part=d.get('part', ''))
+        sensors[name] = Sensor(name=name, kind=d['kind'], board=d['board'], part=d.get('part', ''),
+                               site_addition=bool(d.get('site_addition', False)))
     optics = _optics(c, top['optics']) if 'optics' in top else None
     # cross-checks with the optics
     m = movements.get(JOINTS[0])

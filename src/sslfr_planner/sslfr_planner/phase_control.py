@@ -10,6 +10,9 @@ step of :func:`immediate_step` or more; this module decides
 * **the override poses**, fixed when an override begins: entering STOW starts a ramp
   from the pose commanded at that instant to the stow target, at ``stow.speeds``
   (seed 000 Step 4.1), anchored at that instant so every republished horizon agrees;
+  the target is the sleeping pose, or ``stow.wind_pose`` while safety says the stow
+  is for wind only (``wind_stow``); a change of that target during a stow starts a
+  new ramp from the pose commanded at that instant;
   entering MANUAL or MAINTENANCE from any other phase holds the pose commanded at
   that instant (switching between the two keeps the hold);
 * **when to replan**: a pending request (start-up, parameters, GPS fix, clock jump,
@@ -90,6 +93,9 @@ class PhaseControl:
         self.mode = mode
         self.safety_stow = False
         self.safety_reasons: list[str] = []
+        #: the safety stow is for wind only: the stow target is ``stow.wind_pose``
+        self.wind_stow = False
+        self._stow_for_wind: bool | None = None     # what the current stow ramp targets
         self.phase: int | None = None
         self.reason = ''
         #: pose held in MANUAL / MAINTENANCE [rad] (3,)
@@ -110,12 +116,12 @@ class PhaseControl:
             self.mode = res.mode
         return res
 
-    def on_safety(self, stow_required: bool, reasons) -> bool:
+    def on_safety(self, stow_required: bool, reasons, wind_stow: bool = False) -> bool:
         """The safety verdict; True when it changed what the planner decides (a new
-        stow requirement, its end, or new reasons while it lasts)."""
-        stow, reasons = bool(stow_required), list(reasons)
-        if stow != self.safety_stow or (stow and reasons != self.safety_reasons):
-            self.safety_stow, self.safety_reasons = stow, reasons
+        stow requirement, its end, new reasons or another stow target while it lasts)."""
+        stow, reasons, wind = bool(stow_required), list(reasons), bool(wind_stow) and bool(stow_required)
+        if stow != self.safety_stow or (stow and (reasons != self.safety_reasons or wind != self.wind_stow)):
+            self.safety_stow, self.safety_reasons, self.wind_stow = stow, reasons, wind
             return True
         return False
 
@@ -145,8 +151,11 @@ class PhaseControl:
                                   self.safety_reasons)
         old = self.phase
         changed = dec.phase != old
-        if changed:
-            self._enter(dec.phase, now, cycle, cfg['stow.speeds'])
+        retarget = dec.phase == Phase.STOW and not changed and self._stow_for_wind != self._wind_target()
+        if changed or retarget:
+            self._enter(dec.phase, now, cycle, cfg['stow.speeds'], cfg['stow.wind_pose'])
+        if retarget:
+            self._force_trajectory = True      # the same phase, a new ramp: publish it now
         publish_phase = (changed or dec.reason != self.reason or backwards
                          or now - self._last[PHASE] >= cfg['phase_period'])
         self.reason = dec.reason
@@ -161,11 +170,17 @@ class PhaseControl:
         if topic == TRAJECTORY:
             self._force_trajectory = False
 
-    def _enter(self, phase: int, now: float, cycle, speeds) -> None:
+    def _wind_target(self) -> bool:
+        """True when a stow now goes to the wind pose (a safety stow for wind only)."""
+        return self.safety_stow and self.wind_stow
+
+    def _enter(self, phase: int, now: float, cycle, speeds, wind_pose) -> None:
         """Fix the override pose when an override begins (module docstring)."""
         pose = self.commanded_pose(now, cycle, speeds)
         if phase == Phase.STOW:
-            self.stow_start = (now, pose, cycle.sleep_pose(now))
+            self._stow_for_wind = self._wind_target()
+            target = np.asarray(wind_pose, dtype=float) if self._stow_for_wind else cycle.sleep_pose(now)
+            self.stow_start = (now, pose, target)
         elif phase in HOLD_PHASES and self.phase not in HOLD_PHASES:
             self.hold_pose = pose
         self.phase = phase

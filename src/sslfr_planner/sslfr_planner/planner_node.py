@@ -144,7 +144,7 @@ class PlannerNode(LeanEvents, Node):
             self._tick()
 
     def _on_safety(self, msg: SafetyState) -> None:
-        if self.control.on_safety(msg.stow_required, msg.reasons):
+        if self.control.on_safety(msg.stow_required, msg.reasons, msg.wind_stow):
             self._tick()
 
     # ------------------------------------------------------------------- services

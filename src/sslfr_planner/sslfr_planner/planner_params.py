@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from sslfr_common.contract import JOINT_RANGE, JOINTS, WIND_STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 from .collector import LAWS
@@ -24,6 +25,15 @@ from .site_source import ALTITUDE_RANGE
 
 ALMERIA_LAT = 36 + 50 / 60 + 7 / 3600      # 36 deg 50' 07" N (seed 000 section 5.1)
 ALMERIA_LON = -(2 + 24 / 60 + 8 / 3600)    # 2 deg 24' 08" W
+
+
+def _wind_pose_problem(pose) -> str | None:
+    """A wind pose outside a joint's mechanical range (contract JOINT_RANGE), or None."""
+    for joint, angle in zip(JOINTS, pose):
+        lo, hi = JOINT_RANGE[joint]
+        if not lo <= angle <= hi:
+            return f'{joint} {angle:.4f} rad outside its range [{lo:.4f}, {hi:.4f}] rad'
+    return None
 
 
 _SPECS = (
@@ -121,6 +131,11 @@ _SPECS = (
     ParamSpec('stow.speeds', [0.0175, 0.0175, 0.0175],
               'Axis rates of the stow ramp [rad/s]: mirrors, mobile_structure, secondary_reflector',
               'rad/s', 1e-4, 1.0, length=3),
+    ParamSpec('stow.wind_pose', [WIND_STOW_POSITION[j] for j in JOINTS],
+              'Stow pose of a wind stow (safety/state wind_stow) [rad]: mirrors, mobile_structure, '
+              'secondary_reflector; default every surface face-up (least wind load; the sleeping '
+              'position +pi/2 is for dust at night and turns the mirrors broadside to the wind)',
+              'rad', -math.pi / 2, math.pi / 2, length=3, validator=_wind_pose_problem),
     ParamSpec('initial_mode', 'auto', 'Operator mode at start-up', '-',
               choices=('auto', 'stow', 'manual', 'maintenance')),
 )

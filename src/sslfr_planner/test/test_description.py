@@ -100,7 +100,7 @@ def _broken(tmp_path, edit):
     (0, lambda x: x['movements']['mirrors'].update(sleep_deg=120.0), 'movements.mirrors.sleep_deg',
      'outside range_deg'),
     (0, lambda x: x['boards'].append(dict(x['boards'][3])), 'boards[6].name', "duplicate name 'gps'"),
-    (0, lambda x: x['sensors'].append(dict(x['sensors'][0])), 'sensors[8].name', "duplicate name 'inlet'"),
+    (0, lambda x: x['sensors'].append(dict(x['sensors'][0])), 'sensors[9].name', "duplicate name 'inlet'"),
     (0, lambda x: x['optics'].update(lines='25'), 'optics.lines', 'must be an integer'),
     (0, lambda x: x['optics'].update(central_line='yes'), 'optics.central_line', 'must be true or false'),
     (0, lambda x: x['movements']['mirrors'].update(step_deg=[0.006]), 'movements.mirrors.step_deg',

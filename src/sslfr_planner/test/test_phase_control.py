@@ -206,3 +206,30 @@ def test_immediate_step_is_the_tick_or_the_shortest_publication_period():
     assert immediate_step({'phase_period': 0.1, 'sun_period': 1.0}, 0.2) == 0.1
     assert immediate_step({'phase_period': 5.0, 'sun_period': 0.15}, 0.2) == 0.15
     assert 0.05 < immediate_step({'phase_period': 1.0, 'sun_period': 1.0}, 0.2)     # 20 Hz /clock at 1x
+
+
+# ------------------------------------------------------------------ wind stow (issue 35)
+def test_a_wind_stow_ramps_to_the_wind_pose_and_another_stow_reason_retargets_to_sleep(cycle):
+    now = _utc(2026, 6, 21, 10)
+    ctl = _started(cycle, now)
+    start = ctl.commanded_pose(now, cycle, CFG['stow.speeds'])
+    assert ctl.on_safety(True, ['wind gust 21.0 m/s > 20.0 m/s (3 s mean): wind stow'], wind_stow=True)
+    t = now + 0.2
+    tick = ctl.tick(t, cycle, CFG)
+    assert tick.phase_change[1] == Phase.STOW and tick.publish_trajectory
+    _publish_all(ctl, tick, t)
+    assert np.allclose(ctl.stow_start[2], CFG['stow.wind_pose'])
+    far = ctl.commanded_pose(t + 3600.0, cycle, CFG['stow.speeds'])
+    assert np.allclose(far, [0.0, 0.0, 0.0]) and not np.allclose(start, far)
+    # over-temperature joins: the stow is no longer for wind only -> the sleeping pose
+    assert ctl.on_safety(True, ['wind ...', 'outlet over-temperature ...'], wind_stow=False)
+    t2 = t + 10.0
+    mid = ctl.commanded_pose(t2, cycle, CFG['stow.speeds'])
+    tick = ctl.tick(t2, cycle, CFG)
+    assert tick.phase_change is None and tick.publish_trajectory
+    assert np.allclose(ctl.stow_start[1], mid)                       # a new ramp from where it was
+    assert np.allclose(ctl.stow_start[2], cycle.sleep_pose(t2))
+    assert ctl.commanded_pose(t2 + 3600.0, cycle, CFG['stow.speeds'])[0] == pytest.approx(math.pi / 2)
+    # an operator stow is never a wind stow
+    ctl2 = _started(cycle, now, mode='stow')
+    assert np.allclose(ctl2.stow_start[2], cycle.sleep_pose(now))

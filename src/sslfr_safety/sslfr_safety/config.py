@@ -82,6 +82,16 @@ class SafetyConfig:
     require_site_and_time: bool = True
     trust_system_clock: bool = True       # a plausible system clock counts as time
     min_valid_unix_time: float = 1_704_067_200.0  # [s] 2024-01-01T00:00Z
+    # wind (issue 35; defaults and their sources: src/sslfr_safety/README.md "Wind")
+    wind_enabled: bool = False            # an anemometer is fitted: judge `wind`
+    wind_gust_limit: float = 20.0         # [m/s] 3 s gust above this -> wind stow
+    wind_mean_limit: float = 14.0         # [m/s] 10 min mean above this -> wind stow
+    wind_hysteresis: float = 3.0          # [m/s] release only below mean_limit - this ...
+    wind_hold: float = 1800.0             # [s] ... held for this long
+    wind_silent_warn: float = 10.0        # [s] no wind message for this long -> WARN
+    wind_silent_stow: float = 60.0        # [s] ... for this long -> treated as wind (0 = never)
+    wind_stuck_window: float = 1800.0     # [s] 0 m/s all along while the beam swings -> WARN
+    wind_stuck_beam_swing: float = 300.0  # [W/m^2] beam max - min over that window
     watchdogs: dict = field(default_factory=lambda: {
         'planner': (5.0, 'STOW'),
         **{driver_node(joint): (2.0, 'STOW') for joint in JOINTS},
@@ -111,6 +121,20 @@ class SafetyConfig:
         pos('status_max_age', self.status_max_age)
         pos('beam_max_age', self.beam_max_age)
         pos('startup_grace', self.startup_grace, zero_ok=True)
+        pos('wind_gust_limit', self.wind_gust_limit)
+        pos('wind_mean_limit', self.wind_mean_limit)
+        pos('wind_hysteresis', self.wind_hysteresis, zero_ok=True)
+        if not self.wind_hysteresis < self.wind_mean_limit:
+            raise ValueError(f'wind_hysteresis {self.wind_hysteresis} must be < wind_mean_limit '
+                             f'{self.wind_mean_limit} (the release threshold is their difference)')
+        pos('wind_hold', self.wind_hold, zero_ok=True)
+        pos('wind_silent_warn', self.wind_silent_warn)
+        pos('wind_silent_stow', self.wind_silent_stow, zero_ok=True)
+        if self.wind_silent_stow and self.wind_silent_stow < self.wind_silent_warn:
+            raise ValueError(f'wind_silent_stow {self.wind_silent_stow} s must be 0 (never) or >= '
+                             f'wind_silent_warn {self.wind_silent_warn} s')
+        pos('wind_stuck_window', self.wind_stuck_window)
+        pos('wind_stuck_beam_swing', self.wind_stuck_beam_swing)
         if not (self.valid_min < self.valid_max):
             raise ValueError(f'valid_min {self.valid_min} must be < valid_max {self.valid_max}')
         if set(self.switch_positions) != set(SWITCHES) or not all(

@@ -17,17 +17,22 @@ Every timeout and hold time is measured on the steady clock (``clock.steady()``)
 the inputs' arrival times, never from header stamps; the wall clock only judges whether
 the system time is plausible (``min_valid_unix_time``) and labels transitions. A
 wall-clock or ROS-time step therefore neither fakes a timeout nor stalls a watchdog.
+The exception is control logic that must follow the simulation's speed: the wind stow's
+calm hold is measured in ROS time, from the ``wind`` samples' stamps (sim and replay run
+it as a real day would); the anemometer's silence is a watchdog, on the steady clock.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
-from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, STOW_POSITION, SWITCH_AXIS, SWITCHES, THERMOCOUPLES, Level,
-                                   LinkState, Phase, driver_node)
+import collections
+
+from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, STOW_POSITION, SWITCH_AXIS, SWITCHES, THERMOCOUPLES,
+                                   WIND_STOW_POSITION, Level, LinkState, Phase, driver_node)
 
 from sslfr_safety.config import WATCHABLE, FakeClock, SafetyConfig, SystemClock, with_changes
-from sslfr_safety.rules import LATCHED, RECOVERS, RULES, Clear, Fault, Rule, key_of, link_name
+from sslfr_safety.rules import LATCHED, RECOVERS, RULES, WIND_RULE, Clear, Fault, Rule, key_of, link_name
 
 __all__ = ['WATCHABLE', 'FakeClock', 'SafetyConfig', 'SystemClock', 'with_changes', 'Condition',
            'Verdict', 'Transition', 'SafetyCore']
@@ -49,7 +54,10 @@ class Condition:
 class Verdict:
     """The supervisor's verdict (maps 1:1 to sslfr_interfaces/SafetyState).
 
-    ``since`` is the steady time [s] at which ``level`` was entered.
+    ``since`` is the steady time [s] at which ``level`` was entered. ``wind_stow``: the
+    stow is for wind only (every condition that stows is a wind rule): the axes go to
+    their wind pose. ``wind_release_in`` [s]: time left before a wind stow may release
+    (inf while the wind is not yet calm, NaN without a wind stow).
     """
 
     level: Level
@@ -57,6 +65,8 @@ class Verdict:
     stopped_axes: tuple[str, ...]
     stow_required: bool
     since: float
+    wind_stow: bool = False
+    wind_release_in: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -107,6 +117,18 @@ class _Axis:
     ready: bool | None = None    # None: never reported; True: active, link up, referenced
 
 
+@dataclass
+class _Wind:
+    arrival: float | None = None       # last wind message [steady s]
+    speed: float = math.nan            # 3 s mean [m/s]
+    gust: float = math.nan             # highest 3 s mean over the window [m/s]
+    mean: float = math.nan             # window mean [m/s]
+    stamp: float | None = None         # ROS time of the last wind message [s]
+    calm_since: float | None = None    # ROS time [s] the mean went below limit - hysteresis
+    zero_since: float | None = None    # first of the current run of 0 m/s readings
+    beams: collections.deque = field(default_factory=collections.deque)   # (t, beam) during it
+
+
 class SafetyCore:
     """The facts and the generic rule machinery; see the module doc.
 
@@ -133,6 +155,9 @@ class SafetyCore:
         self.switch_ack: set[str] = set()        # acknowledged trips, re-armed when open
         self.pending_switches: set[str] = set()   # closed while the axis position was unknown
         self.stow_verdict_at: dict[str, float] = {}   # axis -> last verdict stowing it [steady s]
+        self.stow_verdict_pose: dict[str, float] = {}  # axis -> where that verdict sent it [rad]
+        self.wind = _Wind()
+        self._notes: list[str] = []              # log lines of the wind hold (drain_notes)
         self.heard: dict[str, float] = {}        # node -> last arrival [steady s]
         self.phase: int | None = None
         self.tracking_since: float | None = None
@@ -295,8 +320,90 @@ class SafetyCore:
         self.heartbeat('irradiance', now)
         if math.isfinite(beam):
             self.beam, self.beam_arrival = float(beam), now
+            if self.wind.zero_since is not None:
+                q = self.wind.beams
+                q.append((now, float(beam)))
+                while q and q[0][0] < now - self.config.wind_stuck_window:
+                    q.popleft()
         else:
             self.counters['bad_inputs'] += 1
+
+    def on_wind(self, speed: float, gust: float, mean: float, window: float,
+                stamp: float | None = None, arrival: float | None = None) -> None:
+        """A ``wind`` message: 3 s mean, gust, mean over ``window`` [s] (all m/s),
+        ``stamp`` its header stamp [s, ROS time; None: the arrival]. A gust or a mean
+        over its limit raises the wind stow at once; the mean's calm run (below limit -
+        hysteresis) starts or ends the release hold, which is measured between the
+        stamps (control logic on ROS time: sim and replay hold as long as a real day);
+        the anemometer's silence is judged on the steady arrival times (a watchdog)."""
+        now = self._now(arrival)
+        stamp = now if stamp is None else float(stamp)
+        cfg, w = self.config, self.wind
+        vals = [float(v) for v in (speed, gust, mean, window)]
+        if not (all(math.isfinite(v) and v >= 0.0 for v in vals) and math.isfinite(stamp)):
+            self.counters['bad_inputs'] += 1
+            return
+        speed, gust, mean, window = vals
+        if (w.arrival is None or now - w.arrival > cfg.wind_silent_warn
+                or (w.stamp is not None and stamp < w.stamp)):
+            w.calm_since = None               # after a silence or a step back of ROS time: start again
+        w.arrival, w.stamp, w.speed, w.gust, w.mean = now, stamp, speed, gust, mean
+        if not cfg.wind_enabled:
+            return
+        threshold = cfg.wind_mean_limit - cfg.wind_hysteresis
+        gusty, windy = speed > cfg.wind_gust_limit, mean > cfg.wind_mean_limit
+        if (gusty or windy) and WIND_RULE not in self.faults:
+            self._notes.append(f'wind stow: releases once the mean wind stays below {threshold:.1f} m/s '
+                               f'for {cfg.wind_hold:.0f} s')
+        if gusty:
+            # the 3 s running mean crossing the limit is a gust above it (WMO); the gust
+            # field (its highest value over 10 min) would re-raise a released stow
+            self._raise(WIND_RULE, '', 'gust', {'gust': speed, 'limit': cfg.wind_gust_limit}, now)
+        if windy:
+            self._raise(WIND_RULE, '', 'mean', {'mean': mean, 'limit': cfg.wind_mean_limit, 'window': window}, now)
+        if gusty or windy:
+            w.calm_since = stamp if mean < threshold else None     # every exceedance restarts the hold
+            return self._zero_run(speed, now)
+        stowed = WIND_RULE in self.faults
+        if mean < threshold:
+            if w.calm_since is None:
+                w.calm_since = stamp
+                if stowed:
+                    self._notes.append(f'wind stow: mean {mean:.1f} m/s below {threshold:.1f} m/s, '
+                                       f'release after {cfg.wind_hold:.0f} s of calm')
+        else:
+            if w.calm_since is not None and stowed:
+                self._notes.append(f'wind stow: mean {mean:.1f} m/s back at or above {threshold:.1f} m/s '
+                                   f'after {stamp - w.calm_since:.0f} s of calm: hold restarts')
+            w.calm_since = None
+        self._zero_run(speed, now)
+
+    def _zero_run(self, speed: float, now: float) -> None:
+        """Track the current run of 0 m/s readings (the stuck-anemometer check)."""
+        w = self.wind
+        if speed == 0.0:
+            if w.zero_since is None:
+                w.zero_since = now
+                w.beams.clear()
+        else:
+            w.zero_since = None
+            w.beams.clear()
+
+    def wind_release_in(self, now: float) -> float:
+        """[s of ROS time] left before a wind stow may release (the hold counts up to
+        the newest sample's stamp): NaN without one, inf while the anemometer is silent
+        (steady ``now``) or the mean not below its release threshold."""
+        if WIND_RULE not in self.faults:
+            return math.nan
+        w, cfg = self.wind, self.config
+        if w.arrival is None or now - w.arrival > cfg.wind_silent_warn or w.calm_since is None:
+            return math.inf
+        return max(0.0, cfg.wind_hold - (w.stamp - w.calm_since))
+
+    def drain_notes(self) -> list[str]:
+        """Log lines about the wind stow's release hold since the last call."""
+        out, self._notes = self._notes, []
+        return out
 
     # ----------------------------------------------------------------- switches
     def _judge_closure(self, name: str, now: float) -> None:
@@ -324,7 +431,7 @@ class SafetyCore:
         if self.stow_verdict_at.get(axis, -math.inf) >= horizon:
             # this supervisor required a stow within the look-back: the driver may already
             # be there before a status says so (a fast axis, a 5 Hz status)
-            ends.append(STOW_POSITION[axis])
+            ends.append(self.stow_verdict_pose.get(axis, STOW_POSITION[axis]))
         w = self.config.switch_window
         if min(ends) - w <= nominal <= max(ends) + w:
             return
@@ -448,9 +555,11 @@ class SafetyCore:
         level = max((c.level for c in conds), default=Level.OK)
         reasons = tuple(c.reason for c in sorted(conds, key=lambda c: (-c.level, c.key)))
         axes = tuple(a for a in JOINTS if any(a in c.axes for c in conds if c.level == Level.ESTOP))
-        stow = any(c.level == Level.STOW or c.stow_others for c in conds)
+        stowing = [c for c in conds if c.level == Level.STOW or c.stow_others]
+        stow = bool(stowing)
+        wind_stow = stow and all(c.key == WIND_RULE for c in stowing)
         since = self._state.since if level == self._state.level else now
-        return Verdict(level, reasons, axes, stow, since)
+        return Verdict(level, reasons, axes, stow, since, wind_stow, self.wind_release_in(now))
 
     def evaluate(self, now: float | None = None) -> Verdict:
         """Let time pass to ``now`` (:meth:`on_time`), take the :meth:`verdict` and
@@ -464,6 +573,9 @@ class SafetyCore:
             for axis in JOINTS:
                 if axis not in new.stopped_axes:
                     self.stow_verdict_at[axis] = now
+                    self.stow_verdict_pose[axis] = (WIND_STOW_POSITION if new.wind_stow else STOW_POSITION)[axis]
+        if old.wind_release_in == old.wind_release_in and new.wind_release_in != new.wind_release_in:
+            self._notes.append('wind stow released: the mean wind stayed calm for the hold time')
         if new.level != old.level or set(new.reasons) != set(old.reasons):
             self.counters['transitions'] += 1
             self._pending.append(Transition(now, self.clock.wall(), old.level, new.level,
@@ -496,5 +608,11 @@ class SafetyCore:
                 f'{"ready" if ax.ready else "not ready"} ({ax.driver_state}, link {link_name(ax.link_state)})')
         for name in SWITCHES:
             kv[f'switch {name}'] = {None: 'unknown', True: 'closed', False: 'open'}[self.switch_closed[name]]
+        if self.config.wind_enabled:
+            w = self.wind
+            kv['wind [m/s]'] = 'none' if w.arrival is None else (
+                f'{w.speed:.1f} (gust {w.gust:.1f}, mean {w.mean:.1f})')
+            kv['wind age [s]'] = 'never' if w.arrival is None else f'{now - w.arrival:.2f}'
+            kv['wind release in [s]'] = f'{self.wind_release_in(now):.0f}'
         kv.update({k: str(v) for k, v in self.counters.items()})
         return kv

@@ -51,6 +51,11 @@ def config_from(values: dict) -> SafetyConfig:
         require_site_and_time=values['require_site_and_time'],
         trust_system_clock=values['trust_system_clock'],
         min_valid_unix_time=values['min_valid_unix_time'],
+        wind_enabled=values['wind.enabled'], wind_gust_limit=values['wind.gust_limit'],
+        wind_mean_limit=values['wind.mean_limit'], wind_hysteresis=values['wind.hysteresis'],
+        wind_hold=values['wind.hold'], wind_silent_warn=values['wind.silent_warn'],
+        wind_silent_stow=values['wind.silent_stow'], wind_stuck_window=values['wind.stuck_window'],
+        wind_stuck_beam_swing=values['wind.stuck_beam_swing'],
         watchdogs={n: (t, a) for n, t, a in zip(nodes, timeouts, actions)})
     cfg.validate()
     return cfg
@@ -97,6 +102,21 @@ TABLE = ParamTable((
           'axis status older than this: position unknown; a driver silent this long must report ready again',
           's', 0.1, 60.0),
     _spec('beam_max_age', _D.beam_max_age, 'beam irradiance older than this: unknown', 's', 0.1, 600.0),
+    _spec('wind.enabled', _D.wind_enabled, 'an anemometer is fitted (absorber_board anemometer_pin): '
+          'judge the wind topic; false = no wind rules'),
+    _spec('wind.gust_limit', _D.wind_gust_limit, 'wind stow when the 3 s gust passes this', 'm/s', 1.0, 80.0),
+    _spec('wind.mean_limit', _D.wind_mean_limit, 'wind stow when the 10 min mean passes this', 'm/s', 1.0, 60.0),
+    _spec('wind.hysteresis', _D.wind_hysteresis,
+          'release only once the mean is below mean_limit - hysteresis ...', 'm/s', 0.0, 30.0),
+    _spec('wind.hold', _D.wind_hold, '... and has stayed there this long', 's', 0.0, 86400.0),
+    _spec('wind.silent_warn', _D.wind_silent_warn, 'no wind message for this long -> WARN', 's', 0.5, 3600.0),
+    _spec('wind.silent_stow', _D.wind_silent_stow,
+          'no wind message for this long -> treated as wind (stow); 0 = never', 's', 0.0, 86400.0),
+    _spec('wind.stuck_window', _D.wind_stuck_window,
+          'anemometer at 0 m/s all along this window while the beam swings -> WARN (stuck cups?)', 's',
+          10.0, 86400.0),
+    _spec('wind.stuck_beam_swing', _D.wind_stuck_beam_swing,
+          'beam irradiance max - min over stuck_window that means moving clouds', 'W/m^2', 1.0, 1500.0),
     _spec('watchdog.nodes', list(_D.watchdogs), 'watched nodes: ' + ', '.join(WATCHABLE)),
     _spec('watchdog.timeouts', [t for t, _ in _D.watchdogs.values()],
           'silence limit of each watched node, same order', 's'),

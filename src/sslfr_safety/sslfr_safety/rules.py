@@ -32,7 +32,7 @@ import string
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
-from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, THERMOCOUPLES, Level,
+from sslfr_common.contract import (IDLE_DRIVER_STATES, JOINTS, SWITCH_AXIS, THERMOCOUPLES, WIND, Level,
                                    LinkState, driver_node)
 
 
@@ -227,7 +227,56 @@ def _axis_not_ready(core, axis: str, _now: float):
     return 'unreferenced', {'axis': axis, 'state': ax.driver_state}
 
 
+def _wind_silent(core, _name: str, now: float):
+    """A fitted anemometer silent (or never heard after the start-up grace) for more
+    than ``wind_silent_stow``: the wind is unknown, treated as wind."""
+    cfg = core.config
+    if not cfg.wind_enabled or not cfg.wind_silent_stow:
+        return None
+    ref = core.wind.arrival if core.wind.arrival is not None else core.start + cfg.startup_grace
+    if now - ref > cfg.wind_silent_stow:
+        return 'silent', {'timeout': cfg.wind_silent_stow}
+    return None
+
+
+def _anemometer(core, _name: str, now: float):
+    """WARN: a fitted anemometer silent for > ``wind_silent_warn`` (never heard: after
+    the start-up grace), or reading 0 m/s for the whole ``wind_stuck_window`` while the
+    beam irradiance swung by >= ``wind_stuck_beam_swing`` (clouds moving over the
+    collector: there is wind aloft, stuck cups or a broken wire read calm)."""
+    cfg, w = core.config, core.wind
+    if not cfg.wind_enabled:
+        return None
+    if w.arrival is None:
+        if now - core.start > cfg.startup_grace + cfg.wind_silent_warn:
+            return 'never_heard', {'timeout': cfg.startup_grace + cfg.wind_silent_warn}
+        return None
+    if now - w.arrival > cfg.wind_silent_warn:
+        return 'silent', {'age': now - w.arrival}
+    if w.zero_since is not None and now - w.zero_since >= cfg.wind_stuck_window:
+        beams = [b for t, b in w.beams if t >= now - cfg.wind_stuck_window]
+        if beams and max(beams) - min(beams) >= cfg.wind_stuck_beam_swing:
+            return 'stuck', {'window': cfg.wind_stuck_window, 'swing': max(beams) - min(beams)}
+    return None
+
+
 # ------------------------------------------------------------------ blockers
+def _wind_blocker(core, _fault: Fault, now: float) -> str | None:
+    """Why a wind stow cannot release yet: the anemometer must be fresh (steady
+    ``now``) and the mean below ``wind_mean_limit - wind_hysteresis`` for ``wind_hold``
+    [s of ROS time, between the samples' stamps]."""
+    cfg, w = core.config, core.wind
+    if w.arrival is None or now - w.arrival > cfg.wind_silent_warn:
+        return 'anemometer silent: the wind is unknown'
+    threshold = cfg.wind_mean_limit - cfg.wind_hysteresis
+    if w.calm_since is None:
+        return f'wind mean {w.mean:.1f} m/s, must stay < {threshold:.1f} m/s for {cfg.wind_hold:.0f} s'
+    held = w.stamp - w.calm_since
+    if held < cfg.wind_hold:
+        return f'wind mean below {threshold:.1f} m/s for {held:.0f} s of {cfg.wind_hold:.0f} s'
+    return None
+
+
 def _overtemp_blocker(core, fault: Fault, now: float) -> str | None:
     cfg, name = core.config, fault.name
     st = core.sensors[name]
@@ -275,6 +324,9 @@ def _acknowledge_switch(core, name: str) -> None:
 
 
 # ------------------------------------------------------------------ the table
+#: The wind stow's rule key: named after the topic it judges.
+WIND_RULE = WIND.name
+
 RULES: tuple[Rule, ...] = (
     # A valid sample above ``temperature_limit`` [degC] trips at once (raised by
     # SafetyCore.on_temperature, which the node calls in the subscription callback).
@@ -340,6 +392,34 @@ RULES: tuple[Rule, ...] = (
          'That node is not publishing: check that it runs (./sslfr up restarts it) and its board '
          'link; clears by itself when it is heard again.',
          names=lambda core: core.config.watchdogs, condition=_watchdog),
+    # With ``wind_enabled``: a 3 s gust above ``wind_gust_limit`` or a mean above
+    # ``wind_mean_limit`` [m/s] (raised by SafetyCore.on_wind in the ``wind`` callback), or
+    # the anemometer silent for ``wind_silent_stow`` [s] (wind unknown is treated as wind;
+    # steady clock). Held until the anemometer is fresh and the mean has stayed below
+    # ``wind_mean_limit - wind_hysteresis`` for ``wind_hold`` [s] of ROS time (the samples'
+    # stamps); every gust or mean above its limit restarts the hold. While only wind rules
+    # stow, Verdict.wind_stow says so (the axes go face-up, not to the sleeping position);
+    # Verdict.wind_release_in is the time left [s].
+    Rule(WIND_RULE, Level.STOW, Clear.RECOVERY,
+         {'gust': 'wind gust {gust:.1f} m/s > {limit:.1f} m/s (3 s mean): wind stow',
+          'mean': 'wind mean {mean:.1f} m/s > {limit:.1f} m/s ({window:.0f} s mean): wind stow',
+          'silent': 'anemometer silent > {timeout:.0f} s: wind unknown, wind stow'},
+         'Wait: the tracker releases by itself once the mean wind has stayed below the limit minus '
+         'the hysteresis for the hold time (the page shows the time left); a silent anemometer '
+         'must be repaired first.',
+         condition=_wind_silent, blocker=_wind_blocker,
+         held_note='clears by itself once the wind has stayed calm for the hold time'),
+    # A fitted anemometer silent > ``wind_silent_warn`` [s] (steady clock), or at 0 m/s for
+    # ``wind_stuck_window`` while the beam irradiance swung by ``wind_stuck_beam_swing``
+    # (moving clouds, yet a calm anemometer).
+    Rule('anemometer', Level.WARN, Clear.SELF,
+         {'silent': 'anemometer silent for {age:.0f} s: wind not watched',
+          'never_heard': 'anemometer never heard > {timeout:.0f} s: wind not watched',
+          'stuck': 'anemometer at 0 m/s for {window:.0f} s while the beam irradiance swung by '
+                   '{swing:.0f} W/m^2 (moving clouds): stuck cups or a broken wire?'},
+         'Check the anemometer, its cable and the absorber board input (anemometer_pin); a stuck '
+         'anemometer means the wind stow cannot work.',
+         condition=_anemometer),
     # No GPS fix since boot and no persisted (or configured) site reported by the planner.
     Rule('site', Level.STOW, Clear.SELF,
          {'none': 'no site: no GPS fix since boot and no persisted site from the planner: '

@@ -18,7 +18,8 @@ Subscribes (best effort, so it matches reliable, best-effort and transient-local
     ``tracker/trajectory`` (planner heartbeat); ``axes/<axis>/status`` (AxisStatus:
     homing, measured and commanded angles, lifecycle state, link state, homed; the
     driver heartbeat); ``gps/fix`` (NavSatFix);
-    ``irradiance/beam`` (Irradiance).
+    ``irradiance/beam`` (Irradiance); ``wind`` (Wind: gust and mean judged inside the
+    callback).
 Services
     ``safety/estop`` (std_srvs/SetBool): true = stop every axis, false = release;
     ``safety/reset`` (std_srvs/Trigger): clear latched faults once their cause is gone.
@@ -35,11 +36,11 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus, Temperature
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
+from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase, Wind
 
 from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
                                    LIMIT_SWITCHES, SAFETY_ESTOP, SAFETY_RESET, SAFETY_STATE, SWITCHES,
-                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY, Level, Qos)
+                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY, WIND, Level, Qos)
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, stamp, steady_now, to_sec
 from sslfr_safety.core import SafetyCore
 from sslfr_safety.params import TABLE, config_from
@@ -103,6 +104,7 @@ class SafetyNode(LeanEvents, Node):
             self._subscribe(AxisStatus, AXIS_STATUS.of(axis), lambda m, a=axis: self._on_axis(a, m))
         self._subscribe(NavSatFix, GPS_FIX.name, self._on_fix)
         self._subscribe(Irradiance, IRRADIANCE_BEAM.name, self._on_beam)
+        self._subscribe(Wind, WIND.name, self._on_wind)
         self.create_service(SetBool, SAFETY_ESTOP.name, self._srv_estop)
         self.create_service(Trigger, SAFETY_RESET.name, self._srv_reset)
 
@@ -177,6 +179,10 @@ class SafetyNode(LeanEvents, Node):
     def _on_beam(self, msg: Irradiance) -> None:
         self.core.on_beam(msg.beam)
 
+    def _on_wind(self, msg: Wind) -> None:
+        self.core.on_wind(msg.speed, msg.gust, msg.mean, msg.window, stamp=to_sec(msg.header.stamp))
+        self._evaluate(publish_on_change=True)
+
     # ------------------------------------------------------------ services
     def _srv_estop(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         response.success, response.message = self.core.estop(bool(request.data))
@@ -206,6 +212,8 @@ class SafetyNode(LeanEvents, Node):
     def _evaluate(self, publish_on_change: bool) -> None:
         self.core.evaluate()
         transitions = self.core.drain_transitions()
+        for note in self.core.drain_notes():
+            self.get_logger().info(note)
         for tr in transitions:
             self._last_transition = str(tr)
             if tr.new_level >= Level.STOW and tr.added:
@@ -237,6 +245,8 @@ class SafetyNode(LeanEvents, Node):
             self._since_steady = state.since
             self._since_msg = self._ros_time_of(state.since)
         msg.since = self._since_msg
+        msg.wind_stow = state.wind_stow
+        msg.wind_release_in = state.wind_release_in
         msg.sequence = self._sequence
         self._sequence = (self._sequence + 1) % (1 << 32)
         self._pub.publish(msg)

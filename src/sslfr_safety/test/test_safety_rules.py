@@ -174,7 +174,7 @@ def test_each_rule_is_one_entry_with_texts_hint_and_clearing():
     kinds = [r.kind for r in R.RULES]
     assert len(set(kinds)) == len(kinds)
     assert set(kinds) == {'overtemp', 'thermocouple', 'switch', 'stuck_switch', 'estop', 'post_estop',
-                          'watchdog', 'site', 'time', 'axis'}
+                          'watchdog', 'site', 'time', 'axis', 'wind', 'anemometer'}
     for rule in R.RULES:
         assert rule.reasons and rule.hint.endswith('.'), rule.kind
         if rule.clears is R.Clear.SELF:

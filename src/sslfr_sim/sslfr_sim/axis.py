@@ -26,6 +26,12 @@ Model
   decelerate to stop, fault WATCHDOG), reset (power cycle), a slipping coupling
   (:meth:`AxisSim.slip`: the joint, and so the sensor, turns away from the motor at a
   steady rate until the slip is complete; the counter does not see it).
+* Host-loss stow (SET_HOST_LOSS_STOW, kept like the firmware's EEPROM across resets):
+  ``delay_ms`` after the watchdog stop, with the host still silent, the board drives by
+  itself to the stow steps (only when HOMED) or toward the stow switch until it closes,
+  switches and step range respected; fault HOST_LOSS latched (cleared by MOVE_TO /
+  HOME), STATUS flag HOST_LOSS_STOWING while it drives; a host request before the
+  delay cancels it, a host command (MOVE_TO, HOME, STOP) ends it.
 """
 from __future__ import annotations
 
@@ -75,7 +81,8 @@ class AxisSim(SimBoard):
     kind = m.BoardKind.AXIS_STEPPER
     name = 'sim-axis'
     firmware = (1, 0, 0)
-    REQUESTS = SimBoard.REQUESTS | {m.GetStatus.TYPE, m.MoveTo.TYPE, m.Stop.TYPE, m.Home.TYPE, m.SetZero.TYPE}
+    REQUESTS = SimBoard.REQUESTS | {m.GetStatus.TYPE, m.MoveTo.TYPE, m.Stop.TYPE, m.Home.TYPE, m.SetZero.TYPE,
+                                    m.SetHostLossStow.TYPE}
 
     def __init__(self, config: AxisConfig | None = None, board_id: int = 1,
                  rng: random.Random | None = None, **kw):
@@ -121,6 +128,11 @@ class AxisSim(SimBoard):
         self.home_angle: float | None = None         # joint angle [rad] where HOME ended
         self.decel = 0.0            # [steps/s^2] of a watchdog stop (0: accel)
         self.faults = m.FaultBits.RESET
+        self.seek: int | None = None                 # switch a host-loss stow drives to
+        self.hl_stowing = False
+        self.hl_armed_at: float | None = None        # watchdog stop time while a stow waits
+        if not hasattr(self, 'host_loss'):
+            self.host_loss = m.SetHostLossStow()     # the "EEPROM" record (survives resets)
 
     def limit_bits(self) -> int:
         """Raw limit-switch bits (:class:`messages.LimitBits`) at the joint angle: LOW at
@@ -155,6 +167,8 @@ class AxisSim(SimBoard):
             flags |= m.StatusFlags.HOMING
         if self.cfg.has_sensor:
             flags |= m.StatusFlags.HAS_SENSOR
+        if self.hl_stowing:
+            flags |= m.StatusFlags.HOST_LOSS_STOWING
         pos = int(round(self.counter))
         return m.Status(pos, int(round(self.target)) if self.homing is None else pos,
                         float(self.speed), int(flags), int(self.limit_bits()),
@@ -166,6 +180,12 @@ class AxisSim(SimBoard):
             return self.status()
         if isinstance(msg, m.Stop):
             self._stop()
+            self.hl_stowing = False
+            return m.Ack(msg.TYPE)
+        if isinstance(msg, m.SetHostLossStow):
+            if not self._host_loss_valid(msg):
+                raise Refuse(m.ErrorCode.OUT_OF_RANGE)
+            self.host_loss = msg
             return m.Ack(msg.TYPE)
         if isinstance(msg, m.MoveTo):
             if not self.homed:
@@ -179,8 +199,9 @@ class AxisSim(SimBoard):
                 raise Refuse(m.ErrorCode.LIMIT_ACTIVE)
             self.target = float(msg.steps)
             self.decel = 0.0
+            self.seek, self.hl_stowing = None, False
             self.cmd_speed = min(msg.speed, self.cfg.max_speed)
-            self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
+            self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT | m.FaultBits.HOST_LOSS)
             return m.Ack(msg.TYPE)
         if isinstance(msg, m.Home):
             if msg.switch not in (0, 1, 2) or msg.speed == 0:
@@ -189,7 +210,8 @@ class AxisSim(SimBoard):
             self.decel = 0.0
             self.cmd_speed = min(abs(msg.speed), self.cfg.max_speed)
             self.target = self.counter + math.copysign(1e9, msg.speed)
-            self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT)
+            self.seek, self.hl_stowing = None, False
+            self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT | m.FaultBits.HOST_LOSS)
             if self.limit_bits() & (1 << msg.switch):
                 self._home_done()
             return m.Ack(msg.TYPE)
@@ -214,12 +236,57 @@ class AxisSim(SimBoard):
         self.homing = None
         # standstill within WATCHDOG_STOP_S, faster than accel when needed (the firmware's rule)
         self._stop(abs(self.speed) / WATCHDOG_STOP_S)
+        self.hl_stowing = False
+        self.hl_armed_at = self.now if self.host_loss.mode != m.HostLossMode.OFF else None
+
+    def _host_loss_valid(self, h: m.SetHostLossStow) -> bool:
+        """The firmware's rule for a host-loss stow record (hl_valid in boards/axis.cpp)."""
+        if h.mode == m.HostLossMode.OFF:
+            return True
+        if h.mode not in (m.HostLossMode.POSITION, m.HostLossMode.SWITCH) or h.speed == 0 \
+                or not 0 < h.delay_ms <= m.HOST_LOSS_MAX_DELAY_MS:
+            return False
+        if h.mode == m.HostLossMode.POSITION:
+            return self.config.min_steps <= h.steps <= self.config.max_steps
+        return h.switch in (0, 1, 2)
+
+    def _host_loss_poll(self) -> None:
+        """Start the host-loss stow once the host stayed silent for its delay."""
+        h = self.host_loss
+        if self.hl_armed_at is None:
+            return
+        if not self.watchdog_tripped or h.mode == m.HostLossMode.OFF:
+            self.hl_armed_at = None
+            return
+        if (self.now - self.hl_armed_at) * 1000.0 < h.delay_ms:
+            return
+        self.hl_armed_at = None
+        speed = min(abs(h.speed), self.cfg.max_speed)
+        if h.mode == m.HostLossMode.POSITION:
+            if not self.homed:
+                return                                       # position unknown: stay
+            direction = (h.steps > self.counter) - (h.steps < self.counter)
+            if self._blocking(direction):
+                return
+            self.target = float(h.steps)
+        else:
+            if self.limit_bits() & (1 << h.switch):
+                self.faults |= m.FaultBits.HOST_LOSS
+                return
+            if self._blocking(1 if h.speed > 0 else -1):
+                return
+            self.seek = h.switch
+            self.target = self.counter + math.copysign(1e9, h.speed)
+        self.decel, self.cmd_speed = 0.0, speed
+        self.faults |= m.FaultBits.HOST_LOSS
+        self.hl_stowing = True
 
     def _stop(self, decel: float = 0.0) -> None:
         """Decelerate to a stop at max(``decel``, accel) [steps/s^2]: the new target is
         the stopping point."""
         if self.homing is not None:
             self.homing = None
+        self.seek = None
         self.decel = decel if decel > self.cfg.accel else 0.0
         v = self.speed
         d = v * v / (2 * max(decel, self.cfg.accel))
@@ -269,6 +336,9 @@ class AxisSim(SimBoard):
     def update(self, dt: float) -> None:
         if dt <= 0:
             return
+        self._host_loss_poll()
+        if self.hl_stowing and not self.busy():
+            self.hl_stowing = False
         c = self.cfg
         if self.slip_left:
             d = math.copysign(min(abs(self.slip_left), self.slip_rate * dt), self.slip_left)
@@ -299,6 +369,12 @@ class AxisSim(SimBoard):
                 lo_stop, hi_stop = c.lo - c.overtravel, c.hi + c.overtravel
                 self.angle = min(max(self.angle, lo_stop), hi_stop)
             direction = (move > 0) - (move < 0)
+            if self.seek is not None and self.limit_bits() & (1 << self.seek):
+                self._back_to_edge(self.seek, direction)
+                self.seek = None
+                self.target = self.counter
+                self.speed = 0.0
+                break
             if self.homing is not None and self.limit_bits() & (1 << self.homing[0]):
                 self._back_to_edge(self.homing[0], direction)
                 self._home_done()
@@ -307,6 +383,7 @@ class AxisSim(SimBoard):
                 self._back_to_edge(m.Switch.HIGH if direction > 0 else m.Switch.LOW, direction)
                 self.faults |= m.FaultBits.LIMIT
                 self.homing = None
+                self.seek = None
                 self.target = self.counter
                 self.speed = 0.0
                 break

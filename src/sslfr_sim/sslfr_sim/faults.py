@@ -15,6 +15,8 @@ is a simulated duration, > 0)::
     slip:AXIS@HH:MM+SECONDS:DEG                the axis' coupling slips: the joint (and its
                                                encoder) turns DEG away from the motor over
                                                SECONDS, and stays there
+    wind:MEAN@HH:MM+SECONDS                    a gusty wind of mean MEAN [m/s] (0..100) at
+                                               the anemometer (absorber board)
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -43,6 +45,10 @@ slip                the axis' accuracy alarm: WARN past 0.06 deg, ERROR past
                     0.36 deg (``<axis>_driver: accuracy`` diagnostics, log);
                     past ``lost_step_tolerance`` (0.29 deg by default) the
                     driver's lost-step check faults the axis
+wind                safety STOW (wind) at the first 3 s mean over wind.gust_limit
+                    or a mean over wind.mean_limit: planner phase STOW, axes to
+                    the wind pose (face-up); after the fault, released once the
+                    mean stayed below the limit - hysteresis for wind.hold
 ==================  ==========================================================
 """
 from __future__ import annotations
@@ -50,9 +56,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from sslfr_common.contract import JOINTS, MIRRORS
+from sslfr_common.contract import JOINTS, MIRRORS, WIND
 
-KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang', 'slip')
+#: The wind fault's kind: named after the topic whose sensor it disturbs.
+WIND_FAULT = WIND.name
+
+KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang', 'slip',
+         WIND_FAULT)
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -63,12 +73,20 @@ _RULES = {
     'kill': (True, 'optional'),
     'hang': (True, 'forbidden'),
     'slip': (True, 'required'),
+    WIND_FAULT: (True, 'required'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
-FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps'}
+FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-loss': 'gps', WIND_FAULT: 'absorber'}
+#: [m/s] the largest wind mean a fault may inject
+WIND_MAX = 100.0
+#: [s wall] a wind fault shorter than this spans fewer than two of the absorber board's
+#: pulse samples (4 Hz of the board's own clock, wall time in simulation): its wind is
+#: averaged with the calm around it. The gust and mean windows and the release hold run
+#: on ROS (simulated) time, so longer faults act as they would in real time.
+WIND_MIN_WALL_S = 0.5
 
-_SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/]+))?'
+_SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/.]+))?'
                    r'@(?P<hh>\d{1,2}):(?P<mm>\d{2})(?::(?P<ss>\d{2}(?:\.\d+)?))?'
                    r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?'
                    r'(?::(?P<amount>[-+]?(?:\d+(?:\.\d*)?|\.\d+)))?$')
@@ -89,7 +107,8 @@ class Fault:
     at : float
         Seconds after 00:00 UTC of the simulated day [s].
     target : str or None
-        Board (link-drop, board-reset), node (kill, hang) or thermocouple (inlet/outlet).
+        Board (link-drop, board-reset), node (kill, hang), thermocouple (inlet/outlet) or
+        the mean wind [m/s] as text (wind).
     duration : float or None
         Simulated seconds the fault lasts [s]; None = until the end (or instantaneous).
     spec : str
@@ -134,6 +153,15 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         if target not in (None, 'inlet', 'outlet'):
             raise FaultSpecError(f'fault {spec!r}: thermocouple is inlet or outlet, not {target!r}')
         target = target or 'outlet'
+    elif kind == WIND_FAULT:
+        try:
+            mean = float(target or '')
+        except ValueError:
+            mean = -1.0
+        if not 0.0 <= mean <= WIND_MAX:
+            raise FaultSpecError(f'fault {spec!r}: wind needs :MEAN, the mean wind in m/s, 0..{WIND_MAX:g} '
+                                 f'(e.g. wind:18@12:00+600)')
+        target = f'{mean:g}'
     elif needs_target and not target:
         on_node = kind in ('kill', 'hang')
         what = 'NODE' if on_node else 'BOARD'

@@ -184,6 +184,11 @@ class FirmwareBoard:
             self.harness.cmd('nmea ' + bytes(nmea).hex())
         if temps:
             self.harness.cmd(f'temps {temps[0]} {temps[1]}')
+            if hasattr(sh, 'pulse_frequency'):
+                # the cup anemometer's square wave on the pin the firmware counts on (the
+                # host sets it: SET_PULSE_INPUT), the firmware counts the edges
+                hz = 0.0 if sh.anemometer_silent else sh.pulse_frequency()
+                self.harness.cmd(f'pulses {hz:.4f}')
         if lux is not None:
             self.harness.cmd(f'lux {lux:.4f}')
         seq = [b for i, b in enumerate(bits) if i == 0 or b != bits[i - 1]]

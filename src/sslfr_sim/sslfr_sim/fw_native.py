@@ -42,6 +42,8 @@ def lib():
             'hl_request_size': (C.c_int8, [C.c_uint8]),
             'hl_parse_move_to': (C.c_uint8, [C.c_char_p, C.c_uint8, C.POINTER(C.c_int32), C.POINTER(C.c_float)]),
             'hl_parse_home': (C.c_uint8, [C.c_char_p, C.c_uint8, u8p, C.POINTER(C.c_float), C.POINTER(C.c_int32)]),
+            'hl_parse_host_loss': (C.c_uint8, [C.c_char_p, C.c_uint8, u8p, u8p, C.POINTER(C.c_int32),
+                                               C.POINTER(C.c_float), u32p]),
             'hl_msg_status': (C.c_uint8, [u8p, C.c_int32, C.c_int32, C.c_float, C.c_uint8, C.c_uint8, C.c_uint16,
                                           C.c_float, C.c_uint32]),
             'hl_msg_info': (C.c_uint8, [u8p, C.c_uint8, C.c_uint8, C.c_uint8, C.c_uint8, C.c_uint32, C.c_char_p]),
@@ -211,6 +213,15 @@ def parse_home(payload: bytes) -> tuple[int, int, float, int]:
     return r, sw.value, speed.value, pos.value
 
 
+def parse_host_loss(payload: bytes) -> tuple[int, int, int, int, float, int]:
+    """(error code or 0, mode, switch, steps, speed, delay_ms) as the axis firmware parses
+    SET_HOST_LOSS_STOW."""
+    mode, sw, steps, speed, delay = C.c_uint8(), C.c_uint8(), C.c_int32(), C.c_float(), C.c_uint32()
+    r = lib().hl_parse_host_loss(bytes(payload), len(payload), C.byref(mode), C.byref(sw), C.byref(steps),
+                                 C.byref(speed), C.byref(delay))
+    return r, mode.value, sw.value, steps.value, speed.value, delay.value
+
+
 def pack_status(s: m.Status) -> bytes:
     out = _buf(64)
     n = lib().hl_msg_status(out, s.position, s.target, s.speed, s.flags, s.limit_bits, s.fault_bits,
@@ -226,13 +237,16 @@ def pack_info(i: m.Info) -> bytes:
 
 
 def pack_sample(msg) -> bytes:
-    """ThermocoupleSample / SwitchSample / AlsSample payloads as the firmware builds them."""
+    """ThermocoupleSample / SwitchSample / AlsSample / PulseSample payloads as the firmware
+    builds them."""
     out = _buf(16)
     name = type(msg).__name__
     if name == 'ThermocoupleSample':
         n = lib().hl_msg_samples(out, 0, msg.board_ms, msg.inlet, msg.outlet, 0, 0)
     elif name == 'SwitchSample':
         n = lib().hl_msg_samples(out, 1, msg.board_ms, 0, 0, msg.bits, 0)
+    elif name == 'PulseSample':
+        n = lib().hl_msg_samples(out, 3, msg.board_ms, msg.count & 0xFFFF, msg.count >> 16, msg.pin, 0)
     else:
         n = lib().hl_msg_samples(out, 2, msg.board_ms, msg.count, 0, msg.gain_code, msg.it_code)
     return bytes(out[:n])

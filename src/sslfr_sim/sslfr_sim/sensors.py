@@ -43,7 +43,9 @@ Fault injection (:meth:`control` of each class, the runner's control channel):
 ``gps-loss``; plus ``gps-clock`` (``offset`` s added to the receiver's UTC),
 ``switch`` (``name``, ``closed`` true/false/null to release), ``switch-bounce``
 (``name``: next change bounces), ``lux`` (``value`` lx override, null to release),
-``cloud`` (``value`` 0..1), ``flow`` (``value`` W/K, 0 = pump stopped).
+``cloud`` (``value`` 0..1), ``flow`` (``value`` W/K, 0 = pump stopped), ``wind``
+(``value`` mean wind [m/s] of a gusty wind at the anemometer; inactive: back to the
+``wind`` option), ``anemometer-silent`` (the pulse samples stop).
 """
 from __future__ import annotations
 
@@ -56,16 +58,17 @@ import random
 import time
 
 from sslfr_common.contract import (JOINT_RANGE, MIRRORS, MOBILE_STRUCTURE, STOW_POSITION, SWITCH_AXIS, SWITCH_POSITION,
-                                   SWITCHES)
+                                   SWITCHES, WIND)
 from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
-from sslfr_drivers.sensors import max6675
+from sslfr_drivers.sensors import anemometer, max6675
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.protocol import MAX_PAYLOAD
-from sslfr_drivers.link.sensor_messages import AlsSample, NmeaChunk, SwitchSample, ThermocoupleSample
-from sslfr_sim.world import AbsorberThermal, GpsReceiver, Sky, ThermalParameters
+from sslfr_drivers.link.sensor_messages import (PULSE_PIN_OFF, AlsSample, NmeaChunk, PulseSample, SetPulseInput,
+                                                SwitchSample, ThermocoupleSample)
+from sslfr_sim.world import AbsorberThermal, GpsReceiver, GustyWind, Sky, ThermalParameters
 from sslfr_sim.base import Refuse, SimBoard
 
 #: Defaults: the seed 000 prototype at the University of Almeria (36.83 N, 2.40 W).
@@ -293,11 +296,15 @@ class AbsorberSim(_SensorSim):
 
     Options: site keys, ``ambient`` [degC], ``flow`` [W/K], ``heat_capacity`` [J/K],
     ``loss`` [W/K], ``temperature`` (initial outlet) [degC], ``cloud`` [0..1],
-    ``thermo_period`` [s] (0.25), ``switch_period`` [s] (0.05), ``noise`` [degC] (0.2).
+    ``thermo_period`` [s] (0.25), ``switch_period`` [s] (0.05), ``noise`` [degC] (0.2),
+    ``wind`` [m/s] (2: mean of the gusty wind at the cup anemometer, whose pulses are
+    counted on the pin the host sets with SetPulseInput; the anemometer follows the
+    typical calibration of :mod:`sslfr_drivers.sensors.anemometer`).
     """
 
     kind = m.BoardKind.ABSORBER
     name = 'sim-absorber'
+    REQUESTS = _SensorSim.REQUESTS | {SetPulseInput.TYPE}
 
     def __init__(self, options: dict | None = None, rng: random.Random | None = None,
                  board_id: int = 1):
@@ -316,6 +323,11 @@ class AbsorberSim(_SensorSim):
         self.thermo_period = float(o.get('thermo_period', 0.25))
         self.switch_period = float(o.get('switch_period', 0.05))
         self.noise = float(o.get('noise', 0.2))
+        self.calm_wind = float(o.get(WIND.name, 2.0))
+        self.wind = GustyWind(self.calm_wind, random.Random(self.rng.random()))
+        self.pulse_pin = PULSE_PIN_OFF
+        self.pulses = 0.0                  # falling edges since SetPulseInput (fractional: phase)
+        self.anemometer_silent = False
         self.overtemp: float | None = None
         self.open = {'inlet': False, 'outlet': False}
         self.switch_override: dict[str, bool] = {}
@@ -330,6 +342,19 @@ class AbsorberSim(_SensorSim):
         self._next_thermo = self.now + 0.25
         self._next_switch = self.now + 0.05
         self._last_bits = None
+        self.pulse_pin = PULSE_PIN_OFF
+
+    def handle(self, msg, frame):
+        if isinstance(msg, SetPulseInput):
+            if msg.pin != PULSE_PIN_OFF and msg.pin not in anemometer.FREE_PINS:
+                raise Refuse(m.ErrorCode.OUT_OF_RANGE)
+            self.pulse_pin, self.pulses = msg.pin, 0.0
+            return m.Ack(msg.TYPE)
+        return super().handle(msg, frame)
+
+    def pulse_frequency(self) -> float:
+        """Pulse frequency [Hz] of the anemometer in the wind now."""
+        return anemometer.frequency(self.wind.speed)
 
     def axis_angles(self) -> dict[str, float]:
         """Axis joint angles [rad] from the world file, re-read at most every 0.1 s
@@ -353,6 +378,8 @@ class AbsorberSim(_SensorSim):
         sim_dt = utc - self._model_utc
         self._model_utc = utc
         angles = {**self._ideal(utc), **self.axis_angles()}
+        self.wind.step(dt)
+        self.pulses += self.pulse_frequency() * max(0.0, dt)
         if sim_dt > 0:
             sun = self.sky.sun(utc)
             dni = self.sky.dni(utc) if sun.above_horizon else 0.0
@@ -368,6 +395,8 @@ class AbsorberSim(_SensorSim):
             for name, t in (('inlet', self.thermal.inlet), ('outlet', out_t)):
                 words.append(max6675.encode(t + self.rng.gauss(0.0, self.noise), self.open[name]))
             self.send(ThermocoupleSample(self.board_ms, *words))
+            if self.pulse_pin != PULSE_PIN_OFF and not self.anemometer_silent:
+                self.send(PulseSample(self.board_ms, int(self.pulses) & 0xFFFFFFFF, self.pulse_pin))
         bits = self._switch_bits(angles)
         if self._last_bits is not None and bits != self._last_bits:
             changed = bits ^ self._last_bits
@@ -423,6 +452,13 @@ class AbsorberSim(_SensorSim):
             self.sky.cloud_factor = float(cmd.get('value', 1.0))
         elif kind == 'flow':
             self.thermal.p.flow_capacity = float(cmd.get('value', 20.0))
+        elif kind == WIND.name:       # the control kind is the sslfr sim fault's (faults.WIND_FAULT)
+            value = float(cmd.get('value', self.calm_wind)) if active else self.calm_wind
+            if not (math.isfinite(value) and 0.0 <= value <= 100.0):
+                return {'ok': False, 'error': f'wind mean {value!r}: 0..100 m/s'}
+            self.wind.mean = value
+        elif kind == 'anemometer-silent':
+            self.anemometer_silent = active
         else:
             return super().control(cmd)
         return {'ok': True}

@@ -127,6 +127,8 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
     cmd = {'cmd': 'fault', 'kind': f.kind, 'active': active}
     if f.kind == 'thermocouple-open':
         cmd['target'] = f.target
+    if f.kind == faults_mod.WIND_FAULT:
+        cmd['value'] = float(f.target)
     return [json.dumps(cmd)]
 
 
@@ -314,6 +316,11 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             print(f'sslfr sim: fault {f.spec}: a slipping coupling is simulated by the Python boards only '
                   '(--boards sim), not by the firmware harness', file=sys.stderr)
             return 2
+        if f.kind == faults_mod.WIND_FAULT and f.duration / speed < faults_mod.WIND_MIN_WALL_S:
+            print(f'sslfr sim: warning: fault {f.spec} lasts {f.duration / speed:.2f} wall seconds at --speed '
+                  f'{speed:g}, less than two of the absorber board\'s pulse samples (4 Hz, the board\'s clock): '
+                  f'its wind is averaged with the calm around it; give it at least '
+                  f'{faults_mod.WIND_MIN_WALL_S * speed:.0f} s or a lower --speed', file=sys.stderr)
     try:                      # the default output is checked as --out is (a read-only cwd ...)
         out = (args.out or output_dir(f'out/sim-{date}')).resolve()
     except argparse.ArgumentTypeError as exc:

@@ -307,3 +307,30 @@ class AbsorberThermal:
     def inlet(self) -> float:
         """Inlet thermocouple [degC]."""
         return self.p.ambient + 0.1 * (self.temperature - self.p.ambient)
+
+
+class GustyWind:
+    """Wind speed at the anemometer: a mean plus turbulence (SI units, board seconds).
+
+    An Ornstein-Uhlenbeck process around ``mean`` [m/s] with time scale ``tau`` [s]
+    and standard deviation ``intensity * mean`` (turbulence intensity 0.2, the order
+    of open country; its 3 s gusts over 10 min reach about 1.5 x the mean, the usual
+    gust factor), clipped at 0. ``step(dt)`` advances it; ``speed`` is the value now.
+    """
+
+    def __init__(self, mean: float, rng, intensity: float = 0.2, tau: float = 3.0):
+        self.mean = float(mean)
+        self.intensity = float(intensity)
+        self.tau = float(tau)
+        self.rng = rng
+        self._dev = 0.0
+        self.speed = max(0.0, self.mean)
+
+    def step(self, dt: float) -> float:
+        """Advance by ``dt`` [s]; returns the wind speed [m/s]."""
+        if dt > 0:
+            a = math.exp(-dt / self.tau)
+            sigma = self.intensity * self.mean
+            self._dev = a * self._dev + sigma * math.sqrt(1.0 - a * a) * self.rng.gauss(0.0, 1.0)
+        self.speed = max(0.0, self.mean + self._dev)
+        return self.speed

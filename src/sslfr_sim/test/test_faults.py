@@ -17,6 +17,8 @@ from sslfr_sim.faults import Fault, FaultSpecError, Schedule, format_fault, pars
     ('kill:planner@12:00', 'kill', 43200, 'planner', None, None),
     ('kill:safety@12:00+30', 'kill', 43200, 'safety', 30.0, None),
     ('hang:planner@12:00', 'hang', 43200, 'planner', None, None),
+    ('wind:18@12:00+600', 'wind', 43200, '18', 600.0, 'absorber'),
+    ('wind:7.5@12:00+60', 'wind', 43200, '7.5', 60.0, 'absorber'),
 ])
 def test_parse_each_kind(spec, kind, at, target, duration, board):
     f = parse(spec, nodes=['planner', 'safety'])
@@ -42,6 +44,10 @@ def test_parse_each_kind(spec, kind, at, target, duration, board):
     ('hang:nobody@10:00', 'unknown node'),
     ('hang:planner@10:00+30', 'instantaneous'),
     ('thermocouple-open:middle@10:00', 'inlet or outlet'),
+    ('wind@10:00+60', 'wind needs :MEAN'),
+    ('wind:calm@10:00+60', 'wind needs :MEAN'),
+    ('wind:101@10:00+60', 'wind needs :MEAN'),
+    ('wind:12@10:00', 'needs a duration'),
     ('slip:mirrors@10:00+60', 'slipped angle'),
     ('slip:mirrors@10:00+60:0', 'slipped angle'),
     ('slip:mirrors@10:00+60:91', 'slipped angle'),
@@ -65,7 +71,7 @@ def test_slip_spec():
        board=st.sampled_from(faults.DEFAULT_BOARDS))
 def test_format_parse_round_trip(kind, at, dur, board):
     target = {'link-drop': board, 'board-reset': board, 'kill': 'planner', 'hang': 'safety',
-              'thermocouple-open': 'inlet', 'slip': 'mirrors'}.get(kind)
+              'thermocouple-open': 'inlet', 'slip': 'mirrors', 'wind': '12.5'}.get(kind)
     duration = None if kind in ('board-reset', 'hang') else float(dur)
     f = Fault(kind, float(at), target, duration, '', amount=0.25 if kind == 'slip' else None)
     g = parse(format_fault(f))
@@ -81,6 +87,15 @@ def test_schedule_returns_each_start_and_end_once_in_order():
     assert s.due(36000.0) == []
     assert s.due(36100.0) == [(b, 'start'), (a, 'end')]
     assert s.pending() == 0
+
+
+def test_wind_fault_commands_set_and_release_the_simulated_mean():
+    import json
+    from sslfr_sim.sim_cli import fault_commands
+    f = parse('wind:18@12:00+600')
+    assert json.loads(fault_commands(f, 'start', 1.0)[0]) == {'cmd': 'fault', 'kind': 'wind', 'active': True,
+                                                              'value': 18.0}
+    assert json.loads(fault_commands(f, 'end', 1.0)[0])['active'] is False
 
 
 def test_sim_set_option_parses_yaml_values():

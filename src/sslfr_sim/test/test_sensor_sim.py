@@ -1,6 +1,7 @@
 """Simulated sensor boards and their protocol messages (no ROS, no pty)."""
 import datetime as dt
 import math
+import random
 from types import SimpleNamespace
 
 import pytest
@@ -225,3 +226,47 @@ def test_runner_publishes_axis_angles_to_the_world_file(tmp_path, monkeypatch):
     assert true_angle == pytest.approx(math.radians(30.0))
     b = AbsorberSim({'start_utc': NOON, 'world': str(world)})
     assert b.axis_angles()['mirrors'] == pytest.approx(math.radians(30.0))
+
+
+def test_absorber_counts_the_simulated_anemometer_on_the_pin_the_host_sets():
+    """Issue 35: no pulse samples until SetPulseInput; then 4 Hz PulseSample whose counts
+    follow the gusty wind (calm default 2 m/s, the `wind` fault's mean)."""
+    from sslfr_drivers.link.auth import HOST_TO_BOARD
+    from sslfr_drivers.link.protocol import encode_frame
+    from sslfr_drivers.link.sensor_messages import PulseSample, SetPulseInput
+    from sslfr_drivers.sensors import anemometer
+    b = AbsorberSim({'start_utc': NOON, 'seed': 5})
+    assert not [x for x in _run(b, 1.0) if isinstance(x, PulseSample)]
+    s = open_session(b)
+    b.receive(encode_frame(s.seal(HOST_TO_BOARD, 1, m.encode(SetPulseInput(9), 0)))
+              + encode_frame(s.seal(HOST_TO_BOARD, 2, m.encode(SetPulseInput(7), 0))))
+    out = [m.decode(f) for f in Framer().feed(b.take_output())]
+    assert [type(x).__name__ for x in out] == ['Nack', 'Ack'] and out[0].code == m.ErrorCode.OUT_OF_RANGE
+
+    def mean_speed(seconds):
+        samples = [x for x in _run(b, seconds) if isinstance(x, PulseSample)]
+        assert samples and all(x.pin == 7 for x in samples)
+        counter, stats = anemometer.PulseCounter(), anemometer.WindStats()
+        r = [stats.add(*iv) for x in samples if (iv := counter.add(x.board_ms, x.count))]
+        return r[-1].mean, len(samples) / seconds
+    calm, rate = mean_speed(60.0)
+    assert calm == pytest.approx(2.0, abs=0.6) and rate == pytest.approx(4.0, abs=0.1)
+    assert b.control({'cmd': 'fault', 'kind': 'wind', 'value': 18.0})['ok']
+    assert mean_speed(60.0)[0] == pytest.approx(18.0, rel=0.15)
+    assert not b.control({'cmd': 'fault', 'kind': 'wind', 'value': -3})['ok']
+    b.control({'cmd': 'fault', 'kind': 'anemometer-silent', 'active': True})
+    assert not [x for x in _run(b, 1.0) if isinstance(x, PulseSample)]
+
+
+def test_simulated_gusty_wind_has_the_mean_and_a_usual_gust_factor():
+    from sslfr_drivers.sensors import anemometer as an
+    from sslfr_sim.world import GustyWind
+    wind, stats = GustyWind(12.0, random.Random(3)), an.WindStats()
+    count = 0.0
+    last = 0
+    for _ in range(4 * 600):
+        count += an.frequency(wind.step(0.25)) * 0.25
+        r = stats.add(0.25, int(count) - last)
+        last = int(count)
+    assert r.mean == pytest.approx(12.0, rel=0.15)
+    assert 1.2 < r.gust / r.mean < 2.0

@@ -163,3 +163,48 @@ def test_split_frames_survives_garbage_and_a_short_tail():
     for k in range(len(garbage) + 1):
         pieces = _split_frames(garbage[:k])
         assert b''.join(pieces) == garbage[:k]
+
+
+def _counter(ctl):
+    return ctl.cmd('status')['boards'][0]['counter']
+
+
+def test_host_loss_stow_drives_to_the_position_after_the_delay_and_waits_for_the_host(board):
+    """Issue 35: host silence -> watchdog stop (1 s) -> delay -> the board stows by itself,
+    reports HOST_LOSS and moves again only on the host's command."""
+    link, ctl = board
+    link.set_zero(15000)
+    link.move_to(5000, 20000)
+    assert wait_for(lambda: not link.get_status().moving, 3)
+    with pytest.raises(NackError) as err:                                 # outside the step range
+        link.request(m.SetHostLossStow(m.HostLossMode.POSITION, 0, 2**30 + 1, 20000.0, 1500))
+    assert err.value.code == m.ErrorCode.OUT_OF_RANGE
+    link.request(m.SetHostLossStow(m.HostLossMode.POSITION, 0, 12000, 20000.0, 1500))
+    t0 = time.monotonic()                                                  # the last request
+    assert wait_for(lambda: _counter(ctl) == 12000, 5)
+    elapsed = time.monotonic() - t0
+    assert 2.5 < elapsed < 2.5 + 1.0                                       # 1 s + 1.5 s + travel
+    st = link.get_status()
+    assert st.fault_bits & m.FaultBits.HOST_LOSS and st.position == 12000 and not st.moving
+    link.ping()
+    time.sleep(0.3)
+    assert _counter(ctl) == 12000                                          # stays until commanded
+    link.move_to(11000, 20000)                                             # the host's command
+    assert not link.get_status().fault_bits & m.FaultBits.HOST_LOSS
+    assert wait_for(lambda: _counter(ctl) == 11000, 2)
+
+
+def test_host_loss_stow_to_a_switch_and_a_host_back_before_the_delay_cancels_it(board):
+    link, ctl = board
+    link.set_zero(15000)
+    link.move_to(5000, 20000)
+    assert wait_for(lambda: not link.get_status().moving, 3)
+    link.request(m.SetHostLossStow(m.HostLossMode.SWITCH, m.Switch.SLEEP, 0, 20000.0, 1000))
+    time.sleep(1.6)                                                        # watchdog tripped, delay running
+    link.ping()                                                            # the host is back
+    time.sleep(1.5)
+    assert _counter(ctl) == 5000
+    assert wait_for(lambda: ctl.cmd('status')['boards'][0]['speed'] == 0 and _counter(ctl) > 14000, 5)
+    st = link.get_status()
+    assert st.limit_bits & m.LimitBits.SLEEP and st.fault_bits & m.FaultBits.HOST_LOSS
+    assert not st.fault_bits & m.FaultBits.LIMIT

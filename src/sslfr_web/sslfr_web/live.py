@@ -29,7 +29,7 @@ import time
 from collections import deque
 from typing import Any, Callable
 
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import JOINTS, WIND
 from sslfr_common.timeconv import to_sec
 from sslfr_common import accuracy as accuracy_mod
 from sslfr_safety.rules import hint_for
@@ -76,12 +76,27 @@ def phase_dict(m) -> dict:
                      'altitude': num(m.altitude, 2), 'source': m.site_source}}
 
 
+def wind_release(release_in: float) -> dict | None:
+    """A wind stow's release (``SafetyState.wind_release_in`` [s]): None without a wind
+    stow (NaN); ``calm`` False while the wind is not yet calm (inf), else the time left."""
+    v = float(release_in)
+    if math.isnan(v):
+        return None
+    return {'calm': math.isfinite(v), 'release_in': num(v, 1)}
+
+
 def safety_dict(m) -> dict:
     level = int(m.level)
     return {'level': level, 'name': LEVELS[level] if 0 <= level < len(LEVELS) else f'level {level}',
             'stow_required': bool(m.stow_required),
             'reasons': [{'text': r, 'hint': clear_hint(r)} for r in m.reasons],
-            'stopped_axes': list(m.stopped_axes), 'since': seconds_or_none(m.since), 'sequence': int(m.sequence)}
+            'stopped_axes': list(m.stopped_axes), 'since': seconds_or_none(m.since), 'sequence': int(m.sequence),
+            'wind_stow': bool(m.wind_stow), 'wind_release': wind_release(m.wind_release_in)}
+
+
+def wind_dict(m) -> dict:
+    return {'speed': num(m.speed, 2), 'gust': num(m.gust, 2), 'mean': num(m.mean, 2), 'window': num(m.window, 0),
+            'stamp': seconds_or_none(m.header.stamp)}
 
 
 def axis_dict(m) -> dict:
@@ -133,7 +148,7 @@ class LiveState:
     #: key -> converter of its messages
     CONVERT: dict[str, Callable] = {'phase': phase_dict, 'safety': safety_dict, 'sun': sun_dict,
                                     'beam': beam_dict, 'gps': fix_dict, 'axes': axis_dict,
-                                    'temperatures': temperature_dict}
+                                    'temperatures': temperature_dict, WIND.name: wind_dict}
     NESTED = ('axes', 'temperatures')
 
     def __init__(self, axes: tuple[str, ...] = JOINTS, wall: Callable[[], float] = time.time):
@@ -178,6 +193,9 @@ class LiveState:
 
     def on_fix(self, m) -> None:
         self._set('gps', m)
+
+    def on_wind(self, m) -> None:
+        self._set(WIND.name, m)
 
     def set_info(self, key: str, value: Any) -> None:
         with self._lock:

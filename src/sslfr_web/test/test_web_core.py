@@ -505,3 +505,21 @@ def test_web_password_cli_writes_a_hash_and_refuses_weak_passwords(tmp_path, mon
     monkeypatch.setattr('getpass.getpass', lambda prompt='': next(answers))
     assert password_cli.main(['--file', str(target)]) == 1                 # the two differ: unchanged
     assert auth.verify_password('a good passphrase', target.read_text())
+
+
+def test_wind_stow_release_and_wind_shown_on_the_page():
+    """Issue 35: the page shows the wind and a wind stow's time left (SafetyState
+    wind_release_in: NaN none, inf not calm yet, else seconds)."""
+    from sslfr_interfaces.msg import SafetyState, Wind
+    assert live.wind_release(math.nan) is None
+    assert live.wind_release(math.inf) == {'calm': False, 'release_in': None}
+    assert live.wind_release(754.26) == {'calm': True, 'release_in': 754.3}
+    st = live.LiveState(wall=lambda: 100.0)
+    msg = SafetyState(level=2, stow_required=True, reasons=['wind gust 21.0 m/s > 20.0 m/s (3 s mean): wind stow'],
+                      wind_stow=True, wind_release_in=600.0)
+    st.on_safety(msg)
+    st.on_wind(Wind(speed=21.0, gust=22.5, mean=9.0, window=600.0, pulse_rate=27.0))
+    snap = json.loads(json.dumps(st.snapshot()))
+    assert snap['safety']['wind_stow'] and snap['safety']['wind_release'] == {'calm': True, 'release_in': 600.0}
+    assert 'release' in snap['safety']['reasons'][0]['hint'] or 'calm' in snap['safety']['reasons'][0]['hint']
+    assert snap['wind'] == {'speed': 21.0, 'gust': 22.5, 'mean': 9.0, 'window': 600.0, 'stamp': None}

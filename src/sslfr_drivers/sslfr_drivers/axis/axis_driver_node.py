@@ -128,7 +128,7 @@ class AxisDriver(ManagedNode):
             self.session, self.refused = session, False
             self.last_error = self.sup.last_error = ''
             self.sup.position_lost()
-        self.get_logger().info(f'configured: board {session.board_info} on {port}')
+        self.get_logger().info(f'configured: board {session.board_info} on {port}; {session.host_loss_note}')
         return _SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
@@ -190,10 +190,10 @@ class AxisDriver(ManagedNode):
         if self.sup.safety.stop_at_receipt(now, msg) and session is not None:
             session.write(STOP, wait=False)     # before taking the lock: never wait behind a control tick
         with self._lock:
-            before = self.sup.safety.verdict(now)[0]
+            before = self.sup.safety.verdict(now)[0], self.sup.safety.wind_stow
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
-                                    msg.sequence, list(msg.reasons))
-            changed = self.sup.safety.verdict(now)[0] is not before
+                                    msg.sequence, list(msg.reasons), msg.wind_stow)
+            changed = self.sup.safety.verdict(now)[0] is not before[0] or self.sup.safety.wind_stow != before[1]
         if changed:
             self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 

@@ -27,6 +27,7 @@ from sslfr_common.contract import LinkState as Link
 
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.axis.commands import Action, ActionKind, BoardState
+from sslfr_drivers.axis.host_loss import configure_host_loss
 from sslfr_drivers.axis.joint import Calibration
 from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackError
 from sslfr_drivers.link.protocol import ProtocolError
@@ -98,6 +99,7 @@ class AxisBoardSession:
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
                               backoff_min=0.1, backoff_max=2.0, key=key)
         self.board_info = ''
+        self.host_loss_note = ''
         self.last_status: m.Status | None = None
         self.poll_failures = 0
         self.stale_polls = 0
@@ -297,4 +299,5 @@ def open_session(port: str, p: dict) -> AxisBoardSession:
                                key=link_key(p['key_file']), board_kind=drive_for(p['drive']).board_kind)
     session.reference = reference_keeper(p)
     session.open()
+    session.host_loss_note = configure_host_loss(session.link, p)     # the board's own stow (EEPROM)
     return session

@@ -13,7 +13,7 @@ import os
 import re
 import stat as stat_mod
 
-from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
+from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION, WIND_STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_common import accuracy
@@ -74,6 +74,15 @@ _SPECS = [
     _P('min_speed', 1e-4, 'minimum joint speed of a move [rad/s]', 'rad/s', 1e-6, 2.0),
     _P('stow_position', STOW_POSITION[_M], 'stow (defocus) position [rad] (mirrors pi/2 sleeping, others 0)',
        'rad', *_ANGLE),
+    _P('wind_stow_position', WIND_STOW_POSITION[_M], 'position of a wind stow (safety/state wind_stow) '
+       '[rad] (default face-up: mirrors 0, others 0; least wind load)', 'rad', *_ANGLE),
+    _P('host_loss_stow', 'position', "the board's own stow after losing the host (stored in its EEPROM "
+       'at configure): off | position (host_loss_stow_position, only when referenced) | switch (toward '
+       'home_switch)', choices=('off', 'position', 'switch')),
+    _P('host_loss_stow_position', STOW_POSITION[_M], 'joint angle of the host-loss stow [rad] (default the '
+       'stow position: mirrors pi/2 sleeping, defocused)', 'rad', *_ANGLE),
+    _P('host_loss_stow_delay', 60.0, 'host silence after the board watchdog stop (1 s) before the board '
+       'stows by itself [s]', 's', 1.0, 86400.0),
     _P('home_switch', 'sleep', 'limit switch HOME drives to: low | high | sleep (default sleep: '
        'mirrors +pi/2, others 0)', choices=tuple(HOME_SWITCHES)),
     _P('home_position', STOW_POSITION[_M], 'joint angle where the home switch closes [rad]', 'rad', *_ANGLE),
@@ -107,8 +116,10 @@ def cross_check(p: dict) -> list[str]:
     if p['lower_limit'] < mech[0] - 1e-9 or p['upper_limit'] > mech[1] + 1e-9:
         errors.append(f"soft limits [{p['lower_limit']:.4f}, {p['upper_limit']:.4f}] rad exceed the "
                       f'mechanical range [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
-    elif not SoftLimits(p['lower_limit'], p['upper_limit']).contains(p['stow_position']):
-        errors.append(f"stow_position {p['stow_position']:.4f} rad outside the soft limits")
+    else:
+        for key in ('stow_position', 'wind_stow_position', 'host_loss_stow_position'):
+            if not SoftLimits(p['lower_limit'], p['upper_limit']).contains(p[key]):
+                errors.append(f"{key} {p[key]:.4f} rad outside the soft limits")
     if p['min_speed'] > p['max_speed']:
         errors.append('min_speed > max_speed')
     drive = p.get('drive', DRIVE_KINDS[0])
@@ -131,7 +142,9 @@ def params_for(axis: str) -> ParamTable:
     position as stow and home position); KeyError for an unknown axis."""
     lo, hi = JOINT_RANGE[axis]
     return PARAMS.with_defaults(axis=axis, lower_limit=lo, upper_limit=hi,
-                                stow_position=STOW_POSITION[axis], home_position=STOW_POSITION[axis])
+                                stow_position=STOW_POSITION[axis], home_position=STOW_POSITION[axis],
+                                wind_stow_position=WIND_STOW_POSITION[axis],
+                                host_loss_stow_position=STOW_POSITION[axis])
 
 
 def tuning_from(p: dict) -> tuple[AxisTuning, StallDetector]:
@@ -140,7 +153,8 @@ def tuning_from(p: dict) -> tuple[AxisTuning, StallDetector]:
     tuning = AxisTuning(p['axis'], cal, SoftLimits(p['lower_limit'], p['upper_limit']), p['max_speed'],
                         p['min_speed'], 1.0 / p['control_rate'], p['stow_position'], p['home_switch'],
                         p['home_position'], p['home_speed'], p['use_sensor'], p['auto_home'],
-                        p['reference_samples'], p['drive'], p['deadband'])
+                        p['reference_samples'], p['drive'], p['deadband'],
+                        wind_stow_position=p['wind_stow_position'])
     return tuning, StallDetector(p['lost_step_tolerance'], p['stall_window'], p['stall_min_motion'])
 
 

@@ -44,11 +44,13 @@ class SafetyWatch:
     stow_required: bool = False
     stopped_axes: tuple = ()
     reasons: tuple = ()
+    wind_stow: bool = False
     _stop_ordered: bool = False
 
     def receive(self, now_steady: float, level: int, stow_required: bool, stopped_axes,
-                sequence: int, reasons=()) -> bool:
+                sequence: int, reasons=(), wind_stow: bool = False) -> bool:
         """Record a SafetyState; return True when it was fresh (new sequence)."""
+        self.wind_stow = bool(wind_stow)
         fresh = sequence != self.last_sequence
         self.level, self.stow_required = int(level), bool(stow_required)
         self.stopped_axes, self.reasons = tuple(stopped_axes), tuple(reasons)
@@ -85,6 +87,11 @@ class SafetyWatch:
         if msg.stow_required or msg.level == Level.STOW:
             return SafetyVerdict.STOW, 'safety requires stow: ' + '; '.join(msg.reasons)
         return SafetyVerdict.FOLLOW, ''
+
+    def wind_pose(self, now_steady: float) -> bool:
+        """True when a STOW goes to the wind pose: the last fresh message said the stow
+        is for wind only (a fail-safe stow on silence goes to the stow position)."""
+        return self.wind_stow and self.last_rx is not None and now_steady - self.last_rx <= self.timeout
 
     def stop_at_receipt(self, now_steady: float, msg) -> bool:
         """True when ``msg`` (as for :meth:`verdict`) newly orders this axis to STOP:

@@ -67,6 +67,8 @@ class AxisTuning:
         re-established and when a target counts as reached.
     deadband : float
         Position deadband of a closed-loop drive [rad] (linear actuator), else 0.
+    wind_stow_position : float or None
+        Position of a wind stow (safety's ``wind_stow``) [rad]; None: ``stow_position``.
     """
 
     axis: str
@@ -84,6 +86,7 @@ class AxisTuning:
     ref_samples: int = 5
     drive: str = 'stepper_switches'
     deadband: float = 0.0
+    wind_stow_position: float | None = None
 
 
 class Snapshot(NamedTuple):
@@ -291,7 +294,9 @@ class AxisSupervisor:
             self._latch(problem)
             return self.stop(board, 'fault', problem)
         if verdict is SafetyVerdict.STOW:
-            return self._move(board, self.cfg.stow_position, 'stowing', why)
+            wind = self.cfg.wind_stow_position is not None and self.safety.wind_pose(now_steady)
+            return self._move(board, self.cfg.wind_stow_position if wind else self.cfg.stow_position,
+                              'stowing', why)
         if self.mode == 'maintenance':
             if self.jog_target is not None:
                 return self._move(board, self.jog_target, 'jogging', 'maintenance jog')

@@ -88,6 +88,7 @@ class StatusFlags(IntFlag):
     HOMED = 1 << 1        # step counter is referenced (HOME or SET_ZERO since boot)
     HOMING = 1 << 2
     HAS_SENSOR = 1 << 3   # sensor_angle is meaningful
+    HOST_LOSS_STOWING = 1 << 4   # the board drives to its host-loss stow by itself
 
 
 class FaultBits(IntFlag):
@@ -99,6 +100,16 @@ class FaultBits(IntFlag):
     SENSOR = 1 << 3       # position sensor not answering
     DRIVER = 1 << 4       # stepper driver fault pin
     RESET = 1 << 5        # the board booted since the host last referenced it
+    HOST_LOSS = 1 << 6    # the board stowed by itself after losing the host (cleared by MOVE_TO/HOME)
+
+
+class HostLossMode(IntEnum):
+    """SetHostLossStow.mode: what the board does once the host has been silent for
+    the delay after its watchdog stop."""
+
+    OFF = 0               # stay where the watchdog stopped the motor
+    POSITION = 1          # MOVE_TO ``steps`` (only when HOMED)
+    SWITCH = 2            # drive toward switch ``switch`` (speed sign = direction) until it closes
 
 
 #: board-side watchdog period [s]: a board stops its motor when no valid frame
@@ -430,6 +441,36 @@ class SetZero(Message):
     FORMAT: ClassVar[str] = 'i'
     RESPONSE: ClassVar[bool] = True
     position: int = 0
+
+
+@register
+@dataclass(frozen=True)
+class SetHostLossStow(Message):
+    """The board's own stow on host loss, kept in its EEPROM (docs/protocol.md).
+
+    ``delay_ms`` [ms] after the host-silence watchdog's stop, the board drives by itself
+    to ``steps`` [steps] (mode POSITION, only when HOMED) or toward limit switch
+    ``switch`` until it closes (mode SWITCH, ``speed`` sign = direction), at |``speed``|
+    [steps/s] (capped by the board's max speed), switches and step limits respected;
+    then STATUS shows fault HOST_LOSS until a MOVE_TO or HOME. ACK, or NACK
+    OUT_OF_RANGE (mode, switch, zero speed, target outside the step range, delay 0 or
+    above :data:`HOST_LOSS_MAX_DELAY_MS`), INTERNAL (EEPROM write not verified)."""
+
+    TYPE: ClassVar[int] = 0x14
+    FORMAT: ClassVar[str] = 'BBifI'
+    RESPONSE: ClassVar[bool] = True
+    mode: int = HostLossMode.OFF
+    switch: int = 0
+    steps: int = 0
+    speed: float = 0.0
+    delay_ms: int = 60000
+
+    def validate(self):
+        _finite('SetHostLossStow.speed', self.speed)
+
+
+#: Longest host-loss stow delay a board accepts [ms] (one day).
+HOST_LOSS_MAX_DELAY_MS = 86_400_000
 
 
 # ------------------------------------------------------------- board -> host

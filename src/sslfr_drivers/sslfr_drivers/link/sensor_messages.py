@@ -20,6 +20,10 @@ code   message                 payload
                                4 longitudinal_2; 1 = closed), u8 reserved 0
 0xC3   AlsSample               u32 board_ms, u16 ALS count, u8 ALS_GAIN code,
                                u8 ALS_IT code (VEML7700 register codes)
+0xC4   PulseSample             u32 board_ms, u32 pulse count (falling edges
+                               since the input was set, wraps), u8 pin
+0x40   SetPulseInput           u8 pin (Arduino number; 0xFF = off) -> ACK /
+                               NACK OUT_OF_RANGE (a pin the board uses)
 =====  ======================  ================================================
 """
 from __future__ import annotations
@@ -27,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from sslfr_drivers.link.messages import SENSOR_REPLY_RANGE, Message, register
+from sslfr_drivers.link.messages import SENSOR_REPLY_RANGE, SENSOR_REQUEST_RANGE, Message, register
 from sslfr_drivers.link.protocol import MAX_PAYLOAD, PayloadError
 
 
@@ -98,5 +102,36 @@ class AlsSample(Message):
     it_code: int
 
 
+@register
+@dataclass(frozen=True)
+class PulseSample(Message):
+    """The running count of the pulse input (cup anemometer, absorber board), sent
+    at 4 Hz while the input is set (convert with :mod:`sslfr_drivers.sensors.anemometer`)."""
+
+    TYPE: ClassVar[int] = 0xC4
+    FORMAT: ClassVar[str] = 'IIB'
+    board_ms: int
+    count: int
+    pin: int
+
+
+#: SetPulseInput.pin value that switches the pulse input off.
+PULSE_PIN_OFF = 0xFF
+
+
+@register
+@dataclass(frozen=True)
+class SetPulseInput(Message):
+    """Count falling edges on Arduino pin ``pin`` from now on (count restarts at 0),
+    or stop counting (:data:`PULSE_PIN_OFF`). Not stored: the host sends it whenever
+    its link comes up. ACK, or NACK OUT_OF_RANGE for a pin the board uses otherwise."""
+
+    TYPE: ClassVar[int] = 0x40
+    FORMAT: ClassVar[str] = 'B'
+    RESPONSE: ClassVar[bool] = True
+    pin: int = PULSE_PIN_OFF
+
+
 assert all(c.TYPE in SENSOR_REPLY_RANGE for c in (NmeaChunk, ThermocoupleSample, SwitchSample,
-                                                    AlsSample))
+                                                    AlsSample, PulseSample))
+assert SetPulseInput.TYPE in SENSOR_REQUEST_RANGE

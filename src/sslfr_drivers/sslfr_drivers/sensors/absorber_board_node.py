@@ -18,6 +18,11 @@ Publishes
     ``limit_switches`` (sslfr_interfaces/LimitSwitches, R10) at ``switch_rate`` and at
     once on every debounced change; ``*_changed`` = ROS time of the change (the first
     raw sample showing the new state, mapped through the board's millisecond clock).
+    ``wind`` (sslfr_interfaces/Wind, R10, 4 Hz) when ``anemometer_pin`` names the
+    board's pin of a cup anemometer: the 3 s running mean, the WMO gust (highest 3 s
+    mean) and the 10 min mean [m/s] from the pulse counts
+    (:mod:`sslfr_drivers.sensors.anemometer`); the board is told the pin
+    (SetPulseInput) every time its link comes up.
     ``diagnostics``.
 """
 from __future__ import annotations
@@ -29,12 +34,12 @@ from dataclasses import dataclass
 
 from sensor_msgs.msg import Temperature
 
-from sslfr_interfaces.msg import LimitSwitches
+from sslfr_interfaces.msg import LimitSwitches, Wind
 
-from sslfr_common.contract import ABSORBER_TEMPERATURE, LIMIT_SWITCHES, SWITCHES, THERMOCOUPLES
+from sslfr_common.contract import ABSORBER_TEMPERATURE, LIMIT_SWITCHES, SWITCHES, THERMOCOUPLES, WIND
 from sslfr_common.node import qos, run_node, stamp, to_sec
-from sslfr_drivers.link.sensor_messages import SwitchSample, ThermocoupleSample
-from sslfr_drivers.sensors import max6675
+from sslfr_drivers.link.sensor_messages import PULSE_PIN_OFF, PulseSample, SetPulseInput, SwitchSample, ThermocoupleSample
+from sslfr_drivers.sensors import anemometer, max6675
 from sslfr_drivers.sensors.debounce import SwitchTracker
 from sslfr_drivers.sensors.health import RateMeter
 from sslfr_drivers.sensors.sensor_node import SensorBoardNode
@@ -63,6 +68,11 @@ class AbsorberBoardNode(SensorBoardNode):
         self._pub_t = {s: self.create_publisher(Temperature, ABSORBER_TEMPERATURE.of(s), qos(ABSORBER_TEMPERATURE))
                        for s in THERMOCOUPLES}
         self._pub_sw = self.create_publisher(LimitSwitches, LIMIT_SWITCHES.name, qos(LIMIT_SWITCHES))
+        self._pub_wind = self.create_publisher(Wind, WIND.name, qos(WIND))
+        self._pulses = anemometer.PulseCounter()
+        self._wind = anemometer.WindStats(self._values['anemometer_slope'], self._values['anemometer_offset'])
+        self._wind_last: anemometer.WindReading | None = None
+        self._wind_counts = {'samples': 0, 'restarts': 0, 'pin_refused': 0}
         self._start_board()
         self._sw_timer = self.create_timer(1.0 / self._values['switch_rate'], self._publish_switches,
                                            clock=self._steady)
@@ -75,6 +85,13 @@ class AbsorberBoardNode(SensorBoardNode):
 
     def _apply(self, new: dict) -> None:
         self._model = self._error_model(new)
+        if (new['anemometer_slope'], new['anemometer_offset']) != (self._values['anemometer_slope'],
+                                                                   self._values['anemometer_offset']):
+            self._wind = anemometer.WindStats(new['anemometer_slope'], new['anemometer_offset'])
+        if new['anemometer_pin'] != self._values['anemometer_pin']:
+            link = self._source.link if self._source is not None else None
+            if link is not None:
+                self._set_pulse_input(link, new['anemometer_pin'])
         with self._sw_lock:
             self._switches.debouncer.hold_time = float(new['debounce_time'])
         if new['switch_rate'] != self._values['switch_rate']:
@@ -83,10 +100,24 @@ class AbsorberBoardNode(SensorBoardNode):
             self._sw_timer = self.create_timer(1.0 / new['switch_rate'], self._publish_switches,
                                                clock=self._steady)
 
+    def _on_link_up(self, link) -> None:
+        """Reader thread: tell the board which pin counts the anemometer."""
+        if self._values['anemometer_pin'] >= 0:
+            self._set_pulse_input(link, self._values['anemometer_pin'])
+
+    def _set_pulse_input(self, link, pin: int) -> None:
+        def done(fut):
+            if fut.exception() is not None:
+                self._wind_counts['pin_refused'] += 1
+                self.get_logger().error(f'anemometer: the board did not take pin {pin}: {fut.exception()}')
+            else:
+                self.get_logger().info(f'anemometer: counting pulses on pin {pin}')
+        link.submit(SetPulseInput(PULSE_PIN_OFF if pin < 0 else pin)).add_done_callback(done)
+
     def _on_message(self, msg) -> None:
         """Reader thread: temperatures are queued; switch samples are debounced here and
         only a debounced change is queued (with the receive time of its sample)."""
-        if isinstance(msg, ThermocoupleSample):
+        if isinstance(msg, (ThermocoupleSample, PulseSample)):
             self._enqueue(msg)
         elif isinstance(msg, SwitchSample):
             received = self.get_clock().now()
@@ -103,6 +134,9 @@ class AbsorberBoardNode(SensorBoardNode):
                 self._meter.tick()
                 self._publish_temperature('inlet', msg.inlet, received)
                 self._publish_temperature('outlet', msg.outlet, received)
+                continue
+            if isinstance(msg, PulseSample):
+                self._publish_wind(msg, received)
                 continue
             if not msg.first:
                 with self._sw_lock:
@@ -128,6 +162,25 @@ class AbsorberBoardNode(SensorBoardNode):
         self._faults[which] = r.fault
         self._last_temp[which] = r.temperature
         self._pub_t[which].publish(msg)
+
+    def _publish_wind(self, sample: PulseSample, received) -> None:
+        """One pulse sample -> the running means -> ``wind`` (nothing for the first
+        sample after a start, a board reset or a gap: the windows start again)."""
+        if self._values['anemometer_pin'] < 0:
+            return
+        self._wind_counts['samples'] += 1
+        interval = self._pulses.add(sample.board_ms, sample.count)
+        if interval is None:
+            self._wind_counts['restarts'] += 1
+            self._wind.restart()
+            return
+        r = self._wind.add(*interval, t=to_sec(received))     # windows on ROS time (the stamp)
+        self._wind_last = r
+        msg = Wind()
+        msg.header.stamp = received.to_msg()
+        msg.header.frame_id = 'anemometer'
+        msg.speed, msg.gust, msg.mean, msg.window, msg.pulse_rate = r.speed, r.gust, r.mean, r.window, r.pulse_rate
+        self._pub_wind.publish(msg)
 
     def _publish_switches(self) -> None:
         with self._sw_lock:
@@ -160,6 +213,13 @@ class AbsorberBoardNode(SensorBoardNode):
                  'switches': ','.join(closed) or 'none',
                  'switch_bounces': bounces,
                  'queue_dropped': self._queue.dropped}
+        if self._values['anemometer_pin'] >= 0:
+            w = self._wind_last
+            extra.update({'anemometer_pin': self._values['anemometer_pin'],
+                          'wind_mps': 'none' if w is None else f'{w.speed:.2f}',
+                          'wind_gust_mps': 'none' if w is None else f'{w.gust:.2f}',
+                          'wind_mean_mps': 'none' if w is None else f'{w.mean:.2f} over {w.window:.0f} s',
+                          **{f'wind_{k}': v for k, v in self._wind_counts.items()}})
         self._publish_diagnostics(faults, extra)
 
 

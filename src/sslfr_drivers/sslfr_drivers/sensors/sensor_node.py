@@ -75,7 +75,8 @@ class SensorBoardNode(LeanEvents, Node):
     def _make_source(self, v: dict) -> BoardSource:
         return BoardSource(v['port'], v.get('framing', 'protocol'), v['baudrate'],
                            on_message=self._on_message, on_bytes=self._enqueue,
-                           heartbeat=v['heartbeat'], key_file=v.get('key_file', ''))
+                           heartbeat=v['heartbeat'], key_file=v.get('key_file', ''),
+                           on_up=self._on_link_up)
 
     def _change(self, new: dict) -> None:
         """ParameterGuard's apply: reopen the board if needed, then the subclass's
@@ -93,6 +94,9 @@ class SensorBoardNode(LeanEvents, Node):
     # -------------------------------------------------------------- samples
     def _on_message(self, msg) -> None:
         """Subclass hook: one decoded board message (reader thread)."""
+
+    def _on_link_up(self, link) -> None:
+        """Subclass hook: the board link came up (reader thread; submit, never block)."""
 
     def _enqueue(self, item) -> None:
         """Queue a sample (reader thread) with its ROS receive time."""

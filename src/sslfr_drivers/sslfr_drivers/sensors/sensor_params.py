@@ -13,6 +13,7 @@ from __future__ import annotations
 from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_drivers.link.keys import KEY_FILE_PARAM
+from sslfr_drivers.sensors import anemometer
 from sslfr_drivers.sensors.veml7700 import LUMINOUS_EFFICACY
 
 HEARTBEAT = ParamSpec('heartbeat', 0.5, 'board link PING period [s]', 's', 0.05, 5.0)
@@ -64,7 +65,18 @@ ABSORBER_BOARD = _board_table(
     ParamSpec('debounce_time', 0.03, 'a raw switch change must hold this long to count [s]',
               's', 0.0, 5.0),
     ParamSpec('switch_rate', 10.0, 'limit_switches publication rate besides changes [Hz]',
-              'Hz', 0.5, 100.0))
+              'Hz', 0.5, 100.0),
+    ParamSpec('anemometer_pin', -1, 'Arduino pin of the absorber board that counts the cup '
+                                    'anemometer pulses (7, 8, 11, 14..17 = A0..A3); -1 = no '
+                                    'anemometer, no wind topic [-]', '-', -1, 17,
+              validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
+              else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}'),
+    ParamSpec('anemometer_slope', anemometer.SLOPE, 'anemometer calibration: wind speed per pulse '
+                                                    'frequency (typical 3-cup: 0.765) [m/s/Hz]',
+              'm/s/Hz', 0.01, 20.0),
+    ParamSpec('anemometer_offset', anemometer.OFFSET, 'anemometer calibration: speed added while '
+                                                      'the cups turn (starting threshold, typical 0.35) [m/s]',
+              'm/s', 0.0, 5.0))
 
 #: ``irradiance`` node.
 IRRADIANCE = _board_table(

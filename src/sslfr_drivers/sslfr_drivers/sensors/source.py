@@ -14,7 +14,7 @@ import collections
 from typing import Any, Callable
 
 from sslfr_drivers.link import sensor_messages  # noqa: F401 - registers the sensor message types
-from sslfr_drivers.link.board_link import BoardLink
+from sslfr_drivers.link.board_link import BoardLink, BoardLinkState
 from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.link.reader import Protocol, ReaderThread
 from sslfr_drivers.link.transport import TransportError, make_transport
@@ -53,11 +53,15 @@ class BoardSource:
     key_file : str
         Installation key file of the link ('' = none: unprovisioned boards only); a
         file others may read refuses the link (:attr:`last_error` says why).
+    on_up : callable(BoardLink) or None
+        Called (reader thread) every time the link comes up: after the first
+        connection, a reconnection and a board reset (e.g. to set a board input).
     """
 
     def __init__(self, port: str, framing: str = 'protocol', baudrate: int = 115200,
                  on_message: Callable | None = None, on_bytes: Callable | None = None,
-                 heartbeat: float = 0.5, key_file: str = ''):
+                 heartbeat: float = 0.5, key_file: str = '', on_up: Callable | None = None):
+        self.on_up = on_up
         self.port = port
         self.key_file = key_file
         self.framing = framing
@@ -89,6 +93,9 @@ class BoardSource:
             self.link = BoardLink(transport, name=self.port, heartbeat=self.heartbeat,
                                   silence=max(1.0, 4 * self.heartbeat), key=key)
             self.link.add_listener(lambda msg, frame: self.on_message(msg))
+            if self.on_up is not None:
+                self.link.add_state_listener(
+                    lambda state, link: self.on_up(link) if state is BoardLinkState.UP else None)
             self.link.start()
         else:
             self.reader = ReaderThread(transport, RawStream(self.on_bytes), name=self.port,

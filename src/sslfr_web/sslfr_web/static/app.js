@@ -80,7 +80,15 @@ function render(s) {
   const b = s.beam;
   if (b) setText('beam', fix(b.beam, 0, ' W/m²') + (b.saturated ? ' (sensor saturated: at least)' : '') +
     ` from ${fix(b.illuminance, 0, ' lx')}`, age('beam') > STALE_S);
+  const w = s.wind;
+  if (w) setText('wind', `${fix(w.speed, 1, ' m/s')} (gust ${fix(w.gust, 1, ' m/s')}, mean ` +
+    `${fix(w.mean, 1, ' m/s')} over ${fix(w.window / 60, 1, ' min')})`, age('wind') > STALE_S);
   drawSouth(s); drawSide(s);
+}
+
+function duration(s) {
+  const m = Math.floor(s / 60), r = Math.round(s - 60 * m);
+  return m ? `${m} min ${r} s` : `${r} s`;
 }
 
 function renderSafety(sf, age) {
@@ -90,6 +98,10 @@ function renderSafety(sf, age) {
   setText('safety-level', sf.name + (sf.stow_required ? ' (stow required)' : ''), age > STALE_S);
   setText('safety-since', sf.since ? 'since ' + utc(sf.since) : '');
   setText('safety-stopped', sf.stopped_axes.length ? 'stopped: ' + sf.stopped_axes.join(', ') : '');
+  const wr = sf.wind_release;
+  setText('safety-wind', !wr ? '' : (sf.wind_stow ? 'wind stow (face-up)' : 'wind stow') + ': ' +
+    (wr.calm ? 'releases in ' + duration(wr.release_in) + ' if the wind stays calm'
+             : 'waiting for the mean wind to calm down'));
   const ul = $('safety-reasons');
   ul.textContent = '';
   for (const r of sf.reasons) {
