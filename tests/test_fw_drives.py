@@ -66,6 +66,9 @@ def noswitch_session(host) -> list[tuple[str, object]]:
     step('track further', m.MoveTo(12950, 500.0))
     out.append(('arrived again', _settle(host)))
     step('stop at rest', m.Stop())
+    step('host-loss stow toward a switch (none)', m.SetHostLossStow(m.HostLossMode.SWITCH, 0, 0, -2000.0, 5000))
+    step('host-loss stow to a position', m.SetHostLossStow(m.HostLossMode.POSITION, 0, 14000, 2000.0, 5000))
+    step('host-loss stow off', m.SetHostLossStow())
     return out
 
 
@@ -87,6 +90,8 @@ def test_switchless_refuses_home_and_tracks(tmp_path):
         out = dict(noswitch_session(host))
         E = m.ErrorCode
         assert out['home (no switch to look for)'] == m.Nack(m.Home.TYPE, E.UNKNOWN_TYPE)
+        assert out['host-loss stow toward a switch (none)'] == m.Nack(m.SetHostLossStow.TYPE, E.OUT_OF_RANGE)
+        assert out['host-loss stow to a position'] == m.Ack(m.SetHostLossStow.TYPE)
         assert out['move before the reference'] == m.Nack(m.MoveTo.TYPE, E.NOT_HOMED)
         st0 = out['status at power-up']
         assert st0.limit_bits == 0 and not st0.homed and st0.fault_bits & m.FaultBits.RESET
