@@ -580,6 +580,7 @@ class RosSide(threading.Thread):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         from lifecycle_msgs.msg import Transition
+        from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
         from lifecycle_msgs.srv import ChangeState
         from rclpy.clock import Clock, ClockType
         from rclpy.executors import SingleThreadedExecutor
@@ -593,7 +594,7 @@ class RosSide(threading.Thread):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         status: dict[str, dict] = {}
         clients: dict = {}
-        diag_pub = node.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        diag_pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
 
         def publish_diag():
             while True:
@@ -619,7 +620,7 @@ class RosSide(threading.Thread):
                 if s['restarts'] and s['critical']:
                     msg = f"CRITICAL process restarted {s['restarts']}x; last: {msg}"
                 arr.status.append(DiagnosticStatus(
-                    level=level, name=f'sslfr_supervisor: {name}', message=msg, hardware_id='process',
+                    level=level, name=f'sslfr_supervisor: {name}', message=msg, hardware_id=collector_id(self.namespace),
                     values=[KeyValue(key='restarts', value=str(s['restarts'])),
                             KeyValue(key='critical', value=str(s['critical']).lower())]))
             diag_pub.publish(arr)

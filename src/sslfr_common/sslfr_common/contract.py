@@ -126,3 +126,22 @@ class LinkState(enum.IntEnum):
 #: Lifecycle states in which an axis driver does not drive its axis
 #: (``AxisStatus.state`` carries the lifecycle label then).
 IDLE_DRIVER_STATES: frozenset[str] = frozenset({'unconfigured', 'inactive', 'finalized'})
+
+
+# --------------------------------------------------------------------------- diagnostics
+#: Every node's diagnostics go to the ABSOLUTE ``/diagnostics`` (the ROS convention that
+#: ``diagnostic_aggregator`` and rqt_robot_monitor read), also under a collector's
+#: namespace; the collector is named by each status' ``hardware_id``
+#: (:func:`collector_id`) and the status' ``name`` is ``"<node>: <task>"``.
+DIAGNOSTICS_TOPIC = '/diagnostics'
+
+#: ``hardware_id`` of a collector run in the root namespace (a single collector)
+ROOT_COLLECTOR_ID = 'sslfr'
+
+
+def collector_id(namespace: str) -> str:
+    """The collector's id for a node in ``namespace``: the namespace's last name
+    (``/field/c2`` -> ``c2``), :data:`ROOT_COLLECTOR_ID` in the root namespace. A field
+    description makes each collector's namespace end in its id (sslfr_field.field)."""
+    last = (namespace or '').rstrip('/').rsplit('/', 1)[-1]
+    return last or ROOT_COLLECTOR_ID

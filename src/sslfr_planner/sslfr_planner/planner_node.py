@@ -31,7 +31,7 @@ from sslfr_interfaces.msg import SafetyState, SunPosition, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
-from sslfr_common.contract import PHASE_NAMES
+from sslfr_common.contract import DIAGNOSTICS_TOPIC, PHASE_NAMES, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_ns, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
@@ -76,7 +76,7 @@ class PlannerNode(LeanEvents, Node):
         self.pub_sun = self.create_publisher(SunPosition, 'tracker/sun', 10)
         self.pub_phase = self.create_publisher(TrackerPhase, 'tracker/phase', TL1)
         self.pub_traj = self.create_publisher(JointTrajectory, 'tracker/trajectory', TL1)
-        self.pub_diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.create_subscription(NavSatFix, 'gps/fix', self._on_fix, 10)
         self.create_subscription(SafetyState, 'safety/state', self._on_safety, 10)
         self.create_service(Trigger, 'planner/replan', self._srv_replan)
@@ -283,7 +283,7 @@ class PlannerNode(LeanEvents, Node):
                   'last_error': self._last_error}
         values.update({k: str(v) for k, v in self.counters.items()})
         st = DiagnosticStatus(level=DIAG_LEVELS[level], name=f'{self.get_name()}: day cycle',
-                              message=text, hardware_id='sslfr_planner',
+                              message=text, hardware_id=collector_id(self.get_namespace()),
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         arr = DiagnosticArray(status=[st])
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -38,7 +38,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
 
-from sslfr_common.contract import JOINTS, SWITCHES, THERMOCOUPLES, Level
+from sslfr_common.contract import DIAGNOSTICS_TOPIC, JOINTS, SWITCHES, THERMOCOUPLES, Level, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
 from sslfr_safety.core import SafetyCore
 from sslfr_safety.params import TABLE, config_from
@@ -91,7 +91,7 @@ class SafetyNode(LeanEvents, Node):
         self._guard = _Guard(self, values)
 
         self._pub = self.create_publisher(SafetyState, 'safety/state', 10)
-        self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         for sensor in THERMOCOUPLES:
             self._subscribe(Temperature, f'absorber/{sensor}_temperature',
                             lambda m, s=sensor: self._on_temperature(s, m),
@@ -245,7 +245,7 @@ class SafetyNode(LeanEvents, Node):
         state = self.core.state
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: safety supervisor'
-        status.hardware_id = 'sslfr'
+        status.hardware_id = collector_id(self.get_namespace())
         status.level = _DIAG_LEVEL[state.level]
         status.message = state.level.name + (': ' + state.reasons[0] if state.reasons else '')
         kv = self.core.snapshot()

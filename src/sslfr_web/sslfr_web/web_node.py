@@ -20,7 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import DIAGNOSTICS_TOPIC, JOINTS, collector_id
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now, to_sec
 
 from . import commands, remote
@@ -70,7 +70,7 @@ class WebNode(LeanEvents, Node):
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
-        self._diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.op = OperatorApp(self.cfg, self)
         self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))
         self.url = self.server.start()                 # OSError (address in use ...) -> main
@@ -184,7 +184,7 @@ class WebNode(LeanEvents, Node):
 
     def _publish_diagnostics(self) -> None:
         c = self.op.counters
-        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id='web',
+        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id=collector_id(self.get_namespace()),
                              level=DiagnosticStatus.OK if self.op.passwords.line() else DiagnosticStatus.WARN,
                              message=f'serving {self.url}' if self.op.passwords.line()
                              else self.op.passwords.problem)

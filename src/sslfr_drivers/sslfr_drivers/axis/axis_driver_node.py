@@ -23,6 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
 from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
@@ -76,7 +77,7 @@ class AxisDriver(ManagedNode):
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_status = self.create_publisher(AxisStatus, f'axes/{self.axis}/status', 10)
         self.pub_joint = self.create_publisher(JointState, 'joint_states', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.create_subscription(JointTrajectory, 'tracker/trajectory', self._on_trajectory, tl1)
         self.create_subscription(SafetyState, 'safety/state', self._on_safety, 10)
         self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, tl1)
@@ -277,9 +278,9 @@ class AxisDriver(ManagedNode):
             last_error = self.last_error or self.sup.last_error
             level, message = diagnostic_verdict(life, self.sup, self.session is not None, last_error)
             pending = self.activation.pending(life, now)
-            name, hw = f'{self.get_name()}: axis {self.axis}', self.session.board_info if self.session else board_port(self.p)
+            name, hw = f'{self.get_name()}: axis {self.axis}', collector_id(self.get_namespace())
             values = {'lifecycle': life, 'state': self.sup.state, 'reason': self.sup.reason,
-                      'port': board_port(self.p), 'mode': self.sup.mode,
+                      'port': board_port(self.p), 'board': self.session.board_info if self.session else '', 'mode': self.sup.mode,
                       'last_rejected_trajectory': self.sup.store.last_reason, 'last_error': last_error,
                       **self.sup.counts(), **self.activation.values(now),
                       'parameter_changes_refused': self.params.refused,

@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
+from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters
 from sslfr_common.params import ParamTable
 from sslfr_drivers.sensors.health import RateMeter, Report, board_report
@@ -58,7 +59,7 @@ class SensorBoardNode(LeanEvents, Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._meter = RateMeter()
         self._diag_name = f'{name}: board'
-        self._diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._source: BoardSource | None = None
         self._guard: ParameterGuard | None = None
 
@@ -108,10 +109,11 @@ class SensorBoardNode(LeanEvents, Node):
                    *more]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        hw = self._values['port'] or '(none)'
+        hw = collector_id(self.get_namespace())
         arr.status = [DiagnosticStatus(name=name, hardware_id=hw, level=getattr(DiagnosticStatus, r.level),
                                        message=r.message,
-                                       values=[KeyValue(key=k, value=v) for k, v in r.values.items()])
+                                       values=[KeyValue(key='port', value=self._values['port'] or '(none)'),
+                                               *(KeyValue(key=k, value=v) for k, v in r.values.items())])
                       for name, r in reports]
         self._diag_pub.publish(arr)
 
