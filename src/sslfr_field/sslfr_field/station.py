@@ -89,9 +89,10 @@ def servers_here(f: field_mod.Field, role: str, here: set[str] | None = None) ->
 
 
 def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: Path | None,
-             finder=None, here: set[str] | None = None, record: bool = True):
+             finder=None, here: set[str] | None = None, record: bool = True, page_params: dict | None = None):
     """The station's Programs and the list of what is missing (never replaced by
-    anything else): discovery servers, gateway, field recorder."""
+    anything else): discovery servers, field page (``page_params``: more of its
+    parameters), gateway, field recorder."""
     from sslfr_bringup.host import find_executable
     from sslfr_bringup.supervisor import Program
     finder = finder or find_executable
@@ -113,7 +114,8 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
         progs.append(Program(name='field_page', argv=[
             str(page), '--ros-args', '-r', '__node:=field_page', '-p', f'collectors:={_yaml_list(f.namespaces)}',
             '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'collector_pages:={_yaml_list(pages)}',
-            '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}'], start=1, stop=1))
+            '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}',
+            *(a for k, v in (page_params or {}).items() for a in ('-p', f'{k}:={v}'))], start=1, stop=1))
     # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway): started when installed
     gw = finder(*GATEWAY)
     if gw is None:
@@ -215,7 +217,8 @@ def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say
     from sslfr_bringup.supervisor import Supervisor
     say = say or (lambda text: print(text, file=sys.stderr))
     out = Path(args.out or f'out/station-{f.id}').resolve()
-    progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out)
+    progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out,
+                              page_params=getattr(args, 'page_params', None))
     env = station_environment(f)
     env['ROS_DOMAIN_ID'] = str(args.domain_id if args.domain_id is not None else os.environ.get('ROS_DOMAIN_ID', 42))
     for m in missing:

@@ -59,8 +59,10 @@ def collector_argv(args, c: field_mod.Collector, f: field_mod.Field, domain: int
         argv += ['--end', args.end]
     for spec in args.fault:
         argv += ['--fault', spec]
+    argv += ['--set', f'web:port={c.web_port}']
     for spec in args.set:
-        argv += ['--set', spec]
+        if not spec.startswith('field_page:'):
+            argv += ['--set', spec]
     return argv
 
 
@@ -78,6 +80,8 @@ def run_field(args, stop, run: Path) -> int:
     primary, backup = free_udp_ports(2)
     doc = field_mod.simulated(args.collectors, config, discovery_port=primary, backup_port=backup,
                               web_port=free_tcp_port())
+    for c in doc['field']['collectors']:          # each collector's page on its own port, linked from the field page
+        c['web_port'] = free_tcp_port()
     fpath = run / 'field.yaml'
     import yaml
     fpath.write_text(yaml.safe_dump(doc))
@@ -96,12 +100,20 @@ def run_field(args, stop, run: Path) -> int:
             except RuntimeError as exc:
                 print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
                 return 1
+    page_params = {}
+    for spec in args.set:              # --set field_page:KEY=VALUE: the station's field page
+        if spec.startswith('field_page:'):
+            key, eq, value = spec[len('field_page:'):].partition('=')
+            if not (key and eq):
+                print(f'sslfr sim: --set {spec!r}: expected field_page:KEY=VALUE', file=sys.stderr)
+                return 2
+            page_params[key] = value
     out = Path(args.out or 'out/sim-field').resolve()
     out.mkdir(parents=True, exist_ok=True)
     collectors = [Program(name=f'collector_{c.id}', argv=collector_argv(args, c, f, args.domain_id, out),
                           start=2, stop=0, restart=False) for c in f.collectors]
     station_args = type('A', (), {'out': str(out / 'station'), 'role': 'both', 'domain_id': args.domain_id,
-                                  'print_only': False})()
+                                  'print_only': False, 'page_params': page_params})()
     print(f'sslfr sim: field of {len(f.collectors)} collectors ({", ".join(f.namespaces)}), discovery servers '
           f'{field_mod.discovery_servers(f.station)}, ROS_DOMAIN_ID={args.domain_id}, out {out}', file=sys.stderr)
     pages: dict[str, str] = {}

@@ -4,16 +4,15 @@ One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This f
 only wires ROS to pure code: parameters :mod:`.params`, decisions
 :class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
 :mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
-:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md).
-
-The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
-its own thread: at ``control_rate`` while something moves, else at the next setpoint
-step, the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at
-once on a trajectory, safety change, mode change, home / jog request or activation.
-No executor callback waits for the board (configure waits at most ``OPEN_WAIT``), so
-a single-threaded executor serves the node, alone or composed. With ``autostart`` it
-keeps ``active`` by itself; every ``change_state`` request gets an answer. One timer
-publishes ``axes/<axis>/status`` (every lifecycle state) and ``joint_states``.
+:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md). The control step
+(read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in its own thread:
+at ``control_rate`` while something moves, else at the next setpoint step,
+the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at once on a
+trajectory, safety change, mode change, home / jog request or activation. No executor
+callback waits for the board (configure waits at most ``OPEN_WAIT``), so a single-threaded
+executor serves the node, alone or composed. With ``autostart`` it keeps ``active`` by
+itself; every ``change_state`` request gets an answer. One timer publishes
+``axes/<axis>/status`` (every lifecycle state) and ``joint_states``.
 """
 from __future__ import annotations
 
