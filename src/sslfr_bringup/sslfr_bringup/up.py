@@ -151,7 +151,8 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     domain = int(env['ROS_DOMAIN_ID'])
     print(f'sslfr up: config {config}, ROS_DOMAIN_ID={domain}, '
-          f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}', file=sys.stderr)
+          + (f'ROS_DISCOVERY_SERVER={env["ROS_DISCOVERY_SERVER"]}' if env.get('ROS_DISCOVERY_SERVER') else
+             f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}'), file=sys.stderr)
     for m in missing:
         print(f'sslfr up: MISSING executable, node not started: {m} (run make setup?)', file=sys.stderr)
     if args.print_only:

@@ -98,7 +98,7 @@ class FieldState:
         for cid, v in self.views.items():
             out.append({'id': cid, 'namespace': v.namespace, 'page': v.page, 'phase': v.phase, 'mode': v.mode,
                         'phase_reason': v.phase_reason, 'safety_level': v.safety_level,
-                        'safety_reasons': list(v.safety_reasons), 'axes': {k: dict(a) for k, a in v.axes.items()},
+                        'safety_reasons': list(v.safety_reasons), 'axes': {k: dict(v.axes[k]) for k in JOINTS if k in v.axes},
                         'temperatures': dict(v.temperatures), 'beam': v.beam, 'link': self.link(cid, now),
                         'last_heard_s': None if v.last_heard is None else round(now - v.last_heard, 2),
                         'messages': v.messages})

@@ -74,3 +74,24 @@ def test_field_report_sums():
     assert 'c3' in text and '19.000' in text and 'not in the field' in text
     assert math.isnan(report.totals({'c3': rows['c3']})['achieved_kwh'])
     assert report.collector_of(Path('/x/c2_2026-06-21')) == 'c2'
+
+
+def test_a_collector_node_set_under_its_namespace(tmp_path):
+    """`sslfr up --namespace /c2`: the bag is named after the collector and the
+    absolute /diagnostics is not recorded there; a discovery server replaces the range."""
+    import yaml
+
+    from sslfr_bringup import nodeset
+    from sslfr_bringup.up import build_programs
+    from sslfr_common.contract import collector_id
+    ns = nodeset.load()
+    progs, _ = build_programs(ns, CONFIGS / 'almeria_sslfr.yaml', namespace='/c2', run_dir=tmp_path,
+                              finder=lambda pkg, exe: f'/x/{exe}')
+    assert progs
+    rec = yaml.safe_load((tmp_path / 'recorder.params.yaml').read_text())
+    values = next(iter(rec.values()))['ros__parameters']
+    assert values['prefix'] == 'c2' and '/diagnostics' in values['exclude'] and '/clock' in values['exclude']
+    env = nodeset.ros_environment(ns, base={'ROS_DISCOVERY_SERVER': '10.0.0.2:11811;10.0.0.3:11811'})
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in env
+    assert nodeset.ros_environment(ns, base={})['ROS_AUTOMATIC_DISCOVERY_RANGE'] == ns.discovery_range
+    assert [collector_id(n) for n in ('/c2', '/field/row1/', '', '/')] == ['c2', 'row1', 'sslfr', 'sslfr']
