@@ -23,7 +23,8 @@ import time
 
 from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
 from sslfr_drivers.axis.board_session import AxisBoardSession
-from sslfr_drivers.axis.core import AxisSupervisor, AxisTuning, BoardState
+from sslfr_drivers.axis.commands import BoardState
+from sslfr_drivers.axis.supervisor import AxisSupervisor, AxisTuning
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.axis.trajectory import TrajectoryMsg
 from sslfr_sim.axis import AxisConfig as SimConfig

@@ -118,7 +118,7 @@ def run(link: BoardLink, end: BoardEnd, n: int, rate: float) -> tuple[list[float
     wire, rtt = [], []
     period = 1.0 / rate
     for i in range(n):
-        seq = link._seq.peek()
+        seq = link.auth.seq.peek()
         t0 = time.perf_counter()
         fut = link.submit(m.MoveTo(1000 + i, 500.0), timeout=0.5, retries=0)
         try:

@@ -27,6 +27,7 @@ import time
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.contract import JOINTS
 from sslfr_common.timeconv import to_sec
 
 pytestmark = pytest.mark.timeout(120)
@@ -430,6 +431,19 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     assert ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
     assert r.board()['counter'] == held                          # and it stays stopped
     r.safety.update(level=0, stow_required=False)
+    # the operator e-stop (safety/estop: ESTOP listing every axis) while stowing: the
+    # same STOP from the safety callback, motor still within 0.3 s
+    r.safety.update(level=2, stow_required=True)
+    assert ros.spin_until(lambda: r.board()['speed'] != 0.0, 3)
+    r.safety.update(level=3, stow_required=True, stopped_axes=list(JOINTS))
+    r._beat()
+    t_estop = time.monotonic()
+    while r.board()['speed'] != 0.0 and time.monotonic() < t_estop + 1.0:
+        ros.spin_for(0.01)
+    print(f'operator e-stop: motor still {time.monotonic() - t_estop:.3f} s after the message')
+    assert time.monotonic() - t_estop <= 0.3
+    assert ros.spin_until(lambda: r.status[-1].state == 'stopped', 2)
+    r.safety.update(level=0, stow_required=False, stopped_axes=[])
 
     # jog: refused outside maintenance, accepted in maintenance
     res = ros.call(Jog, 'axes/mirrors/jog', Jog.Request(delta=0.01, speed=0.0))

@@ -199,3 +199,177 @@ def test_stop_signal_is_sigterm_while_a_node_starts_and_sigint_once_it_handles_s
         if p.proc.poll() is None:
             p.proc.kill()
             p.proc.wait()
+
+
+# ---------------------------------------------------------------- executor liveness
+BEATING = textwrap.dedent('''
+    import os, signal, sys, time
+    from sslfr_common.sdnotify import Notifier
+    n = Notifier.from_environ()
+    stop = []
+    signal.signal(signal.SIGINT, lambda s, f: stop.append(s))
+    signal.signal(signal.SIGTERM, lambda s, f: stop.append(s))
+    if sys.argv[1] == 'mute':              # starts but never turns its executor
+        while not stop:
+            time.sleep(0.05)
+        sys.exit(0)
+    n.notify('READY=1', 'STATUS=executor turning: ' + sys.argv[1])
+    while not stop:                        # the spin loop: one beat call per turn
+        n.beat()
+        time.sleep(0.02)
+    n.notify('STOPPING=1')
+''')
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_hung_process_is_killed_within_the_bound_and_restarted(tmp_path):
+    """A SIGSTOPped node process (its executor stops as in a deadlock) is SIGKILLed once
+    its beats have been missing for the bound (2 s), reaped and restarted, the cause in
+    the log; the others are untouched; a process that never beats is killed after the
+    start-up bound; the stop kills a stopped process at once."""
+    from sslfr_bringup.liveness import LivenessWatch
+    script = tmp_path / 'beating.py'
+    script.write_text(BEATING)
+    progs = [Program(name=n, argv=[sys.executable, str(script), n], start=i, stop=1, critical=(n == 'safety'))
+             for i, n in enumerate(['planner', 'safety', 'gps'])]
+    out = io.StringIO()
+    sup = Supervisor(progs, dict(os.environ), backoff=(0.2,), stable_after=30.0, out=out,
+                     liveness=LivenessWatch(timeout=2.0, startup_timeout=30.0))
+    try:
+        sup.start()
+        pids = {p.name: p.pid for p in progs}
+
+        def run_until(pred, timeout):
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline and not pred():
+                sup.step()
+                time.sleep(0.02)
+            return pred()
+
+        assert run_until(sup.node_set_ready, 30.0), out.getvalue()
+        t_hang = time.monotonic()
+        sup.hang('planner')
+        assert run_until(lambda: not _alive(pids['planner']), 6.0), out.getvalue()
+        t_kill = time.monotonic()
+        # silent for the bound (2 s) since the last beat, which came at most one beat
+        # period (0.5 s) before the hang; then one supervision pass (loaded machine: +1 s)
+        assert 2.0 - 0.5 <= t_kill - t_hang <= 2.0 + 1.0, t_kill - t_hang
+        assert run_until(lambda: sup.programs['planner'].alive() and sup.liveness.beats('planner') > 0, 30.0)
+        text = out.getvalue()
+        assert 'planner: no executor beat for 2.' in text and 'killing it (SIGKILL) to restart it' in text, text
+        assert 'planner exited (killed: no executor beat for' in text, text
+        assert sup.programs['planner'].restarts == 1 and sup.programs['planner'].pid != pids['planner']
+        assert [p.restarts for p in progs[1:]] == [0, 0] and [p.pid for p in progs[1:]] == \
+            [pids['safety'], pids['gps']]
+        events = [ev for _, name, ev, _ in sup.events if name == 'planner']
+        assert events[-6:] == ['hang', 'hung', 'exited', 'restart', 'started', 'turning'], events
+        # a critical process hangs: the same, loudly
+        sup.hang('safety')
+        assert run_until(lambda: sup.programs['safety'].restarts == 1, 10.0), out.getvalue()
+        assert '*** CRITICAL: safety DIED (killed: no executor beat for' in out.getvalue()
+        # the stop: a stopped process is SIGKILLed at once, not after the budget
+        sup.hang('gps')
+        gps = pids['gps']
+        took = sup.stop()
+        assert took < 3.0, out.getvalue()
+        assert 'gps is stopped (SIGSTOP): SIGKILL' in out.getvalue()
+        assert not any(_alive(p) for p in [gps, *sup.pids()])
+    finally:
+        if not sup.stopping:
+            sup.stop()
+    for p in progs:                        # reaped: no zombie, no orphan
+        assert p.proc.returncode is not None
+
+
+def test_process_that_never_beats_is_killed_after_the_startup_bound(tmp_path):
+    from sslfr_bringup.liveness import LivenessWatch
+    script = tmp_path / 'beating.py'
+    script.write_text(BEATING)
+    prog = Program(name='web', argv=[sys.executable, str(script), 'mute'])
+    out = io.StringIO()
+    sup = Supervisor([prog], dict(os.environ), backoff=(30.0,), out=out,
+                     liveness=LivenessWatch(timeout=2.0, startup_timeout=5.0))
+    sup.start()
+    try:
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline and prog.last_exit is None:
+            sup.step()
+            time.sleep(0.05)
+        assert prog.last_exit == -signal.SIGKILL, out.getvalue()
+        assert 'web: no executor beat 5.' in out.getvalue() and 'after its start (start-up bound 5 s)' in out.getvalue()
+        assert not sup.node_set_ready()
+    finally:
+        sup.stop()
+
+
+def test_children_get_their_own_notify_socket_never_systemds(tmp_path):
+    """Node processes get the supervisor's NOTIFY_SOCKET and its bound; simulated
+    boards get neither; systemd's own variables reach no child."""
+    from sslfr_bringup.liveness import LivenessWatch
+    script = tmp_path / 'env.py'
+    script.write_text('import os, sys, json\n'
+                      'open(sys.argv[1], "w").write(json.dumps({k: os.environ.get(k) for k in '
+                      '("NOTIFY_SOCKET", "WATCHDOG_USEC", "WATCHDOG_PID")}))\n')
+    progs = [Program(name='node', argv=[sys.executable, str(script), str(tmp_path / 'node.json')], restart=False),
+             Program(name='sim_x', argv=[sys.executable, str(script), str(tmp_path / 'board.json')], kind='board',
+                     restart=False)]
+    env = dict(os.environ, NOTIFY_SOCKET='/run/systemd/notify', WATCHDOG_USEC='15000000', WATCHDOG_PID='1')
+    sup = Supervisor(progs, env, out=io.StringIO(), liveness=LivenessWatch(timeout=3.0))
+    sup.start()
+    for p in progs:
+        p.proc.wait(30)
+    sup.stop()
+    import json
+    node = json.loads((tmp_path / 'node.json').read_text())
+    board = json.loads((tmp_path / 'board.json').read_text())
+    assert node['NOTIFY_SOCKET'].endswith('notify.sock') and node['NOTIFY_SOCKET'] != env['NOTIFY_SOCKET']
+    assert node['WATCHDOG_USEC'] == '3000000' and node['WATCHDOG_PID'] is None
+    assert board == {'NOTIFY_SOCKET': None, 'WATCHDOG_USEC': None, 'WATCHDOG_PID': None}
+    assert not os.path.exists(node['NOTIFY_SOCKET']), 'the socket is removed at close'
+
+
+def test_sslfr_up_speaks_sd_notify_to_its_watcher(tmp_path, ros_env):
+    """`sslfr up` as systemd runs it (Type=notify, WatchdogSec=): on a real
+    NOTIFY_SOCKET it beats WATCHDOG=1 from its start, says READY=1 once every node
+    process's executor turns, and STOPPING=1 at SIGTERM; every message comes from its
+    own pid (the node processes have the supervisor's socket, not this one)."""
+    from sslfr_common.sdnotify import NotifyListener
+    site = tmp_path / 'site.yaml'
+    site.write_text("/**:\n  ros__parameters:\n    site:\n      latitude_deg: 36.835\n")
+    with NotifyListener(str(tmp_path / 'systemd-notify.sock')) as lis:
+        env = dict(ros_env, NOTIFY_SOCKET=lis.path, WATCHDOG_USEC='4000000')    # beat every 1 s
+        proc = subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', 'safety,gps',
+                                 '--log-dir', str(tmp_path / 'logs')],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        got = []
+        try:
+            deadline = time.monotonic() + 90
+            while time.monotonic() < deadline and proc.poll() is None:
+                got += [(time.monotonic(), n) for n in lis.receive()]
+                if any(n.fields.get('READY') == '1' for _, n in got) and \
+                        sum('WATCHDOG' in n.fields for _, n in got) >= 3:
+                    break
+                time.sleep(0.05)
+            assert proc.poll() is None
+            proc.send_signal(signal.SIGTERM)
+            out, _ = proc.communicate(timeout=15)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate(timeout=15)
+        got += [(time.monotonic(), n) for n in lis.receive()]
+    assert proc.returncode == 0, out
+    assert {n.pid for _, n in got} == {proc.pid}, 'only the unit\'s main process talks to systemd'
+    ready = [n for _, n in got if n.fields.get('READY') == '1']
+    assert len(ready) == 1 and ready[0].fields['STATUS'].startswith('node set up: 2 node processes'), got
+    beats = [t for t, n in got if n.fields.get('WATCHDOG') == '1']
+    assert len(beats) >= 3 and max(b - a for a, b in zip(beats, beats[1:])) < 2.0, beats
+    assert got[-1][1].fields == {'STOPPING': '1'}, got[-3:]
+    assert 'node set up: 2 node processes, every executor turning' in out

@@ -18,6 +18,8 @@ import pytest
 from fw_support import require
 
 from sslfr_bringup import nodeset
+from sslfr_common.contract import JOINTS
+from sslfr_recording.day import read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
@@ -53,12 +55,12 @@ def _run(env, out, args, timeout=400.0):
     assert summary['boards'] == 'firmware' and bag is not None, text
     for log in (out / 'logs').glob('sim_*.log'):
         assert 'Traceback' not in log.read_text(), log.read_text()
-    return text, summary, scenario.read_day(bag)
+    return text, summary, read_day(bag)
 
 
 def _ref(day):
     k = np.asarray(day.phase['site_source']) != ''
-    return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+    return reference(_config(), float(np.median(day.phase['latitude'][k])),
                               float(np.median(day.phase['longitude'][k])), 22.0)
 
 
@@ -71,7 +73,7 @@ def test_tracking_window_on_firmware_boards(ros_env, tmp_path):
     t0, t1 = T('10:00'), T('10:30') - 30      # the last 30 sim s belong to the ordered stop
     assert np.all(day.phase.between(t0, t1)['phase'] == 2), 'TRACKING all through the window'
     report = {}
-    for axis in scenario.JOINTS:
+    for axis in JOINTS:
         s = day.axes[axis].between(t0, t1)
         assert len(s) > 30, (axis, len(s))
         assert np.all(s['link_state'] == s['link_state'][0]) and np.all(s['homed'])

@@ -28,6 +28,7 @@ import pytest
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
+from sslfr_recording.day import planner_config, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
@@ -73,7 +74,7 @@ def _sim(ros, env, out, args, timeout=150.0, watch=None):
     summary = json.loads((out / 'sim.json').read_text())
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     assert bags, text
-    return text, summary, scenario.read_day(bags[-1])
+    return text, summary, read_day(bags[-1])
 
 
 @pytest.fixture(scope='module')
@@ -126,7 +127,7 @@ def _applied(morning, spec) -> tuple[float, float]:
 
 def _ref(day):
     k = np.asarray(day.phase['site_source']) != ''
-    return scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+    return reference(_config(), float(np.median(day.phase['latitude'][k])),
                               float(np.median(day.phase['longitude'][k])), 22.0)
 
 
@@ -193,7 +194,7 @@ def test_killed_planner_drivers_finish_the_horizon_then_hold(morning):
     day = morning['day']
     traj = day.trajectory.between(t0 + 120, t1 - 20)
     assert len(traj) == 0, 'no trajectory while the planner is down'
-    horizon = scenario.planner_config(_config())['horizon']
+    horizon = planner_config(_config())['horizon']
     hold = day.axes['mirrors'].between(t0 + horizon + 2 * LAG, t1)
     assert len(hold) >= 3, len(hold)
     assert np.ptp(hold['measured']) < 4 * TOL, 'holding position'

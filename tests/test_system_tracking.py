@@ -19,6 +19,8 @@ import pytest
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
+from sslfr_common.contract import JOINTS
+from sslfr_recording.day import Day, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch
 
@@ -57,10 +59,10 @@ def _run_live(ros, env, out, args, timeout=150.0, on_spin=None):
     summary = __import__('json').loads((out / 'sim.json').read_text())
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     assert bags, text
-    return text, summary, scenario.read_day(bags[-1])
+    return text, summary, read_day(bags[-1])
 
 
-def _site(day: scenario.Day):
+def _site(day: Day):
     k = np.asarray(day.phase['site_source']) != ''
     return (float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k])), 22.0)
 
@@ -81,14 +83,14 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros
     assert any(abs(m.error) < 1e-3 and m.link_state == AxisStatus.LINK_UP for m in live_status)
     # bag: every axis within one step + sensor noise of the ideal, 10:00-10:20
     lat, lon, elev = _site(day)
-    ref = scenario.reference(_config(), lat, lon, elev)
+    ref = reference(_config(), lat, lon, elev)
     # the ordered stop at the window's end deactivates the axes first, so safety stows
     # (issue 21) and the planner's phase follows: the last 30 sim s belong to the stop
     t0, t1 = DAY0 + 10 * 3600, DAY0 + (10 + 20 / 60) * 3600 - 30
     assert np.all(day.phase.between(t0, t1)['phase'] == 2), ('TRACKING all through the window', _why(tmp_path))
     lag = speed * WALL_LATENCY
     report = {}
-    for axis in scenario.JOINTS:
+    for axis in JOINTS:
         s = day.axes[axis].between(t0, t1)
         assert len(s) > 50, (axis, len(s), day.topics)
         err = scenario.tracking_error(s.t, s['measured'], lambda t, a=axis: getattr(ref(t), a), lag=lag)
@@ -133,7 +135,7 @@ def test_sunrise_and_sunset_phase_changes(ros, ros_env, tmp_path, window, expect
     t0 = DAY0 + scenario_hhmm(window[0])
     t1 = DAY0 + scenario_hhmm(window[1])
     lat, lon, elev = _site(day)
-    ref = scenario.reference(_config(), lat, lon, elev)
+    ref = reference(_config(), lat, lon, elev)
     want = _ref_changes(ref, t0, t1)
     assert [n for _, n in want] == expected, want
     got = _changes(day, t0, t1)

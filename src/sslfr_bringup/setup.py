@@ -26,6 +26,7 @@ setup(
         'console_scripts': [
             'sslfr = sslfr_bringup.cli:main',
             'composed = sslfr_bringup.composed:main',
+            'liveness_watchdog = sslfr_bringup.watchdog:main',
         ],
     },
 )

@@ -20,6 +20,14 @@ the same description and applies it the same way:
   their board appears late; launch only starts them (an outside lifecycle command is
   still obeyed and not undone).
 
+- executor liveness: launch restarts a process only when it exits, so one more process
+  of the launch, ``liveness_watchdog`` (sslfr_bringup/watchdog.py), binds a
+  ``NOTIFY_SOCKET`` in the launch's run directory; every node process gets that socket
+  and ``WATCHDOG_USEC`` (the node set's ``watchdog_timeout``) in its environment and
+  beats ``WATCHDOG=1`` from its spin loop; a process whose beats stop for longer is
+  SIGKILLed by the watchdog and respawned by launch (``respawn=True``), the cause
+  printed on the launch's output.
+
 The supervisor of `./sslfr up` adds what launch does not do: restart with backoff and
 an ordered stop (axes first); the systemd unit uses `sslfr up` for that reason
 (docs/deploy.md).
@@ -35,6 +43,18 @@ def _entries(config: str | None = None, namespace: str | None = None, write_dir:
     cfg = nodeset.resolve_config(config or None, default=ns.config)
     return nodeset.launch_entries(ns, cfg, namespace=namespace, write_dir=write_dir,
                                   use_sim_time=use_sim_time, layout=layout)
+
+
+def _liveness(write_dir: str) -> tuple[list[str], dict[str, str]]:
+    """The watchdog's arguments and the environment every node process gets (pure)."""
+    import os
+
+    from sslfr_bringup import nodeset
+
+    ns = nodeset.load()
+    sock = os.path.join(write_dir, 'notify.sock')
+    return (['--socket', sock, '--timeout', f'{ns.watchdog_timeout:g}'],
+            {'NOTIFY_SOCKET': sock, 'WATCHDOG_USEC': str(int(ns.watchdog_timeout * 1e6))})
 
 
 def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
@@ -70,15 +90,19 @@ def generate_launch_description():
         write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
         actions = [SetEnvironmentVariable(k, v) for k, v in
                    _environment(arg('domain_id'), arg('discovery_range')).items()]
+        watchdog_args, notify_env = _liveness(write_dir)
+        actions.append(Node(package='sslfr_bringup', executable='liveness_watchdog', arguments=watchdog_args,
+                            output='screen', respawn=True, respawn_delay=1.0))
         for e in _entries(arg('config'), namespace or None, write_dir, use_sim_time, arg('layout') or None):
             if e['name'] is None:          # a composed process: each node's own --ros-args in arguments
                 actions.append(Node(package=e['package'], executable=e['executable'], arguments=e['arguments'],
-                                    output='screen', respawn=True, respawn_delay=2.0))
+                                    output='screen', respawn=True, respawn_delay=2.0,
+                                    additional_env=notify_env))
                 continue
             common = dict(package=e['package'], executable=e['executable'], name=e['name'],
                           namespace=e['namespace'], parameters=e['parameters'],
                           remappings=e['remappings'], output='screen',
-                          respawn=True, respawn_delay=2.0)
+                          respawn=True, respawn_delay=2.0, additional_env=notify_env)
             actions.append(LifecycleNode(**common) if e['lifecycle'] else Node(**common))
         return actions
 

@@ -26,7 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'record': ('sslfr_recording.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
     'bag': ('sslfr_recording.bag_cli', 'bag utilities: info, check (rosbag2 rules), recover'),
     'replay': ('sslfr_recording.replay', 'replay a recorded bag with /clock'),
-    'report': ('sslfr_recording.report', 'day report of a recorded bag (text, Markdown, PNG plots)'),
+    'report': ('sslfr_recording.report_cli', 'day report of a recorded bag (text, Markdown, PNG plots)'),
     'install-service': ('sslfr_bringup.service', 'install systemd units for the node set (Raspberry Pi)'),
     'web-password': ('sslfr_web.password_cli', 'set the operator password of the web page (stored as a scrypt hash)'),
     'doctor': ('sslfr_bringup.doctor', 'check the installation: ROS underlay, interfaces, executables'),

@@ -12,7 +12,7 @@ from .host import executable_path, find_executable, install_prefix
 #: build. kind 'cli' answers ``--help``; kind 'node' starts with defaults and stops
 #: cleanly on SIGINT. Kept in one place; tests/test_foundation.py checks every one.
 EXECUTABLES: dict[str, dict[str, str]] = {
-    'sslfr_bringup': {'sslfr': 'cli'},
+    'sslfr_bringup': {'sslfr': 'cli', 'liveness_watchdog': 'cli'},
     'sslfr_recording': {'recorder': 'node'},
     'sslfr_web': {'web': 'node'},
     'sslfr_safety': {'safety': 'node'},

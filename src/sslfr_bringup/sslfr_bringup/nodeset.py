@@ -28,6 +28,8 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
+from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
+
 #: Parameter that receives a board's serial port (pyserial URL or device path).
 PORT_PARAM = 'port'
 NODESET_FILE = 'nodeset.yaml'
@@ -92,6 +94,8 @@ class NodeSet:
     restart_backoff: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)
     stable_after: float = 60.0
     stop_timeout: float = 5.0
+    watchdog_timeout: float = DEFAULT_TIMEOUT          # [s] executor beat bound (sslfr_bringup.liveness)
+    watchdog_startup: float = DEFAULT_STARTUP_TIMEOUT  # [s] start to first beat
     sim: Mapping[str, Any] = field(default_factory=dict)
     #: process layouts: name -> ((group name, (node names...)), ...); nodes in no group run alone
     layouts: Mapping[str, tuple] = field(default_factory=lambda: {'separate': ()})
@@ -248,11 +252,20 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
     backoff = tuple(float(x) for x in d.get('restart_backoff', (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)))
     if not backoff or any(x <= 0 for x in backoff):
         raise NodeSetError('defaults.restart_backoff must be positive seconds')
+    try:
+        watchdog = (float(d.get('watchdog_timeout', DEFAULT_TIMEOUT)),
+                    float(d.get('watchdog_startup', DEFAULT_STARTUP_TIMEOUT)))
+    except (TypeError, ValueError) as exc:
+        raise NodeSetError(f'defaults.watchdog_timeout / watchdog_startup must be seconds: {exc}') from None
+    problems = check_bounds(*watchdog)
+    if problems:
+        raise NodeSetError('defaults.' + '; defaults.'.join(problems))
     return NodeSet(nodes=tuple(nodes), boards=boards, config=str(d.get('config', 'almeria_sslfr.yaml')),
                    domain_id=domain_id, discovery_range=str(d.get('discovery_range', 'LOCALHOST')),
                    namespace=str(d.get('namespace') or ''), restart_backoff=backoff,
                    stable_after=float(d.get('stable_after', 60.0)),
                    stop_timeout=float(d.get('stop_timeout', 5.0)),
+                   watchdog_timeout=watchdog[0], watchdog_startup=watchdog[1],
                    sim=dict(data.get('sim') or {}), path=path,
                    **_parse_layouts(data, {n.name: n for n in nodes}))
 

@@ -1,7 +1,9 @@
 """``sslfr install-service``: a systemd unit that runs the node set at boot.
 
 The unit runs ``<repo>/sslfr up --config CONFIG`` (which sources the ROS underlay
-and the workspace itself), restarts it on failure, logs to the journal
+and the workspace itself) as a ``Type=notify`` service with a watchdog
+(``WatchdogSec=``: ``sslfr up`` sends READY=1 and WATCHDOG=1, sd_notify(3)),
+restarts it on failure or on a missed beat, logs to the journal
 (``journalctl -u sslfr-tracker``) and stops it with SIGTERM to the supervisor only
 (``KillMode=mixed``), so the supervisor can stop the axes first; systemd kills any
 leftover after ``TimeoutStopSec``. Step by step: docs/deploy.md.
@@ -25,6 +27,13 @@ from sslfr_planner.cli_input import (CliError, OneLineParser, bounded_int, outpu
                                     write_atomically)
 
 UNIT_NAME = 'sslfr-tracker.service'
+#: [s] WatchdogSec= of the unit: `sslfr up` beats at least every 1 s from its loop
+#: (sslfr_common.sdnotify.MAX_BEAT_PERIOD), whose longest step is a reap after SIGKILL
+#: (<= 5 s); 15 s leaves room for a loaded Pi
+SUPERVISOR_WATCHDOG_S = 15
+#: [s] TimeoutStartSec=: from the start to READY=1 (every node process's executor
+#: turning; a process silent past defaults.watchdog_startup, 60 s, is restarted first)
+START_TIMEOUT_S = 180
 
 
 def repo_root() -> Path:
@@ -76,7 +85,14 @@ StartLimitIntervalSec=300
 StartLimitBurst=10
 
 [Service]
-Type=simple
+# sd_notify: `sslfr up` sends READY=1 once every node process's executor turns and
+# WATCHDOG=1 from its supervision loop (at least every 1 s); it watches its node
+# processes itself (config/nodeset.yaml defaults.watchdog_timeout) and restarts a hung
+# one. systemd restarts the whole set when `sslfr up` itself stops beating.
+Type=notify
+NotifyAccess=main
+WatchdogSec={SUPERVISOR_WATCHDOG_S}
+TimeoutStartSec={START_TIMEOUT_S}
 User={user}
 SupplementaryGroups=dialout
 WorkingDirectory={root}

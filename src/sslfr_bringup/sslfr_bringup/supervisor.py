@@ -14,9 +14,21 @@ only the supervisor, which then stops the set in order). The supervisor
   retried with back-off while a board is not reachable), the supervisor never
   requests a transition on the way up, so it cannot fight them; a driver not active
   after 20 s is reported (and watched again 3 s later);
+- watches that every node process's executor turns (with a
+  :class:`~sslfr_bringup.liveness.LivenessWatch`): each node process gets its own
+  ``NOTIFY_SOCKET`` (one datagram socket of the supervisor, the sender told apart by
+  the pid the kernel attaches) and ``WATCHDOG_USEC``, and beats ``WATCHDOG=1`` from
+  its spin loop (:func:`sslfr_common.node.run_nodes`). A process silent for longer
+  than the bound (``defaults.watchdog_timeout``; before its first beat
+  ``defaults.watchdog_startup``) is killed with SIGKILL (a stopped or deadlocked
+  process does not act on SIGTERM), reaped and restarted like a crashed one; the
+  log line and the ``diagnostics`` status say why ("no executor beat for N s");
+- speaks sd_notify to its own watcher (systemd, ``Type=notify``): ``WATCHDOG=1`` from
+  its loop, ``READY=1`` once every node process has beaten, ``STOPPING=1`` at stop;
 - on :meth:`Supervisor.stop` stops the set in stop groups within ``stop_timeout``
   seconds: the axes first (lifecycle ``deactivate``, then SIGINT), then the rest,
-  the recorder last; whatever is still alive at the end is killed.
+  the recorder last; a stopped (SIGSTOP) process is killed at once; whatever is
+  still alive at the end is killed.
 
 The ROS side (lifecycle calls, diagnostics, the simulation's /clock) lives in one
 thread (:class:`RosSide`) that owns the rclpy context; the process bookkeeping is
@@ -26,14 +38,20 @@ from __future__ import annotations
 
 import os
 import queue
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, TextIO
+
+from sslfr_common.sdnotify import Notifier, NotifyListener
+
+from sslfr_bringup.liveness import LivenessWatch
 
 
 class Interrupted(Exception):
@@ -110,6 +128,19 @@ def catches(pid: int, sig: int) -> bool:
     return False
 
 
+def is_stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (SIGSTOP; Linux /proc/PID/stat state T)."""
+    try:
+        with open(f'/proc/{pid}/stat') as f:
+            return f.read().rsplit(')', 1)[1].split()[0] in ('T', 't')
+    except (OSError, IndexError):
+        return False
+
+
+#: environment variables of the sd_notify protocol (sslfr_common.sdnotify)
+NOTIFY_ENV = ('NOTIFY_SOCKET', 'WATCHDOG_USEC', 'WATCHDOG_PID')
+
+
 @dataclass
 class Program:
     """A supervised process."""
@@ -135,6 +166,7 @@ class Program:
     lifecycle_retry: float | None = None
     lifecycle_pending: set = field(default_factory=set)   # lifecycle nodes not yet active
     last_exit: int | None = None
+    hang_cause: str = ''          # why the liveness watch killed it ('' = it was not)
     log_file: object = None
     history: list = field(default_factory=list)   # (monotonic, event, detail)
 
@@ -177,7 +209,8 @@ class Supervisor:
 
     def __init__(self, programs: list[Program], env: dict, *, backoff=(1.0, 2.0, 4.0, 8.0, 16.0, 30.0),
                  stable_after: float = 60.0, stop_timeout: float = 5.0, log_dir: Path | None = None,
-                 out: TextIO | None = None, ros: 'RosSide | None' = None):
+                 out: TextIO | None = None, ros: 'RosSide | None' = None,
+                 liveness: LivenessWatch | None = None, notifier: Notifier | None = None):
         names = [p.name for p in programs]
         if len(set(names)) != len(names):
             raise ValueError(f'duplicate program names: {names}')
@@ -193,6 +226,15 @@ class Supervisor:
         self.stop_took = 0.0   # [s] how long the ordered stop took
         self.fatal = ''        # why the set cannot run (a node refused its configuration)
         self.events: list[tuple[float, str, str, str]] = []   # (mono, program, event, detail)
+        #: the executor-liveness watch of the node processes (None: not watched)
+        self.liveness = liveness
+        #: sd_notify towards this supervisor's own watcher (systemd); sends nothing without one
+        self.notifier = notifier or Notifier(None)
+        self.ready_sent = False
+        self._notify_dir = self._listener = None
+        if liveness is not None:
+            self._notify_dir = tempfile.mkdtemp(prefix='sslfr-notify-')   # short: socket paths <= 107 bytes
+            self._listener = NotifyListener(os.path.join(self._notify_dir, 'notify.sock'))
 
     # ------------------------------------------------------------------ reporting
     def say(self, text: str, priority: int = 6) -> None:
@@ -218,8 +260,12 @@ class Supervisor:
                     if node != p.name and not link.exists():
                         link.symlink_to(f'{p.name}.log')
             stdout = p.log_file
+        watched = self._listener is not None and p.kind == 'node'
+        env = {k: v for k, v in self.env.items() if k not in NOTIFY_ENV}   # never systemd's socket
+        if watched:
+            env.update(NOTIFY_SOCKET=self._listener.path, WATCHDOG_USEC=str(int(self.liveness.timeout * 1e6)))
         try:
-            p.proc = subprocess.Popen(_orphan_guard(p.argv), env=self.env, stdout=stdout,
+            p.proc = subprocess.Popen(_orphan_guard(p.argv), env=env, stdout=stdout,
                                       stderr=subprocess.STDOUT if stdout else None,
                                       stdin=subprocess.DEVNULL, start_new_session=True)
         except OSError as exc:
@@ -233,6 +279,9 @@ class Supervisor:
         p.next_start = None
         p.lifecycle_state = ''
         p.lifecycle_retry = None
+        p.hang_cause = ''
+        if watched:
+            self.liveness.watch(p.name, p.started_at)
         self._event(p, 'started', f'pid {p.proc.pid}')
         if p.lifecycle:
             self._activate(p)
@@ -259,9 +308,50 @@ class Supervisor:
         return self.programs.get(node) or next(
             (p for p in self.programs.values() if node in p.node_names), None)
 
+    def _check_liveness(self, now: float) -> None:
+        """Take the node processes' beats; kill those past their bound (the exit is
+        then handled as any other: restart with backoff)."""
+        by_pid = {p.proc.pid: p for p in self.programs.values() if p.proc is not None and p.kind == 'node'}
+        for n in self._listener.receive():
+            p = by_pid.get(n.pid)
+            if p is not None:
+                first = self.liveness.beats(p.name) == 0
+                if self.liveness.note(p.name, n.fields, now) and first and self.liveness.beats(p.name):
+                    self._event(p, 'turning', f'first executor beat {now - p.started_at:.1f} s after its start')
+        for late in self.liveness.overdue(now):
+            p = self.programs[late.key]
+            self.liveness.forget(p.name)
+            if not p.alive() or p.held:
+                continue
+            p.hang_cause = late.cause
+            self.say(f'{p.name}: {late.cause}: killing it (SIGKILL) to restart it', 2 if p.critical else 3)
+            try:
+                os.killpg(p.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.proc.wait(5)
+            self._event(p, 'hung', late.cause)
+
+    def node_set_ready(self) -> bool:
+        """Every node process runs and (when watched) has beaten at least once."""
+        nodes = [p for p in self.programs.values() if p.kind == 'node']
+        return bool(nodes) and all(p.alive() and (self.liveness is None or self.liveness.beats(p.name) > 0)
+                                   for p in nodes)
+
+    def _notify_systemd(self) -> None:
+        self.notifier.beat()
+        if not self.ready_sent and self.node_set_ready():
+            self.ready_sent = True
+            n = sum(1 for p in self.programs.values() if p.kind == 'node')
+            self.notifier.notify('READY=1', f'STATUS=node set up: {n} node processes, every executor turning')
+            self.say(f'node set up: {n} node processes, every executor turning')
+
     def step(self) -> None:
-        """One supervision pass: reap exits, schedule/perform restarts, lifecycle."""
+        """One supervision pass: reap exits, schedule/perform restarts, lifecycle,
+        executor liveness."""
         now = time.monotonic()
+        if self._listener is not None and not self.stopping:
+            self._check_liveness(now)
         if self.ros is not None:
             for name, ok, msg in self.ros.results():
                 p = self.program_of(name)
@@ -290,7 +380,8 @@ class Supervisor:
                     p.failures = 0
                 p.failures += 1
                 p.lifecycle_state = ''
-                self._event(p, 'exited', f'code {code} after {up_for:.1f} s')
+                how = f'killed: {p.hang_cause}' if p.hang_cause else f'code {code}'
+                self._event(p, 'exited', f'{how} after {up_for:.1f} s')
                 if code == EXIT_CONFIG_REFUSED and p.kind == 'node':
                     p.next_start = float('inf')
                     self.fatal = f'{p.name} refused its configuration (exit code {code}): {self.last_error(p)}'
@@ -304,12 +395,13 @@ class Supervisor:
                 p.next_start = now + delay
                 if p.critical:
                     self.say('*' * 72, 2)
-                    self.say(f'*** CRITICAL: {p.name} DIED (exit code {code}, up {up_for:.1f} s). '
+                    self.say(f'*** CRITICAL: {p.name} DIED ({how if p.hang_cause else f"exit code {code}"}, '
+                             f'up {up_for:.1f} s). '
                              f'Restart #{p.restarts + 1} in {delay:.0f} s. Until it is back the axis '
                              f'drivers see no safety heartbeat and stow/hold.', 2)
                     self.say('*' * 72, 2)
                 else:
-                    self.say(f'{p.name} exited (code {code}, up {up_for:.1f} s); restart in {delay:.0f} s', 4)
+                    self.say(f'{p.name} exited ({how}, up {up_for:.1f} s); restart in {delay:.0f} s', 4)
             if p.next_start is not None and now >= p.next_start and not p.held:
                 p.restarts += 1
                 self._event(p, 'restart', f'#{p.restarts}')
@@ -349,6 +441,18 @@ class Supervisor:
         self._event(p, 'killed', 'fault injection')
         self.say(f'{name} killed (fault injection){"; held down" if hold else ""}', 4)
 
+    def hang(self, name: str) -> None:
+        """SIGSTOP the process running node ``name`` (a fault: the process stops as if
+        deadlocked; the liveness watch has to find and restart it)."""
+        p = self.program_of(name)
+        if p is None:
+            raise KeyError(name)
+        if not p.alive():
+            raise RuntimeError(f'{p.name} is not running')
+        os.killpg(p.proc.pid, signal.SIGSTOP)
+        self._event(p, 'hang', 'fault injection: SIGSTOP')
+        self.say(f'{p.name} stopped with SIGSTOP (fault injection: hang of {name})', 4)
+
     def release(self, name: str) -> None:
         """Let a held program start again now."""
         p = self.program_of(name)
@@ -364,8 +468,10 @@ class Supervisor:
         """Ordered stop (axes first, recorder last) within ``stop_timeout``; return the
         wall time it took [s]."""
         self.stopping = True
+        self.notifier.notify('STOPPING=1')
         t0 = time.monotonic()
         deadline = t0 + self.stop_timeout - 0.4
+        self._kill_stopped(self.programs.values())
         groups: dict[int, list[Program]] = {}
         for p in self.programs.values():
             groups.setdefault(p.stop, []).append(p)
@@ -387,6 +493,7 @@ class Supervisor:
             group_deadline = min(group_deadline, deadline)
             while time.monotonic() < group_deadline and any(p.alive() for p in progs):
                 time.sleep(0.02)
+                self._kill_stopped(progs)
             for p in progs:
                 if p.alive():
                     self.say(f'{p.name} did not stop on SIGINT in time: SIGTERM', 4)
@@ -414,11 +521,28 @@ class Supervisor:
         self.stop_took = took
         return took
 
+    def _kill_stopped(self, progs) -> None:
+        """SIGKILL (and reap) the stopped ones among ``progs``: a stopped process acts on
+        no signal but SIGKILL (SIGINT and SIGTERM wait for a SIGCONT), so it is killed
+        at once, not at the end of the stop budget."""
+        for p in progs:
+            if p.alive() and is_stopped(p.proc.pid):
+                self.say(f'{p.name} is stopped (SIGSTOP): SIGKILL', 4)
+                try:
+                    os.killpg(p.proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                p.proc.wait(2)
+
     def close(self) -> None:
         for p in self.programs.values():
             if p.log_file is not None:
                 p.log_file.close()
                 p.log_file = None
+        if self._listener is not None:
+            self._listener.close()
+            shutil.rmtree(self._notify_dir, ignore_errors=True)
+            self._listener = None
 
     def rss(self, full: bool = False) -> dict[str, tuple[int, int]]:
         """Memory of every running program with its children: ``(rss, pss)`` [bytes].
@@ -464,6 +588,7 @@ class Supervisor:
                 self.start()
             while not stop.requested.is_set():
                 self.step()
+                self._notify_systemd()
                 if self.fatal:
                     why = 'fatal'
                     break
@@ -515,9 +640,12 @@ class RosSide(threading.Thread):
         self._ctx = None
 
     # called from the supervisor thread
-    def wait_ready(self, stop: StopSignals) -> str | None:
-        """Wait (started thread) until the ROS side is ready: None, or why it failed."""
+    def wait_ready(self, stop: StopSignals, tick: Callable[[], None] | None = None) -> str | None:
+        """Wait (started thread) until the ROS side is ready: None, or why it failed.
+        ``tick()`` is called every 0.05 s meanwhile (the supervisor's own beat)."""
         while not self.ready.is_set() and self.is_alive():
+            if tick is not None:
+                tick()
             stop.wait(0.05)
         if self.error is not None or not self.ready.is_set():
             return str(self.error or 'its thread ended before it was ready')
@@ -606,17 +734,21 @@ class RosSide(threading.Thread):
                 s['event'], s['detail'] = event, detail
                 if event == 'restart':
                     s['restarts'] += 1
+                if event in ('hung', 'exited', 'killed'):
+                    s['cause'] = f'{event} {detail}'.strip()   # why it went, kept past the restart
             arr = DiagnosticArray()
             arr.header.stamp = node.get_clock().now().to_msg()
             for name, s in sorted(status.items()):
                 level = DiagnosticStatus.OK
-                if s['event'] in ('exited', 'killed', 'spawn-failed', 'activate-failed'):
+                if s['event'] in ('exited', 'killed', 'hung', 'hang', 'spawn-failed', 'activate-failed'):
                     level = DiagnosticStatus.ERROR if s['critical'] else DiagnosticStatus.WARN
                 elif s['restarts'] and s['critical']:
                     level = DiagnosticStatus.ERROR
                 elif s['restarts']:
                     level = DiagnosticStatus.WARN
                 msg = f"{s['event']} {s['detail']}".strip()
+                if s['restarts'] and s.get('cause') and s['event'] not in ('hung', 'exited', 'killed'):
+                    msg += f"; restarted after: {s['cause']}"
                 if s['restarts'] and s['critical']:
                     msg = f"CRITICAL process restarted {s['restarts']}x; last: {msg}"
                 arr.status.append(DiagnosticStatus(

@@ -5,7 +5,9 @@ params file; default ``almeria_sslfr.yaml``), starts the nodes as processes of t
 (default ``separate``: every node its own process; ``--layout composed``: drivers and
 sensors in one process, planner, web and recorder in another, safety alone),
 drives the axis drivers' lifecycle to ``active``, restarts a crashed node with backoff
-(a restart of the safety supervisor is reported loudly) and, on SIGINT/SIGTERM, stops
+(a restart of the safety supervisor is reported loudly), kills and restarts a process
+whose executor stops turning (no ``WATCHDOG=1`` beat within ``defaults.watchdog_timeout``)
+and, on SIGINT/SIGTERM, stops
 the axes first, then the rest, within 5 s. This is what the systemd unit runs.
 
 Networking: ``ROS_DOMAIN_ID`` defaults to the node set's (42, never 0) and
@@ -23,7 +25,9 @@ from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
+from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
+from sslfr_common.sdnotify import Notifier
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
 
 
@@ -165,16 +169,20 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     if not programs:
         print('sslfr up: nothing to run', file=sys.stderr)
         return 1
+    # systemd (Type=notify, WatchdogSec=): this process beats from its first loop on
+    notifier = Notifier.from_environ()
+    notifier.beat()
     ros = RosSide(domain, namespace=args.namespace or ns.namespace)
     ros.start()
     try:
-        failed = ros.wait_ready(stop)
+        failed = ros.wait_ready(stop, tick=notifier.beat)
         if failed:
             print(f'sslfr up: ROS side failed: {failed}', file=sys.stderr)
             return 1
         sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
                          stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None,
-                         ros=ros)
+                         ros=ros, liveness=LivenessWatch(ns.watchdog_timeout, ns.watchdog_startup),
+                         notifier=notifier)
         why = sup.run(stop)
     finally:
         ros.shutdown()

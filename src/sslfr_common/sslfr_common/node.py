@@ -19,6 +19,13 @@ and ``demo_nodes_py``), with what a tracker on a Pi needs on top of it:
 - **Invalid start-up configuration** (the exceptions in ``config_errors``, by default
   ``ValueError`` and rclpy's parameter exceptions) prints one line
   (``<node>: invalid parameters, not starting: <reason>``) and exits 2, so a supervisor can tell it from a crash.
+- **Liveness.** With ``NOTIFY_SOCKET`` in the environment (given by ``sslfr up`` /
+  ``sslfr sim``, the launch file's watchdog, or systemd) the process sends ``READY=1``
+  when its executor starts, ``WATCHDOG=1`` from the spin loop after executor turns
+  (rate-limited: at most one per beat period, a quarter of ``WATCHDOG_USEC``, <= 1 s)
+  and ``STOPPING=1`` when it begins to stop (:mod:`sslfr_common.sdnotify`). The beat
+  comes from the thread that runs the callbacks, so a deadlock, a callback that never
+  returns or a stopped process silences it; the watcher kills and restarts the process.
 - **The log bridge.** The pure modules log with Python ``logging``; :class:`LogBridge`
   forwards their records to the node's rclpy logger (once per distinct text) and is
   detached before the node is destroyed: nothing is forwarded to ``/rosout`` after
@@ -42,6 +49,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from .executor import LeanExecutor
+from .sdnotify import Notifier
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
 
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
@@ -205,19 +213,30 @@ def _ignore_signal(signum, frame) -> None:
     """A signal during the stop: nothing more to do."""
 
 
+def _no_beat() -> None:
+    """No watcher: nothing to prove."""
+
+
 def spin_until_stopped(node, executor, stop: StopRequest | None = None,
-                       stats: SpinStats | None = None) -> SpinStats:
+                       stats: SpinStats | None = None, beat: Callable[[], None] | None = None) -> SpinStats:
     """Spin ``node`` in ``executor`` until ``stop`` is requested or the context ends.
 
     A ``RuntimeError`` from the executor (a message rclpy could not take, a callback
     failing with it) is logged (throttled) and counted in ``stats``; the loop goes on.
+    ``beat()`` is called after every turn of the executor (every ``spin_once``, which
+    returns at least every :data:`SPIN_TIMEOUT_S`), by the thread that runs the
+    callbacks: a callback that never returns, a wait that never wakes or a stopped
+    process stops the beats (:meth:`sslfr_common.sdnotify.Notifier.beat`, which sends
+    at most one ``WATCHDOG=1`` per beat period).
     """
     stats = stats or SpinStats()
+    beat = beat or _no_beat
     if node not in executor.get_nodes():
         executor.add_node(node)
     while node.context.ok() and not (stop is not None and stop.requested.is_set()):
         try:
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            beat()
         except RuntimeError as exc:
             stats.errors += 1
             stats.last = str(exc)
@@ -350,7 +369,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopRequest()
     built: list = []
-    ex = bridge = stats = None
+    ex = bridge = stats = notifier = None
     code = 0
     try:
         for name, make_node in nodes:
@@ -369,13 +388,18 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
         stop.executor = ex
         for node in built:
             ex.add_node(node)
-        stats = spin_until_stopped(built[0], ex, stop)
+        notifier = Notifier.from_environ()
+        notifier.notify('READY=1', 'STATUS=executor turning: ' + ', '.join(n.get_name() for n in built))
+        stats = spin_until_stopped(built[0], ex, stop, beat=notifier.beat if notifier.period else None)
         for node in built:
             node.spin_stats = stats
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         stop.ignore_further()
+        if notifier is not None:
+            notifier.notify('STOPPING=1')     # from here no beats: the watcher lets it go
+            notifier.close()
         if ex is not None:
             drain_callbacks(ex, stats)      # nothing runs in the pool while on_exit() does
         for node in built:

@@ -26,6 +26,7 @@ NODE = textwrap.dedent('''
     BUILD_S = float(os.environ.get('BUILD_S', '0'))
     EXIT_S = float(os.environ.get('EXIT_S', '0'))
     SLOW_CB_S = float(os.environ.get('SLOW_CB_S', '0'))
+    HANG_FILE = os.environ.get('HANG_FILE', '')
     lib = logging.getLogger('sslfr_testlib')
 
     class Demo(Node):
@@ -43,6 +44,10 @@ NODE = textwrap.dedent('''
             if not getattr(self, 'said', False):
                 self.said = True
                 print('executor', type(self.executor).__name__, flush=True)
+            if HANG_FILE and os.path.exists(HANG_FILE):   # a callback that never returns
+                print('callback hangs', flush=True)
+                while True:
+                    time.sleep(0.05)
             if SLOW_CB_S:                         # a callback still running at the stop
                 print('cb start', flush=True)
                 time.sleep(SLOW_CB_S)
@@ -337,3 +342,50 @@ def test_composed_nodes_share_one_clock_subscription(ros_domain):
         for n in (*nodes, wall, src):
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.parametrize('choice', ['lean', 'rclpy'])
+def test_beats_come_from_the_executor_turning(ros_env, tmp_path, choice):
+    """READY=1, then WATCHDOG=1 every beat period (a quarter of WATCHDOG_USEC, here
+    0.5 s) on a real NOTIFY_SOCKET while the executor turns; a callback that never
+    returns stops them although the process runs on (its other threads too); an
+    orderly stop says STOPPING=1."""
+    from sslfr_common.sdnotify import NotifyListener
+
+    def collect(lis, proc, until, timeout):
+        got = []
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not until(got):
+            got += [(time.monotonic(), n.fields) for n in lis.receive() if n.pid == proc.pid]
+            time.sleep(0.02)
+        return got
+
+    hang = tmp_path / 'hang'
+    with NotifyListener(str(tmp_path / 'notify.sock')) as lis:
+        proc = _start(ros_env, SSLFR_EXECUTOR=choice, NOTIFY_SOCKET=lis.path, WATCHDOG_USEC='2000000',
+                      HANG_FILE=str(hang))
+        try:
+            got = collect(lis, proc, lambda g: sum('WATCHDOG' in f for _, f in g) >= 4, 60.0)
+            assert got and got[0][1].get('READY') == '1', got
+            assert got[0][1]['STATUS'] == 'executor turning: plumbing_demo'
+            beats = [t for t, f in got if f.get('WATCHDOG') == '1']
+            assert len(beats) >= 4, got
+            gaps = [b - a for a, b in zip(beats, beats[1:])]
+            assert all(0.4 <= g <= 1.6 for g in gaps), gaps       # 0.5 s period, loaded machine
+            hang.touch()
+            _wait_line(proc, 'callback hangs')
+            t_hung = time.monotonic()
+            late = collect(lis, proc, lambda g: False, 2.5)
+            # a beat already on its way when the callback began may still arrive
+            assert not [t for t, f in late if 'WATCHDOG' in f and t > t_hung + 0.3], late
+            assert proc.poll() is None, 'the process runs on: only its executor stopped'
+        finally:
+            proc.kill()
+            proc.communicate(timeout=20)
+        hang.unlink()
+        proc = _start(ros_env, SSLFR_EXECUTOR=choice, NOTIFY_SOCKET=lis.path, WATCHDOG_USEC='2000000')
+        collect(lis, proc, lambda g: any('WATCHDOG' in f for _, f in g), 60.0)
+        proc.send_signal(signal.SIGINT)
+        code, out = _finish(proc)
+        assert code == 0, out
+        assert any(n.fields.get('STOPPING') == '1' for n in lis.receive() if n.pid == proc.pid), out

@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sslfr_common.contract import JOINT_RANGE, STEP_ANGLE
-from sslfr_drivers.axis.core import SafetyVerdict, SafetyWatch, StallDetector
+from sslfr_drivers.axis.safety_watch import SafetyVerdict, SafetyWatch
+from sslfr_drivers.axis.stall import StallDetector
 from sslfr_drivers.axis.joint import Calibration, SoftLimits, move_speed
 from sslfr_drivers.axis.trajectory import TrajectoryMsg, TrajectoryRejected, TrajectoryStore
 from sslfr_drivers.axis.trajectory import validate_trajectory as _validate
@@ -190,8 +191,9 @@ def test_stall_without_sensor_pending_move_not_moving():
 
 
 # ----------------------------------------------------------------- supervisor
-from sslfr_drivers.axis.core import Action, AxisSupervisor, BoardState  # noqa: E402
-from sslfr_drivers.axis.core import AxisTuning as AxisConfig  # noqa: E402
+from sslfr_drivers.axis.commands import Action, BoardState  # noqa: E402
+from sslfr_drivers.axis.supervisor import AxisSupervisor  # noqa: E402
+from sslfr_drivers.axis.supervisor import AxisTuning as AxisConfig  # noqa: E402
 
 
 def _sup(use_sensor=True, auto_home=True):
@@ -316,7 +318,7 @@ def test_setpoint_lead_scales_with_the_ros_time_rate():
 
 def test_board_fault_bits_latch_a_fault_and_match_the_protocol():
     from sslfr_drivers.link import messages as m
-    from sslfr_drivers.axis.core import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
+    from sslfr_drivers.axis.commands import BOARD_FAULT_DRIVER, BOARD_FAULT_STALL
     assert BOARD_FAULT_STALL == m.FaultBits.STALL and BOARD_FAULT_DRIVER == m.FaultBits.DRIVER
     sup = _sup()
     offer(sup.store, [100.0, 200.0], [0.0, 0.1], None, 100.0, MIRRORS)
@@ -378,7 +380,7 @@ def test_next_tick_follows_the_sun_one_step_at_a_time():
 
 
 def test_time_rate_ignores_a_step_right_after_a_clock_jump():
-    from sslfr_drivers.axis.core import TimeRate
+    from sslfr_drivers.axis.rates import TimeRate
     r = TimeRate()
     t_ros, t_st = 1000.0, 0.0
     for _ in range(40):                   # 90x, /clock every 50 ms wall

@@ -15,10 +15,11 @@ from hypothesis import strategies as st
 
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STOW_POSITION, Phase
 from sslfr_drivers.axis.activation import SelfActivation, check_request
-from sslfr_drivers.axis.core import (
-    DIAG_ERROR, DIAG_OK, DIAG_WARN, Action, AxisSupervisor, AxisTuning, BoardState, TimeRate,
-    diagnostic_verdict, operator_mode,
-)
+from sslfr_drivers.axis.commands import Action, BoardState
+from sslfr_drivers.axis.diagnostics import DIAG_ERROR, DIAG_OK, DIAG_WARN, diagnostic_verdict
+from sslfr_drivers.axis.operator_input import operator_mode
+from sslfr_drivers.axis.rates import TimeRate
+from sslfr_drivers.axis.supervisor import AxisSupervisor, AxisTuning
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.axis.params import PARAMS, cross_check, params_for, port_problem, tuning_from
 from sslfr_drivers.axis.trajectory import (

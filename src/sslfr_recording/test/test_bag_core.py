@@ -333,7 +333,7 @@ def test_whatif_comparison_on_bags(tmp_path):
 def test_report_figures_on_a_known_day(tmp_path):
     from daybag import SUNRISE, SUNSET, STOW, expected_H, write_day
 
-    from sslfr_recording import report
+    from sslfr_recording import report, report_cli
     start, end = STOW[0] - 1800, STOW[0] + 1800
     write_day(tmp_path / 'd', start, end, err_amp=0.002)
     rep = report.analyse(BagReader(tmp_path / 'd'))
@@ -347,7 +347,7 @@ def test_report_figures_on_a_known_day(tmp_path):
     assert 'outlet' in stow['reasons'][0]
     assert rep.temperatures['outlet_temperature']['max'] == pytest.approx(152.0)
     assert rep.irradiance['H_kWh_m2'] == pytest.approx(expected_H(start, end - 1), rel=1e-4)
-    assert report.main([str(tmp_path / 'd'), '--out', str(tmp_path / 'r')]) == 0
+    assert report_cli.main([str(tmp_path / 'd'), '--out', str(tmp_path / 'r')]) == 0
     md = (tmp_path / 'r' / 'report.md').read_text()
     for png in ('angles', 'tracking_error', 'temperatures', 'irradiance'):
         assert (tmp_path / 'r' / f'{png}.png').stat().st_size > 5000 and f'({png}.png)' in md

@@ -4,7 +4,7 @@ from datetime import datetime, timezone
 import numpy as np
 import pytest
 
-from sslfr_recording.report import energy_estimate
+from sslfr_recording.report_energy import energy_estimate
 
 SITE = {'latitude': 36.8353, 'longitude': -2.4022, 'altitude': 22.0}
 T0 = datetime(2024, 6, 21, 10, 0, tzinfo=timezone.utc).timestamp()

@@ -10,6 +10,8 @@ is a simulated duration, > 0)::
     gps-loss@HH:MM+SECONDS                     the GPS receiver loses its fix
     kill:NODE@HH:MM[+SECONDS]                  SIGKILL a node; held down SECONDS, else
                                                for the rest of the run
+    hang:NODE@HH:MM                            SIGSTOP the process of a node (its
+                                               executor stops as in a deadlock)
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -30,6 +32,10 @@ gps-loss            gps/fix status NO_FIX; the planner keeps the persisted site
 kill:planner        the drivers finish the trajectory horizon they hold, then
                     hold position
 kill:safety         no safety heartbeat: every axis stops/stows within 1.2 s
+hang                no executor beat: the supervisor SIGKILLs the process within
+                    its watchdog_timeout (5 s) and restarts it; meanwhile safety
+                    stows if the node is a watched one (or, safety hung, the axes
+                    stop on their own heartbeat watchdog); then tracking resumes
 ==================  ==========================================================
 """
 from __future__ import annotations
@@ -39,7 +45,7 @@ from dataclasses import dataclass
 
 from sslfr_common.contract import JOINTS
 
-KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill')
+KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -48,6 +54,7 @@ _RULES = {
     'board-reset': (True, 'forbidden'),
     'gps-loss': (False, 'required'),
     'kill': (True, 'optional'),
+    'hang': (True, 'forbidden'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
@@ -73,7 +80,7 @@ class Fault:
     at : float
         Seconds after 00:00 UTC of the simulated day [s].
     target : str or None
-        Board (link-drop, board-reset), node (kill) or thermocouple (inlet/outlet).
+        Board (link-drop, board-reset), node (kill, hang) or thermocouple (inlet/outlet).
     duration : float or None
         Simulated seconds the fault lasts [s]; None = until the end (or instantaneous).
     spec : str
@@ -93,7 +100,7 @@ class Fault:
 
     @property
     def board(self) -> str | None:
-        """The simulated board that receives this fault (None for ``kill``)."""
+        """The simulated board that receives this fault (None for ``kill``, ``hang``)."""
         if self.kind in ('link-drop', 'board-reset'):
             return self.target
         return FAULT_BOARD.get(self.kind)
@@ -118,15 +125,16 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
             raise FaultSpecError(f'fault {spec!r}: thermocouple is inlet or outlet, not {target!r}')
         target = target or 'outlet'
     elif needs_target and not target:
-        what = 'NODE' if kind == 'kill' else 'BOARD'
+        on_node = kind in ('kill', 'hang')
+        what = 'NODE' if on_node else 'BOARD'
         raise FaultSpecError(f'fault {spec!r}: {kind} needs :{what} (e.g. {kind}:'
-                             f'{"planner" if kind == "kill" else "mirrors"}@10:00'
+                             f'{"planner" if on_node else "mirrors"}@10:00'
                              f'{"+60" if dur_rule == "required" else ""})')
     elif not needs_target and target:
         raise FaultSpecError(f'fault {spec!r}: {kind} takes no target')
     if kind in ('link-drop', 'board-reset') and target not in boards:
         raise FaultSpecError(f'fault {spec!r}: unknown board {target!r} (known: {", ".join(boards)})')
-    if kind == 'kill' and nodes is not None and target not in nodes:
+    if kind in ('kill', 'hang') and nodes is not None and target not in nodes:
         raise FaultSpecError(f'fault {spec!r}: unknown node {target!r} (known: {", ".join(nodes)})')
     duration = float(dur) if dur is not None else None
     if dur_rule == 'required' and duration is None:

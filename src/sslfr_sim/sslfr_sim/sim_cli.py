@@ -25,7 +25,8 @@ measured without the simulation's own ``/clock`` traffic (benchmarks/bench_nodes
 
 Faults (``--fault SPEC``, grammar in :mod:`sslfr_sim.faults`) fire at their
 simulated time through the simulators' control sockets (``kill:NODE`` through the
-supervisor). A fault duration is simulated seconds; a link drop lasts
+supervisor; ``hang:NODE`` SIGSTOPs the node's process, which the supervisor's
+liveness watch then kills and restarts). A fault duration is simulated seconds; a link drop lasts
 ``SECONDS / speed`` wall seconds, so at high speed give it enough simulated seconds
 to exceed the drivers' steady-clock link timeout (1 s wall).
 """
@@ -46,6 +47,7 @@ from pathlib import Path
 from sslfr_sim import faults as faults_mod
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain, find_executable
+from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float, ros_namespace
@@ -411,6 +413,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
         sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
                          stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
+                         liveness=LivenessWatch(ns.watchdog_timeout, ns.watchdog_startup),
                          ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('[sslfr up] started ', ': lifecycle active')))
         schedule = faults_mod.Schedule(faults)
         fired: list[dict] = []
@@ -503,6 +506,9 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                         else:
                             sup.release(f.target)
                         rec['result'] = 'ok'
+                    elif f.kind == 'hang':
+                        sup.hang(f.target)
+                        rec['result'] = 'ok'
                     else:
                         ctl = SimControl(controls[f.board], timeout=2.0)
                         rec['result'] = [ctl.cmd(line).get('ok', False) for line in fault_commands(f, what, speed)]
@@ -533,6 +539,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                    'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,
                    'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
                    'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
+                   # the supervisor's process events [wall s since the command's start, program,
+                   # event, detail]: started, hang, hung (liveness kill, with its cause), exited, restart...
+                   'process_events': [[round(t - t_wall0, 3), name, event, detail]
+                                      for t, name, event, detail in sup.events],
                    'clock_messages': ros.clock_published,
                    # the fault timer's longest pass-to-pass gap [s wall] (nominal 0.02 s) and its
                    # memory census's longest pass: a late injection shows here
@@ -550,7 +560,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             return 1
         if args.no_report:
             return 0 if why == 'until' else 130
-        return _report(bag_root, out)
+        return _report(bag_root, out, config)
 
     finally:
         if sup is not None and not sup.stopping:
@@ -605,19 +615,20 @@ def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=No
                           run_dir=run_dir, layout=layout, params=params)
 
 
-def _report(bag_root: Path, out: Path) -> int:
-    """Run the day report on the newest bag under ``bag_root``."""
+def _report(bag_root: Path, out: Path, config: Path) -> int:
+    """Run the day report on the newest bag under ``bag_root``, its ideal from the run's
+    site ``config``."""
     bags = sorted((p for p in bag_root.iterdir() if (p / 'metadata.yaml').exists()),
                   key=lambda p: p.stat().st_mtime) if bag_root.exists() else []
     if not bags:
         print(f'sslfr sim: no bag was recorded in {bag_root}: no report', file=sys.stderr)
         return 1
     try:
-        from sslfr_recording import report
+        from sslfr_recording import report_cli
     except ImportError:
-        print('sslfr sim: MISSING the report module (sslfr_recording.report): no report', file=sys.stderr)
+        print('sslfr sim: MISSING the report module (sslfr_recording.report_cli): no report', file=sys.stderr)
         return 1
-    code = int(report.main([str(bags[-1]), '--out', str(out / 'report')]) or 0)
+    code = int(report_cli.main([str(bags[-1]), '--out', str(out / 'report'), '--config', str(config)]) or 0)
     print(f'plots: {out / "report"}/*.png')
     return code
 

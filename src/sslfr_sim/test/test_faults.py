@@ -16,6 +16,7 @@ from sslfr_sim.faults import Fault, FaultSpecError, Schedule, format_fault, pars
     ('gps-loss@06:00+600', 'gps-loss', 21600, None, 600.0, 'gps'),
     ('kill:planner@12:00', 'kill', 43200, 'planner', None, None),
     ('kill:safety@12:00+30', 'kill', 43200, 'safety', 30.0, None),
+    ('hang:planner@12:00', 'hang', 43200, 'planner', None, None),
 ])
 def test_parse_each_kind(spec, kind, at, target, duration, board):
     f = parse(spec, nodes=['planner', 'safety'])
@@ -37,6 +38,9 @@ def test_parse_each_kind(spec, kind, at, target, duration, board):
     ('gps-loss@10:00+0', 'duration must be > 0'),
     ('kill@10:00', 'needs :NODE'),
     ('kill:nobody@10:00', 'unknown node'),
+    ('hang@10:00', 'needs :NODE'),
+    ('hang:nobody@10:00', 'unknown node'),
+    ('hang:planner@10:00+30', 'instantaneous'),
     ('thermocouple-open:middle@10:00', 'inlet or outlet'),
 ])
 def test_bad_specs_are_refused_with_the_reason(spec, needle):
@@ -47,9 +51,9 @@ def test_bad_specs_are_refused_with_the_reason(spec, needle):
 @given(kind=st.sampled_from(faults.KINDS), at=st.integers(0, 86399), dur=st.integers(1, 7200),
        board=st.sampled_from(faults.DEFAULT_BOARDS))
 def test_format_parse_round_trip(kind, at, dur, board):
-    target = {'link-drop': board, 'board-reset': board, 'kill': 'planner',
+    target = {'link-drop': board, 'board-reset': board, 'kill': 'planner', 'hang': 'safety',
               'thermocouple-open': 'inlet'}.get(kind)
-    duration = None if kind == 'board-reset' else float(dur)
+    duration = None if kind in ('board-reset', 'hang') else float(dur)
     f = Fault(kind, float(at), target, duration, '')
     g = parse(format_fault(f))
     assert (g.kind, g.at, g.target, g.duration) == (f.kind, f.at, f.target, f.duration)

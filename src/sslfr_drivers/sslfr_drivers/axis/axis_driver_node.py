@@ -2,7 +2,7 @@
 
 One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This file
 only wires ROS to pure code: parameters :mod:`.params`, decisions
-:class:`.core.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
+:class:`.supervisor.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
 :mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
 :mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md). The control step
 (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in its own thread:
@@ -32,8 +32,11 @@ from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_drivers.axis.board_session import AxisBoardSession, BoardReading, BoardRefused, open_session
 from sslfr_drivers.axis.control_loop import BackgroundOpen, ControlLoop
-from sslfr_drivers.axis.core import (Action, AxisSupervisor, BoardState, Snapshot, TimeRate,
-                                     diagnostic_verdict, operator_mode)
+from sslfr_drivers.axis.commands import STOP, ActionKind, BoardState
+from sslfr_drivers.axis.diagnostics import diagnostic_verdict
+from sslfr_drivers.axis.operator_input import operator_mode
+from sslfr_drivers.axis.rates import TimeRate
+from sslfr_drivers.axis.supervisor import AxisSupervisor, Snapshot
 from sslfr_drivers.axis.managed_node import ManagedNode
 from sslfr_drivers.axis.msgs import diagnostics_msg, joint_msg, status_msg, trajectory_msg
 from sslfr_drivers.axis.params import PARAMS, board_port, params_for, port_problem, tuning_from
@@ -69,7 +72,6 @@ class AxisDriver(ManagedNode):
         self._snap = Snapshot()
         self._pub_n = 0
         self._opening: BackgroundOpen | None = None
-        self._stop_seen = False
         self.rate = TimeRate()
 
         tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -169,7 +171,7 @@ class AxisDriver(ManagedNode):
 
     def _send_stop(self, why: str) -> None:
         if self.session is not None:
-            res = self.session.write(Action('stop'))
+            res = self.session.write(STOP)
             self.sup.counters['stops_sent'] += 1
             if not res.ok:
                 self.get_logger().warning(f'STOP ({why}) not acknowledged: {res.detail}')
@@ -187,11 +189,8 @@ class AxisDriver(ManagedNode):
     def _on_safety(self, msg: SafetyState) -> None:
         now = steady_now(self.steady)
         session = self.session
-        # an ESTOP names the axes it stops; an ESTOP naming none stops every axis
-        stop_us = self.axis in msg.stopped_axes or (msg.level == SafetyState.ESTOP and not msg.stopped_axes)
-        if session is not None and stop_us and not self._stop_seen:
-            session.stop_now()      # before taking the lock: never wait behind a control tick
-        self._stop_seen = stop_us
+        if self.sup.safety.stop_at_receipt(now, msg) and session is not None:
+            session.write(STOP, wait=False)     # before taking the lock: never wait behind a control tick
         with self._lock:
             before = self.sup.safety.verdict(now)[0]
             self.sup.safety.receive(now, msg.level, msg.stow_required, list(msg.stopped_axes),
@@ -241,11 +240,11 @@ class AxisDriver(ManagedNode):
             fault = self.sup.take_new_fault()
         if fault:
             self.get_logger().error(f'axis fault: {fault}')
-        result = session.write(act) if session is not None and board is not None and act.kind != 'none' else None
+        result = session.write(act) if session is not None and board is not None and act.kind != ActionKind.NONE else None
         with self._lock:
             warning = self.sup.record_write(act, *result) if result is not None else None
             self._snap = self.sup.snapshot(now_ros, board)
-            wait = period if act.kind != 'none' else self.sup.next_tick(
+            wait = period if act.kind != ActionKind.NONE else self.sup.next_tick(
                 now_ros, now_steady, board, rate, period, self.p['idle_poll_period'])
         if warning:
             self.get_logger().warning(warning)

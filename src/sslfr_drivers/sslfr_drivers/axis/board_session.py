@@ -1,17 +1,18 @@
 """The axis driver's hardware interface (no rclpy): one axis board, a thin adapter over
-:class:`sslfr_drivers.link.board_link.BoardLink` that speaks in :mod:`.core` terms.
+:class:`sslfr_drivers.link.board_link.BoardLink` that speaks in :mod:`.commands` terms.
 It owns the board I/O of the driver's read -> update -> write cycle.
 
 - :meth:`AxisBoardSession.open` starts the link, waits for INFO and refuses a board
   speaking another protocol version or that is not an axis board
   (:class:`BoardRefused`, message says why);
 - :meth:`read` (once per control tick) reads STATUS (one try, short time-out) into
-  a :class:`BoardReading`: the :class:`~sslfr_drivers.axis.core.BoardState`, or
+  a :class:`BoardReading`: the :class:`~sslfr_drivers.axis.commands.BoardState`, or
   None while the link is not UP (down, reconnecting, re-reading INFO/STATUS after a
   board reset), and whether the board reset or the port was reopened since the
   last read (the driver then forgets its commands);
-- :meth:`write` executes an :class:`~sslfr_drivers.axis.core.Action`
-  (MOVE_TO / STOP / HOME / SET_ZERO) and returns a :class:`WriteResult`.
+- :meth:`write` executes an :class:`~sslfr_drivers.axis.commands.Action`
+  (MOVE_TO / STOP / HOME / SET_ZERO) and returns a :class:`WriteResult`: the one place
+  where the driver's commands, every STOP included, are put on the wire.
 
 The link's own heartbeat (PING when idle for ``heartbeat`` s) keeps the board's 1 s
 watchdog quiet even when the driver is inactive; STATUS polls count as traffic too.
@@ -25,7 +26,8 @@ from typing import NamedTuple
 from sslfr_common.contract import LinkState as Link
 
 from sslfr_drivers.link import messages as m
-from sslfr_drivers.axis.core import Action, BoardState, Calibration
+from sslfr_drivers.axis.commands import Action, ActionKind, BoardState
+from sslfr_drivers.axis.joint import Calibration
 from sslfr_drivers.link.board_link import BoardLink, LinkError, LinkState, NackError
 from sslfr_drivers.link.protocol import ProtocolError
 from sslfr_drivers.link.keys import link_key
@@ -235,28 +237,23 @@ class AxisBoardSession:
         return self.last_status.speed * cal.joint_per_step
 
     # ------------------------------------------------------------------ commands
-    def stop_now(self) -> None:
-        """Queue a STOP without waiting for its ACK (safe from any thread; used for
-        e-stops so they never wait behind a control tick that is retrying)."""
+    def write(self, act: Action, wait: bool = True) -> WriteResult | None:
+        """Put ``act`` on the wire (nothing for NONE). ``wait``: wait for its ACK (the
+        link's time-out and retries) and return the result, a NACK's detail being the
+        :class:`messages.ErrorCode` name (e.g. ``NOT_HOMED``). Not ``wait``: queue it
+        and return None at once, errors ignored (safe from any thread: the e-stop at a
+        safety message never waits behind a control tick that is retrying)."""
+        msg = board_command(act)
+        if msg is None:
+            return WriteResult(True) if wait else None
+        if not wait:
+            try:
+                self.link.submit(msg)
+            except (LinkError, ProtocolError, OSError):
+                pass
+            return None
         try:
-            self.link.submit(m.Stop())
-        except (LinkError, ProtocolError, OSError):
-            pass
-
-    def write(self, act: Action) -> WriteResult:
-        """Execute one action and wait for its ACK (the link's time-out and retries).
-
-        A NACK's detail is the :class:`messages.ErrorCode` name (e.g. ``NOT_HOMED``).
-        """
-        try:
-            if act.kind == 'move':
-                self.link.move_to(act.steps, max(1.0, abs(act.speed)))
-            elif act.kind == 'stop':
-                self.link.stop_motor()
-            elif act.kind == 'home':
-                self.link.home(m.Switch(act.switch), act.speed, act.steps)
-            elif act.kind == 'set_zero':
-                self.link.set_zero(act.steps)
+            self.link.request(msg)
         except NackError as exc:
             try:
                 return WriteResult(False, m.ErrorCode(exc.code).name, True)
@@ -265,6 +262,20 @@ class AxisBoardSession:
         except (LinkError, ProtocolError) as exc:
             return WriteResult(False, str(exc) or type(exc).__name__)
         return WriteResult(True)
+
+
+def board_command(act: Action) -> m.Message | None:
+    """The board message of ``act`` (None for NONE): MOVE_TO at >= 1 step/s, STOP,
+    HOME toward ``act.switch``, SET_ZERO."""
+    if act.kind is ActionKind.MOVE:
+        return m.MoveTo(int(act.steps), float(max(1.0, abs(act.speed))))
+    if act.kind is ActionKind.STOP:
+        return m.Stop()
+    if act.kind is ActionKind.HOME:
+        return m.Home(int(m.Switch(act.switch)), float(act.speed), int(act.steps))
+    if act.kind is ActionKind.SET_ZERO:
+        return m.SetZero(int(act.steps))
+    return None
 
 
 def open_session(port: str, p: dict) -> AxisBoardSession:

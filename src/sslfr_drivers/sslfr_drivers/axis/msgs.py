@@ -1,6 +1,6 @@
 """The axis driver's messages in and out: a trajectory in numbers, and the status,
 joint state and diagnostics built from one control step's
-:class:`~sslfr_drivers.axis.core.Snapshot` (no node, no lock, no board I/O)."""
+:class:`~sslfr_drivers.axis.supervisor.Snapshot` (no node, no lock, no board I/O)."""
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue

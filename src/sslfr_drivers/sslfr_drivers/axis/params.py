@@ -16,7 +16,9 @@ import stat as stat_mod
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
-from sslfr_drivers.axis.core import HOME_SWITCHES, AxisTuning, StallDetector
+from sslfr_drivers.axis.commands import HOME_SWITCHES
+from sslfr_drivers.axis.stall import StallDetector
+from sslfr_drivers.axis.supervisor import AxisTuning
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
 from sslfr_drivers.link.keys import KEY_FILE_PARAM
 

@@ -23,19 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES
-from sslfr_common.timeconv import to_sec
 
-from .reader import message_time
+from ..day import Trajectory, read_day
 
-
-@dataclass
-class Trajectory:
-    """One JointTrajectory: absolute point times [s] and positions [rad] per joint."""
-
-    stamp: float
-    joints: list[str]
-    times: np.ndarray          # (n,) absolute [s]
-    positions: np.ndarray      # (n, len(joints)) [rad]
+#: the topics that hold a run's decisions
+DECISION_TOPICS = ('tracker/phase', 'safety/state', 'tracker/trajectory')
 
 
 @dataclass
@@ -51,56 +43,14 @@ class Decisions:
     trajectories: list[Trajectory] = field(default_factory=list)
 
 
-def _topic(reader_topics, name: str) -> str | None:
-    for cand in (name, '/' + name.lstrip('/')):
-        if cand in reader_topics:
-            return cand
-    suffix = '/' + name.lstrip('/')
-    for t in reader_topics:  # namespaced graphs: /sslfr1/tracker/phase
-        if t.endswith(suffix):
-            return t
-    return None
-
-
 def extract_decisions(reader, start_ns: int | None = None, end_ns: int | None = None) -> Decisions:
-    """Read tracker/phase, safety/state and tracker/trajectory from a bag (any namespace)."""
-    names = {key: _topic(reader.topics, key)
-             for key in ('tracker/phase', 'safety/state', 'tracker/trajectory')}
-    topics = [t for t in names.values() if t]
-    d = Decisions()
-    pt, pv, st, sv = [], [], [], []
-    if not topics:
-        return d
-    for raw, msg in reader.decoded(topics, start_ns, end_ns):
-        if raw.topic == names['tracker/phase']:
-            pt.append(message_time(msg.header, raw.log_time))
-            pv.append(int(msg.phase))
-            d.phase_reason.append(str(msg.reason))
-        elif raw.topic == names['safety/state']:
-            st.append(message_time(msg.header, raw.log_time))
-            sv.append(int(msg.level))
-            d.safety_reasons.append([str(r) for r in msg.reasons])
-        else:
-            t0 = message_time(msg.header, raw.log_time)
-            joints = list(msg.joint_names)
-            if not msg.points or not joints:
-                continue
-            times = np.array([t0 + to_sec(p.time_from_start) for p in msg.points])
-            pos = np.full((len(msg.points), len(joints)), np.nan)
-            for i, p in enumerate(msg.points):
-                n = min(len(p.positions), len(joints))
-                pos[i, :n] = list(p.positions)[:n]
-            d.trajectories.append(Trajectory(t0, joints, times, pos))
-    order = np.argsort(np.asarray(pt), kind='stable')
-    d.phase_t = np.asarray(pt, dtype=float)[order]
-    d.phase = np.asarray(pv, dtype=int)[order]
-    d.phase_reason = [d.phase_reason[i] for i in order]
-    order = np.argsort(np.asarray(st), kind='stable')
-    d.safety_t = np.asarray(st, dtype=float)[order]
-    d.safety = np.asarray(sv, dtype=int)[order]
-    d.safety_reasons = [d.safety_reasons[i] for i in order]
-    d.trajectories.sort(key=lambda tr: tr.stamp)
-    return d
+    """The decisions of a run: tracker/phase, safety/state and tracker/trajectory of a
+    bag (any namespace), read through :func:`~sslfr_recording.day.read_day`."""
+    day = read_day(reader, start_ns, end_ns, topics=DECISION_TOPICS)
+    return Decisions(phase_t=day.phase.t, phase=np.asarray(day.phase['phase'], dtype=int),
+                     phase_reason=list(day.phase['reason']), safety_t=day.safety.t,
+                     safety=np.asarray(day.safety['level'], dtype=int),
+                     safety_reasons=list(day.safety['reasons']), trajectories=day.trajectories)
 
 
 def step_values(t: np.ndarray, v: np.ndarray, tq: np.ndarray, missing: int = -1) -> np.ndarray:
