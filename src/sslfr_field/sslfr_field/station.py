@@ -29,8 +29,8 @@ from pathlib import Path
 
 from sslfr_field import field as field_mod
 
-#: the gateway's package and executable (issue 37 item 3); started when installed
-GATEWAY = ('sslfr_gateway', 'gateway')
+#: the plant gateway's package and executable (SunSpec over Modbus TCP); started when installed
+GATEWAY = ('sslfr_gateway', 'modbus_gateway')
 #: the field recorder's topics per collector (relative to its namespace) and for the field
 RECORDED_PER_COLLECTOR = ('tracker/phase', 'safety/state')
 
@@ -89,10 +89,14 @@ def servers_here(f: field_mod.Field, role: str, here: set[str] | None = None) ->
 
 
 def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: Path | None,
-             finder=None, here: set[str] | None = None, record: bool = True, page_params: dict | None = None):
+             finder=None, here: set[str] | None = None, record: bool = True, params: dict | None = None):
     """The station's Programs and the list of what is missing (never replaced by
-    anything else): discovery servers, field page (``page_params``: more of its
-    parameters), gateway, field recorder."""
+    anything else): discovery servers, field page, gateway, field recorder.
+    ``params``: more parameters per node (``{'field_page': {...}, 'modbus_gateway': {...}}``)."""
+    params = params or {}
+
+    def more(node):
+        return [a for k, v in (params.get(node) or {}).items() for a in ('-p', f'{k}:={v}')]
     from sslfr_bringup.host import find_executable
     from sslfr_bringup.supervisor import Program
     finder = finder or find_executable
@@ -115,15 +119,16 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
             str(page), '--ros-args', '-r', '__node:=field_page', '-p', f'collectors:={_yaml_list(f.namespaces)}',
             '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'collector_pages:={_yaml_list(pages)}',
             '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}',
-            *(a for k, v in (page_params or {}).items() for a in ('-p', f'{k}:={v}'))], start=1, stop=1))
+            *more('field_page')], start=1, stop=1))
     # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway): started when installed
     gw = finder(*GATEWAY)
     if gw is None:
         missing.append(f'plant gateway ({GATEWAY[0]}/{GATEWAY[1]} is not installed): no Modbus TCP')
     else:
-        progs.append(Program(name='gateway', argv=[str(gw), '--ros-args', '-r', '__node:=gateway',
-                                                   '-p', f'collectors:={_yaml_list(f.namespaces)}',
-                                                   '-p', f'collector_ids:={_yaml_list(f.ids)}'], start=1, stop=1))
+        progs.append(Program(name=GATEWAY[1], argv=[
+            str(gw), '--ros-args', '-r', f'__node:={GATEWAY[1]}', '-p', f'collectors:={_yaml_list(f.namespaces)}',
+            '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'bind_address:={f.station.address}',
+            *more(GATEWAY[1])], start=1, stop=1))
     if record and out_dir is not None:
         rec = finder('sslfr_recording', 'recorder')
         if rec is None:
@@ -218,7 +223,7 @@ def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say
     say = say or (lambda text: print(text, file=sys.stderr))
     out = Path(args.out or f'out/station-{f.id}').resolve()
     progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out,
-                              page_params=getattr(args, 'page_params', None))
+                              params=getattr(args, 'params', None))
     env = station_environment(f)
     env['ROS_DOMAIN_ID'] = str(args.domain_id if args.domain_id is not None else os.environ.get('ROS_DOMAIN_ID', 42))
     for m in missing:

@@ -36,16 +36,19 @@ def test_programs_name_what_is_missing_and_pass_the_field(tmp_path):
                                       finder=finder({('sslfr_field', 'field_page'), ('sslfr_recording', 'recorder')}))
     names = [p.name for p in progs]
     assert names[:2] == ['discovery_server_0', 'discovery_server_1'] or any('fast-discovery-server' in m for m in missing)
-    assert 'field_page' in names and 'field_recorder' in names and 'gateway' not in names
-    assert any('sslfr_gateway/gateway is not installed' in m for m in missing)
+    assert 'field_page' in names and 'field_recorder' in names and 'modbus_gateway' not in names
+    assert any('sslfr_gateway/modbus_gateway is not installed' in m for m in missing)
     page = next(p for p in progs if p.name == 'field_page')
     assert "collectors:=['/c1','/c2']" in page.argv and "collector_ids:=['c1','c2']" in page.argv
     rec = (tmp_path / 'field_recorder.params.yaml').read_text()
     assert '/c2/safety/state' in rec and '/diagnostics' in rec and 'prefix: sim_field' in rec
     progs, missing = station.programs(f, role='both', run_dir=tmp_path, out_dir=None,
-                                      finder=finder({('sslfr_gateway', 'gateway'), ('sslfr_field', 'field_page')}))
-    gw = next(p for p in progs if p.name == 'gateway')
+                                      finder=finder({('sslfr_gateway', 'modbus_gateway'), ('sslfr_field', 'field_page')}),
+                                      params={'modbus_gateway': {'port': 0}, 'field_page': {'open_view': 'false'}})
+    gw = next(p for p in progs if p.name == 'modbus_gateway')
     assert "collectors:=['/c1','/c2']" in gw.argv and "collector_ids:=['c1','c2']" in gw.argv
+    assert 'bind_address:=192.168.10.2' in gw.argv and 'port:=0' in gw.argv
+    assert 'open_view:=false' in next(p for p in progs if p.name == 'field_page').argv
 
 
 def test_environments(tmp_path):

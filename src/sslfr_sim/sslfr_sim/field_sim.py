@@ -22,6 +22,8 @@ from sslfr_bringup.supervisor import Program
 from sslfr_field import field as field_mod
 from sslfr_field import station as station_mod
 
+#: the station's nodes that ``--set NODE:KEY=VALUE`` reaches (the rest go to every collector)
+STATION_NODES = ('field_page', station_mod.GATEWAY[1])
 #: [s] the ordered stop: each collector's own sim stops its node set (<= 5 s) first
 FIELD_STOP_TIMEOUT = 15.0
 
@@ -61,7 +63,7 @@ def collector_argv(args, c: field_mod.Collector, f: field_mod.Field, domain: int
         argv += ['--fault', spec]
     argv += ['--set', f'web:port={c.web_port}']
     for spec in args.set:
-        if not spec.startswith('field_page:'):
+        if spec.partition(':')[0] not in STATION_NODES:
             argv += ['--set', spec]
     return argv
 
@@ -100,25 +102,35 @@ def run_field(args, stop, run: Path) -> int:
             except RuntimeError as exc:
                 print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
                 return 1
-    page_params = {}
-    for spec in args.set:              # --set field_page:KEY=VALUE: the station's field page
-        if spec.startswith('field_page:'):
-            key, eq, value = spec[len('field_page:'):].partition('=')
+    station_params: dict = {'modbus_gateway': {'port': 0}}   # any free port, printed
+    for spec in args.set:              # --set field_page:KEY=VALUE etc.: the station's nodes
+        node, _, rest = spec.partition(':')
+        if node in STATION_NODES:
+            key, eq, value = rest.partition('=')
             if not (key and eq):
-                print(f'sslfr sim: --set {spec!r}: expected field_page:KEY=VALUE', file=sys.stderr)
+                print(f'sslfr sim: --set {spec!r}: expected {node}:KEY=VALUE', file=sys.stderr)
                 return 2
-            page_params[key] = value
+            station_params.setdefault(node, {})[key] = value
     out = Path(args.out or 'out/sim-field').resolve()
     out.mkdir(parents=True, exist_ok=True)
     collectors = [Program(name=f'collector_{c.id}', argv=collector_argv(args, c, f, args.domain_id, out),
                           start=2, stop=0, restart=False) for c in f.collectors]
     station_args = type('A', (), {'out': str(out / 'station'), 'role': 'both', 'domain_id': args.domain_id,
-                                  'print_only': False, 'page_params': page_params})()
+                                  'print_only': False, 'params': station_params})()
     print(f'sslfr sim: field of {len(f.collectors)} collectors ({", ".join(f.namespaces)}), discovery servers '
           f'{field_mod.discovery_servers(f.station)}, ROS_DOMAIN_ID={args.domain_id}, out {out}', file=sys.stderr)
     pages: dict[str, str] = {}
 
     def announce():
+        if 'gateway' not in pages:
+            try:
+                m = re.search(r'SunSpec Modbus TCP at (\S+)', (out / 'station' / 'logs' / f'{station_mod.GATEWAY[1]}.log')
+                              .read_text(errors='replace'))
+            except OSError:
+                m = None
+            if m:
+                pages['gateway'] = m.group(1)
+                print(f'sslfr sim: SunSpec MODBUS TCP GATEWAY at {m.group(1)}', file=sys.stderr)
         if 'station' not in pages:
             try:
                 m = re.search(r'field page at (\S+)', (out / 'station' / 'logs' / 'field_page.log').read_text(errors='replace'))
