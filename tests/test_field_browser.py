@@ -8,7 +8,8 @@ The page shows every collector heard (link ok) with its phase, safety level and
 temperatures; each collector's name links to its own operator page, which answers;
 commands are refused without login; after login "Stow all" stows every collector
 through its own ``planner/set_mode`` (each planner's phase becomes STOW), then one
-collector is set back to auto alone. Every collector also publishes on the absolute
+collector is set back to auto alone. After the run each collector's bag is named after
+it and the station's field recording holds every collector's statuses on the absolute
 ``/diagnostics`` with ``hardware_id`` = its id. A screenshot is kept in
 out/test-artifacts/field-page.png.
 """
@@ -108,3 +109,24 @@ def test_field_page_in_chromium_against_simulated_collectors(browser, field):  #
     print(f'screenshot: {shot}')
     audit = (tmp / 'audit.jsonl').read_text()
     assert '"c1: stow"' in audit and '"c1: mode"' in audit
+
+    # after the run: each collector's bag names it; the station's field recording holds
+    # every collector's statuses on the absolute /diagnostics, hardware_id = its id
+    assert proc.stop(timeout=40) is not None
+    from sslfr_recording.bag import BagReader
+    out = tmp / 'field'
+    for cid in ids:
+        bags = [b.name for b in (out / cid / 'bags').iterdir()]
+        assert bags and all(b.startswith(f'{cid}_') for b in bags), bags
+    (station_bag,) = [b for b in (out / 'station' / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
+    reader = BagReader(station_bag)
+    seen: dict[str, set] = {}
+    for raw in reader.messages(['/diagnostics']):
+        for s in reader.decoder(raw.type)(raw.data).status:
+            seen.setdefault(s.hardware_id, set()).add(s.name)
+    for cid in ids:
+        names = seen.get(cid, set())
+        assert {'safety: safety supervisor', 'planner: day cycle', 'mirrors_driver: axis mirrors'} <= names, \
+            (cid, sorted(names))
+        assert all(': ' in n for n in names)
+    assert 'field_page: field page' in set().union(*seen.values())
