@@ -218,3 +218,111 @@ def test_field_discovery_over_network_namespaces(net, ros_env, tmp_path):
     finally:
         for name in list(procs):
             stop(name)
+
+
+#: [s] how long one collector is cut off in the whole-collector test (the issue's 5 min: 300)
+CUT_S = float(os.environ.get('SSLFR_FIELD_CUT_S', '30'))
+
+
+@pytest.fixture
+def net2():
+    why = _can_make_netns()
+    if why:
+        pytest.skip(f'network-namespace field test: {why}')
+    n = Net(['c1', 'c2'])
+    try:
+        n.up()
+        yield n
+    finally:
+        n.down()
+
+
+@pytest.mark.slow
+def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, tmp_path):
+    """Two whole simulated collectors (``sslfr sim --wall-clock --namespace``), each in
+    its own network namespace, and ``sslfr station`` on the bridge: the field page hears
+    both; one collector cut off for SSLFR_FIELD_CUT_S (30 s; the issue's 5 minutes: 300)
+    is shown lost while it keeps tracking on its own (its bag: the mirrors following
+    through the cut, no safety stow), and is heard again when its link is back."""
+    import datetime as dt
+    import json
+    import urllib.request
+
+    import yaml
+
+    from conftest import ROOT, NodeProcess
+    base = os.getpid() % 1000 * 2 + 20000
+    web_port = base + 7
+    doc = {'field': {'id': 'netns_field',
+                     'station': {'address': net2.station_ip, 'discovery_port': base, 'backup_address': net2.station_ip,
+                                 'backup_port': base + 1, 'web_port': web_port},
+                     'collectors': [{'id': cid, 'address': net2.ip[cid],
+                                     'config': str(ROOT / 'src/sslfr_bringup/config/almeria_sslfr.yaml')}
+                                    for cid in net2.ns]}}
+    fpath = tmp_path / 'field.yaml'
+    fpath.write_text(yaml.safe_dump(doc))
+    f = field_mod.load(fpath)
+    end = (dt.datetime.now(dt.timezone.utc) + dt.timedelta(seconds=CUT_S + 600)).strftime('%H:%M')
+    procs = {'station': NodeProcess([str(ROOT / 'sslfr'), 'station', '--field', str(fpath), '--out',
+                                     str(tmp_path / 'station')], ros_env, tmp_path / 'station.out')}
+    env = station_mod.collector_environment(f, ros_env)
+    try:
+        for c in f.collectors:
+            procs[c.id] = NodeProcess(['ip', 'netns', 'exec', net2.ns[c.id], str(ROOT / 'sslfr'), 'sim',
+                                       '--wall-clock', '--namespace', c.namespace, '--layout', 'composed',
+                                       '--end', end, '--no-report', '--out', str(tmp_path / c.id)],
+                                      env, tmp_path / f'{c.id}.out')
+        url = f'http://{net2.station_ip}:{web_port}/api/field'
+
+        def page():
+            try:
+                with urllib.request.urlopen(url, timeout=5) as r:
+                    return {c['id']: c for c in json.load(r)['collectors']}
+            except OSError:
+                return {}
+        show = lambda: f'page: {page()}; outputs: ' + ' | '.join(  # noqa: E731
+            f'{k}: {p.output()[-600:]}' for k, p in procs.items())
+        t0 = time.monotonic()
+        _wait(lambda: (s := page()) and all(s[c]['link'] == 'ok' and s[c]['phase'] for c in f.ids), 240,
+              'both collectors heard at the field page', show)
+        print(f'field page heard both collectors (own network namespaces) {time.monotonic() - t0:.1f} s after start')
+        _wait(lambda: page()['c1']['phase'] == 'TRACKING', 120, 'c1 tracking', show)
+        net2.link('c1', False)
+        t_cut = time.time()
+        _wait(lambda: page()['c1']['link'] == 'lost', 30, 'c1 shown lost', show)
+        assert page()['c2']['link'] == 'ok'
+        deadline = time.monotonic() + CUT_S
+        while time.monotonic() < deadline:           # the cut lasts CUT_S: c1 stays lost all along
+            assert page()['c1']['link'] == 'lost'
+            time.sleep(1.0)
+        net2.link('c1', True)
+        t_up = time.monotonic()
+        t_again = _wait(lambda: page()['c1']['link'] == 'ok', 120, 'c1 heard again', show)
+        t_cut_end = time.time()
+        print(f'c1 cut off for {CUT_S:.0f} s, heard again {t_again - t_up:.1f} s after its link came back')
+        snap = page()['c1']
+        assert snap['phase'] == 'TRACKING' and snap['safety_level'] in ('OK', 'WARN'), snap
+    finally:
+        for p in procs.values():
+            p.stop(timeout=30)
+    # c1 kept tracking on its own while cut off: its own bag says so, as c2's (never cut) does
+    from sslfr_recording.bag import BagReader
+
+    def during_cut(cid):
+        (bag,) = [b for b in (tmp_path / cid / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
+        assert bag.name.startswith(f'{cid}_')
+        reader = BagReader(bag)
+        states, levels = [], []
+        for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
+            if t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
+                m = reader.decoder(raw.type)(raw.data)
+                (states if raw.topic.endswith('status') else levels).append(
+                    m.state if raw.topic.endswith('status') else m.level)
+        return states, levels
+    for cid in f.ids:
+        states, levels = during_cut(cid)
+        # 'waiting': a new horizon whose first point is still ahead (each republication)
+        assert states and set(states) <= {'following', 'waiting'}, (cid, set(states))
+        assert levels and max(levels) <= 1, (cid, sorted(set(levels)))      # OK or WARN: no stow
+        print(f'{cid} during the cut: mirrors following {states.count("following") / len(states):.0%} of '
+              f'{len(states)} status messages, else waiting for the next horizon; safety levels {sorted(set(levels))}')
