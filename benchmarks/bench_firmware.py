@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Firmware-in-the-loop figures (docs/firmware.md, README):
+"""Firmware-in-the-loop figures (docs/firmware.md, docs/measurements.md):
 
 1. harness speed: simulated seconds per wall second of each board's exact firmware in
    simavr, free-running (``--pace 0``), idle and (axis) stepping at 20 000 steps/s;

@@ -29,6 +29,8 @@ import pytest
 from conftest import NodeProcess
 from sslfr_common.contract import JOINTS
 from sslfr_common.timeconv import to_sec
+from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, AXIS_STATUS, DIAGNOSTICS, SAFETY_STATE,
+                                   TRACKER_PHASE, TRACKER_TRAJECTORY)
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -56,7 +58,7 @@ class Rig:
     """Simulated board process + axis_driver process + publishers in the test."""
 
     def __init__(self, launch, ros, ros_env, tmp_path, axis='mirrors', sim_args=(), params=None):
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from sslfr_common.node import qos
         from diagnostic_msgs.msg import DiagnosticArray
         from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
         from trajectory_msgs.msg import JointTrajectory
@@ -81,14 +83,13 @@ class Rig:
         p.update(params or {})
         self.driver = launch('sslfr_drivers', 'axis_driver', params=p, name=f'{axis}_driver')
 
-        tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        tl1 = qos(TRACKER_PHASE)
         node = ros.node
-        self.pub_traj = node.create_publisher(JointTrajectory, 'tracker/trajectory', tl1)
-        self.pub_phase = node.create_publisher(TrackerPhase, 'tracker/phase', tl1)
-        self.pub_safety = node.create_publisher(SafetyState, 'safety/state', 10)
-        self.status = ros.collect(AxisStatus, f'axes/{axis}/status')
-        self.diags = ros.collect(DiagnosticArray, 'diagnostics')
+        self.pub_traj = node.create_publisher(JointTrajectory, TRACKER_TRAJECTORY.name, tl1)
+        self.pub_phase = node.create_publisher(TrackerPhase, TRACKER_PHASE.name, tl1)
+        self.pub_safety = node.create_publisher(SafetyState, SAFETY_STATE.name, 10)
+        self.status = ros.collect(AxisStatus, AXIS_STATUS.of(axis))
+        self.diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
         self.safety = {'level': 0, 'stow_required': False, 'stopped_axes': []}
         self.heartbeat = True
         self.last_heartbeat = 0.0
@@ -446,19 +447,19 @@ def test_safety_silence_stops_within_1_2_s_stow_and_jog(rig, ros):
     r.safety.update(level=0, stow_required=False, stopped_axes=[])
 
     # jog: refused outside maintenance, accepted in maintenance
-    res = ros.call(Jog, 'axes/mirrors/jog', Jog.Request(delta=0.01, speed=0.0))
+    res = ros.call(Jog, AXIS_JOG.of('mirrors'), Jog.Request(delta=0.01, speed=0.0))
     assert not res.success and 'maintenance' in res.message
     r.pub_phase.publish(TrackerPhase(phase=TrackerPhase.MAINTENANCE, phase_name='MAINTENANCE',
                                      mode='maintenance'))
     assert ros.spin_until(lambda: r.status[-1].state in ('holding', 'jogging')
                           and r.status[-1].moving is False, 10)
     here = r.status[-1].measured
-    res = ros.call(Jog, 'axes/mirrors/jog', Jog.Request(delta=-0.01, speed=0.0))
+    res = ros.call(Jog, AXIS_JOG.of('mirrors'), Jog.Request(delta=-0.01, speed=0.0))
     assert res.success, res.message
     assert ros.spin_until(lambda: abs(r.board()['angle'] - (here - 0.01)) < 2 * STEP + 4 * NOISE, 5)
-    res = ros.call(Jog, 'axes/mirrors/jog', Jog.Request(delta=1.0, speed=0.0))
+    res = ros.call(Jog, AXIS_JOG.of('mirrors'), Jog.Request(delta=1.0, speed=0.0))
     assert not res.success and 'max_jog' in res.message
-    assert ros.call(Trigger, 'axes/mirrors/home', Trigger.Request()).success
+    assert ros.call(Trigger, AXIS_HOME.of('mirrors'), Trigger.Request()).success
 
 
 def test_lifecycle_transitions_stall_fault_and_old_protocol(rig, ros):
@@ -558,8 +559,8 @@ def test_driver_started_before_its_board_activates_by_itself_and_after_sigkill(l
     d = tempfile.mkdtemp(prefix='axd')
     port = os.path.join(d, 'board')
     params = {'axis': 'mirrors', 'port': port, 'retry_period': 0.5, 'retry_period_max': 2.0}
-    status = ros.collect(AxisStatus, 'axes/mirrors/status')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    status = ros.collect(AxisStatus, AXIS_STATUS.of('mirrors'))
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     driver = launch('sslfr_drivers', 'axis_driver', params=params, name='mirrors_driver')   # autostart: default
     sim = None
     try:

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from conftest import ROOT, NodeProcess, executable
+from sslfr_common.contract import DIAGNOSTICS
 
 AXES = ('mirrors', 'mobile_structure', 'secondary_reflector')
 
@@ -51,7 +52,7 @@ def test_up_activates_axes_reports_safety_restart_and_stops_axes_first(ros, ros_
     up = subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', ','.join(nodes),
                            '--log-dir', str(logs)], env=ros_env, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     try:
         states = {}
 
@@ -100,12 +101,13 @@ def test_two_collectors_in_their_namespaces_share_a_domain_without_mixing(ros, r
     """Two `sslfr up --namespace` sets, each with its own site config whose node section
     is keyed by the bare node name `planner:` (as the shipped configs are): each planner
     gets its own section (rcl alone would give a bare key only to the root namespace)."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sslfr_common.contract import TRACKER_PHASE
+    from sslfr_common.node import qos
     from sslfr_interfaces.msg import TrackerPhase
 
     ups = []
     phases = {}
-    tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    tl1 = qos(TRACKER_PHASE)
     for ns, lat, temp in (('/c1', 10.0, 18.0), ('/c2', -20.0, 25.0)):
         site = tmp_path / f'{ns[1:]}.yaml'
         site.write_text(yaml.safe_dump({'planner': {'ros__parameters': {

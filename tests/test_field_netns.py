@@ -238,6 +238,7 @@ def net2():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(CUT_S + 300)
 def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, tmp_path):
     """Two whole simulated collectors (``sslfr sim --wall-clock --namespace``), each in
     its own network namespace, and ``sslfr station`` on the bridge: the field page hears

@@ -180,7 +180,7 @@ def test_provisioning_over_usb_only_after_an_external_reset(tmp_path):
 
 
 def test_mac_cycles_on_the_atmega328p():
-    """The MAC's cost measured on the AVR (simavr is cycle-exact): printed for the README
+    """The MAC's cost measured on the AVR (simavr is cycle-exact): printed for docs/measurements.md
     (docs/protocol.md "Authentication: cost"); bounds generous."""
     from sslfr_drivers import firmware as fw
     fw.build('bench')

@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from sslfr_common.contract import (CLOCK, GPS_FIX, PLANNER_REPLAN, PLANNER_SET_MODE, SAFETY_STATE, TRACKER_PHASE,
+                                   TRACKER_TRAJECTORY)
 
 from conftest import ROOT
 
@@ -24,9 +26,8 @@ def _utc(*args) -> float:
 
 
 def _qos_tl1():
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    from sslfr_common.node import qos
+    return qos(TRACKER_PHASE)
 
 
 def _stamp(t) -> float:
@@ -57,7 +58,7 @@ class SimClock:
     def __init__(self, ros):
         from rosgraph_msgs.msg import Clock
         self.ros, self.Clock = ros, Clock
-        self.pub = ros.node.create_publisher(Clock, '/clock', 10)
+        self.pub = ros.node.create_publisher(Clock, CLOCK.name, 10)
         self.now = 0.0
         self.started = False
 
@@ -150,7 +151,7 @@ def test_phase_sequence_over_a_simulated_day(case, launch, ros, tmp_path):
     expected_changes = [(float(plan.table.t[i]), PHASES[ph[i]]) for i in changes]
 
     proc = _start(launch, tmp_path, config, overrides)
-    box = ros.collect(TrackerPhase, 'tracker/phase', _qos_tl1())
+    box = ros.collect(TrackerPhase, TRACKER_PHASE.name, _qos_tl1())
     clock = SimClock(ros)
     for t in _schedule(t0, t1, transitions):
         clock.step_until(t, box)
@@ -189,7 +190,7 @@ def test_trajectory_equals_core_and_is_never_in_the_past(launch, ros, tmp_path):
                                   cfg['site.elevation'], 'parameters'))
     coll = make_collector(cfg)
     proc = _start(launch, tmp_path, config, overrides)
-    box = ros.collect(JointTrajectory, 'tracker/trajectory', _qos_tl1())
+    box = ros.collect(JointTrajectory, TRACKER_TRAJECTORY.name, _qos_tl1())
     clock = SimClock(ros)
     # around sunrise (PRE_DAWN -> TRACKING inside the horizon), mid-day with fractional
     # clock values, a 1 h backward jump, and across local midnight
@@ -260,8 +261,8 @@ def test_replans_within_one_second_of_a_3h_clock_jump(launch, ros, tmp_path):
 
     config = CONFIG / 'almeria_sslfr.yaml'
     proc = _start(launch, tmp_path, config, {'republish_period': 30.0, 'phase_period': 0.1})
-    traj = ros.collect(JointTrajectory, 'tracker/trajectory', _qos_tl1())
-    phases = ros.collect(TrackerPhase, 'tracker/phase', _qos_tl1())
+    traj = ros.collect(JointTrajectory, TRACKER_TRAJECTORY.name, _qos_tl1())
+    phases = ros.collect(TrackerPhase, TRACKER_PHASE.name, _qos_tl1())
     clock = SimClock(ros)
     t0 = _utc(2026, 6, 21, 22, 30, 0)      # 22:40 local solar: NIGHT of the 21st
     for k in range(3):
@@ -291,8 +292,8 @@ def test_persisted_site_is_used_after_a_restart_without_gps(launch, ros, tmp_pat
     from sslfr_interfaces.msg import TrackerPhase
 
     proc = _start(launch, tmp_path, CONFIG / 'almeria_sslfr.yaml', {}, sim=False)
-    phases = ros.collect(TrackerPhase, 'tracker/phase', _qos_tl1())
-    pub = ros.node.create_publisher(NavSatFix, 'gps/fix', 10)
+    phases = ros.collect(TrackerPhase, TRACKER_PHASE.name, _qos_tl1())
+    pub = ros.node.create_publisher(NavSatFix, GPS_FIX.name, 10)
     bad = NavSatFix(latitude=50.0, longitude=10.0, altitude=1.0)
     bad.status.status = NavSatStatus.STATUS_NO_FIX
     good = NavSatFix(latitude=7.1254, longitude=-73.1198, altitude=959.0)
@@ -332,15 +333,15 @@ def test_modes_safety_stow_and_parameter_refusal(launch, ros, tmp_path):
     from trajectory_msgs.msg import JointTrajectory
 
     proc = _start(launch, tmp_path, CONFIG / 'almeria_sslfr.yaml', {'republish_period': 1.0})
-    phases = ros.collect(TrackerPhase, 'tracker/phase', _qos_tl1())
-    traj = ros.collect(JointTrajectory, 'tracker/trajectory', _qos_tl1())
+    phases = ros.collect(TrackerPhase, TRACKER_PHASE.name, _qos_tl1())
+    traj = ros.collect(JointTrajectory, TRACKER_TRAJECTORY.name, _qos_tl1())
     clock = SimClock(ros)
     t = _utc(2026, 6, 21, 10, 0, 0)              # TRACKING in Almeria
     clock.step_until(t, phases)
     assert phases[-1].phase_name == 'TRACKING'
 
     def call_mode(mode):
-        return ros.call(SetMode, 'planner/set_mode', SetMode.Request(mode=mode))
+        return ros.call(SetMode, PLANNER_SET_MODE.name, SetMode.Request(mode=mode))
 
     res = call_mode('fly')
     assert not res.success and 'fly' in res.message and res.mode == 'auto'
@@ -368,7 +369,7 @@ def test_modes_safety_stow_and_parameter_refusal(launch, ros, tmp_path):
     assert call_mode('auto').success
 
     # the safety supervisor requires a stow: STOW whatever the mode
-    safety = ros.node.create_publisher(SafetyState, 'safety/state', 10)
+    safety = ros.node.create_publisher(SafetyState, SAFETY_STATE.name, 10)
     msg = SafetyState(level=SafetyState.STOW, stow_required=True,
                       reasons=['safety: outlet 152.3 degC > 150 degC'])
 
@@ -409,7 +410,7 @@ def test_modes_safety_stow_and_parameter_refusal(launch, ros, tmp_path):
     t += 5
     clock.step_until(t, traj)
     assert len(traj[-1].points) == 61
-    rep = ros.call(Trigger, 'planner/replan', Trigger.Request())
+    rep = ros.call(Trigger, PLANNER_REPLAN.name, Trigger.Request())
     assert rep.success and 'sunrise' in rep.message, rep.message
     assert 'Traceback' not in proc.output()
 

@@ -18,21 +18,21 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, TrackerPhase
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, TRACKER_PHASE
+from sslfr_common.node import qos
 
 ROOT = Path(__file__).resolve().parents[1]
 
 from sslfr_recording.bag import BagReader, BagWriter, WriterOptions, profile  # noqa: E402
 from sslfr_recording.bag.conformance import check_bag  # noqa: E402
 
-TL1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TL1 = qos(TRACKER_PHASE)
 
 
 def dds_padded(data: bytes) -> bytes:
@@ -94,9 +94,9 @@ def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
         'output_dir': str(tmp_path / 'bags'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'exclude': ['/diagnostics']})
     node = ros.node
-    p_temp = node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
-    p_axis = node.create_publisher(AxisStatus, 'axes/mirrors/status', 10)
-    p_phase = node.create_publisher(TrackerPhase, 'tracker/phase', TL1)
+    p_temp = node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
+    p_axis = node.create_publisher(AxisStatus, AXIS_STATUS.of('mirrors'), 10)
+    p_phase = node.create_publisher(TrackerPhase, TRACKER_PHASE.name, TL1)
     _wait_matched(ros, [p_temp, p_axis, p_phase])
     sent = {'/absorber/outlet_temperature': [], '/axes/mirrors/status': [], '/tracker/phase': []}
     for i in range(60):  # 20 Hz for 3 s
@@ -166,7 +166,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
         'output_dir': str(tmp_path / 'two'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'use_sim_time': True,
         'topics': ['/absorber/inlet_temperature', '/axes/mirrors/status', '/tracker/phase']})
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     out = _sslfr(['replay', str(tmp_path / 'one'), '--rate', '1', '--no-progress',
                   '--wait-subscribers', '15'], ros_env)
     assert out.returncode == 0, out.stderr
@@ -200,7 +200,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
 def test_sigkill_then_recover_loses_at_most_5_s(launch, ros, ros_env, tmp_path):
     rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'discovery_period': 0.2})  # default 2 s chunks
-    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    pub = ros.node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
     _wait_matched(ros, [pub])
     sent = []
     t_kill = None
@@ -265,8 +265,8 @@ def test_disk_guard_stops_recording_with_diagnostic(launch, ros, tmp_path):
     rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'min_free_bytes': 2**60, 'discovery_period': 0.2,
         'disk_check_period': 0.2})
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
-    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
+    pub = ros.node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
     _wait_matched(ros, [pub])
     _publish(ros, pub, 1.0, 20)
     assert ros.spin_until(_diag_error(diags, 'recording stopped'), 10.0)
@@ -294,7 +294,7 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
     rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'discovery_period': 0.2, 'chunk_duration': 0.2,
         'fsync': False, 'exclude': ['/diagnostics']})
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
 
     def set_dir(value):
         req = SetParameters.Request(parameters=[Parameter(name='output_dir', value=ParameterValue(
@@ -303,7 +303,7 @@ def test_unwritable_output_refused_and_write_errors_are_errors(launch, ros, tmp_
     # at run time: refused with the reason, the old location is kept
     res = set_dir('/proc/x')
     assert not res.successful and '/proc/x' in res.reason and 'cannot write' in res.reason
-    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    pub = ros.node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
     _wait_matched(ros, [pub])
     _publish(ros, pub, 1.0, 10)
     assert ros.spin_until(lambda: any((tmp_path / 'bags').glob('*/*.mcap')), 10.0)
@@ -405,7 +405,7 @@ def test_two_sigints_during_the_stop_still_finish_the_bag(launch, ros, tmp_path,
     rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'bags'), 'chunk_duration': 0.5, 'discovery_period': 0.2,
         'exclude': ['/diagnostics']})
-    pub = ros.node.create_publisher(Temperature, 'absorber/outlet_temperature', 10)
+    pub = ros.node.create_publisher(Temperature, ABSORBER_TEMPERATURE.of('outlet'), 10)
     _wait_matched(ros, [pub])
     _publish(ros, pub, 80.0, 40)
     rec.signal(signal.SIGINT)

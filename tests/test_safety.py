@@ -14,6 +14,9 @@ import math
 import time
 
 import pytest
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, CLOCK, GPS_FIX,
+                                   IRRADIANCE_BEAM, LIMIT_SWITCHES, SAFETY_ESTOP, SAFETY_RESET,
+                                   SAFETY_STATE, TRACKER_PHASE)
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -41,15 +44,15 @@ class World:
         self.stamp = None          # builtin_interfaces/Time for headers (None: harness clock)
         self._types = (Temperature, LimitSwitches, TrackerPhase, AxisStatus, NavSatFix, Irradiance)
         pub = self.node.create_publisher
-        self.temp_pub = {s: pub(Temperature, f'absorber/{s}_temperature', 10) for s in self.t}
-        self.sw_pub = pub(LimitSwitches, 'limit_switches', 10)
-        self.phase_pub = pub(TrackerPhase, 'tracker/phase', 10)
-        self.axis_pub = {a: pub(AxisStatus, f'axes/{a}/status', 10) for a in self.positions}
-        self.fix_pub = pub(NavSatFix, 'gps/fix', 10)
-        self.beam_pub = pub(Irradiance, 'irradiance/beam', 10)
+        self.temp_pub = {s: pub(Temperature, ABSORBER_TEMPERATURE.of(s), 10) for s in self.t}
+        self.sw_pub = pub(LimitSwitches, LIMIT_SWITCHES.name, 10)
+        self.phase_pub = pub(TrackerPhase, TRACKER_PHASE.name, 10)
+        self.axis_pub = {a: pub(AxisStatus, AXIS_STATUS.of(a), 10) for a in self.positions}
+        self.fix_pub = pub(NavSatFix, GPS_FIX.name, 10)
+        self.beam_pub = pub(Irradiance, IRRADIANCE_BEAM.name, 10)
         self.states: list = []
         self.arrivals: list[float] = []      # test-process receipt time of each state
-        self.node.create_subscription(SafetyState, 'safety/state', self._on_state, 10)
+        self.node.create_subscription(SafetyState, SAFETY_STATE.name, self._on_state, 10)
         self.timer = self.node.create_timer(period, self.publish_all)
         self._clients: dict = {}
         self.proc = None
@@ -176,18 +179,18 @@ def test_over_temperature_stows_within_200ms_latched_reset_refused_while_hot(lau
 
     # still hot: reset refused, state unchanged
     before = _key(world.next_state())
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert not res.success and 'still hot' in res.message, res.message
     assert _key(world.next_state()) == before
     # cooled below limit - hysteresis, but not for the hold time: refused
     world.t['outlet'] = 120.0
     ros.spin_for(0.3)
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert not res.success and 'cooling' in res.message, res.message
     # no return to OK by itself
     ros.spin_for(1.5)
     assert _key(world.next_state()) == before
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert res.success, res.message
     assert world.wait_level(SafetyState.OK, 1.0)
     assert 'OK -> STOW' in proc.output() and 'STOW -> OK' in proc.output()
@@ -205,7 +208,7 @@ def test_thermocouple_nan_and_silence_while_tracking_stow_within_2s(launch, ros)
     assert any('inlet thermocouple invalid (NaN)' in r for r in world.latest().reasons)
     ros.spin_for(0.5)
     assert world.latest().level == SafetyState.STOW             # held while NaN
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert not res.success and 'clears by itself' in res.message, res.message
     world.t['inlet'] = 61.0
     back = time.monotonic()
@@ -257,7 +260,7 @@ def test_limit_switch_outside_homing_estops_that_axis_naming_the_switch(launch, 
     state = world.latest()
     assert list(state.stopped_axes) == ['mobile_structure']
     assert any('limit switch longitudinal_1 tripped outside homing' in r for r in state.reasons)
-    assert world.call(Trigger, 'safety/reset', Trigger.Request()).success
+    assert world.call(Trigger, SAFETY_RESET.name, Trigger.Request()).success
     assert world.wait_level(SafetyState.OK, 1.0)
 
 
@@ -298,9 +301,9 @@ def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros)
     from sslfr_interfaces.msg import SafetyState
     _proc, world = _start(launch, ros)
     before = _key(world.next_state())
-    res = world.call(SetBool, 'safety/estop', SetBool.Request(data=False))
+    res = world.call(SetBool, SAFETY_ESTOP.name, SetBool.Request(data=False))
     assert not res.success and 'no e-stop' in res.message
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert not res.success and 'nothing latched' in res.message
     bad = SetParameters.Request(parameters=[Parameter(
         name='watchdog.actions', value=ParameterValue(type=ParameterType.PARAMETER_STRING_ARRAY,
@@ -309,23 +312,23 @@ def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros)
     assert not out.results[0].successful and 'WARN or STOW' in out.results[0].reason
     assert _key(world.next_state()) == before
 
-    res = world.call(SetBool, 'safety/estop', SetBool.Request(data=True))
+    res = world.call(SetBool, SAFETY_ESTOP.name, SetBool.Request(data=True))
     assert res.success
     assert world.wait_level(SafetyState.ESTOP, 1.0)
     assert sorted(world.latest().stopped_axes) == ['mirrors', 'mobile_structure', 'secondary_reflector']
     ros.spin_for(0.5)
     assert world.latest().level == SafetyState.ESTOP             # latched
     held = _key(world.next_state())
-    res = world.call(Trigger, 'safety/reset', Trigger.Request())
+    res = world.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert not res.success and 'release it first' in res.message
     assert _key(world.next_state()) == held
-    res = world.call(SetBool, 'safety/estop', SetBool.Request(data=False))
+    res = world.call(SetBool, SAFETY_ESTOP.name, SetBool.Request(data=False))
     assert res.success
     assert world.wait_level(SafetyState.STOW, 1.0)                # released to stow
     assert world.latest().stow_required and not world.latest().stopped_axes
     ros.spin_for(0.5)
     assert world.latest().level == SafetyState.STOW
-    assert world.call(Trigger, 'safety/reset', Trigger.Request()).success
+    assert world.call(Trigger, SAFETY_RESET.name, Trigger.Request()).success
     assert world.wait_level(SafetyState.OK, 1.0)
 
     # a valid runtime change is applied: a lower limit makes 120 degC an over-temperature
@@ -339,13 +342,12 @@ def test_estop_semantics_and_bad_calls_refused_with_state_unchanged(launch, ros)
 
 
 def test_sim_time_jumps_of_one_hour_cause_no_stow_and_no_stall(launch, ros):
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
-    from sslfr_common.node import stamp, to_sec
+    from sslfr_common.node import qos, stamp, to_sec
     from sslfr_interfaces.msg import SafetyState
-    clock_pub = ros.node.create_publisher(Clock, '/clock',
-                                          QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    clock_pub = ros.node.create_publisher(Clock, CLOCK.name,
+                                          qos(CLOCK))
     sim = {'t': 1_750_000_000.0}
 
     def tick():

@@ -34,6 +34,7 @@ import time
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.contract import AXIS_STATUS, SAFETY_STATE
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -72,8 +73,8 @@ def test_killed_and_restarted_driver_keeps_safety_stowed_until_active_and_homed(
     from sslfr_interfaces.msg import AxisStatus, SafetyState
 
     states: list = []                         # (arrival [steady s], SafetyState)
-    ros.node.create_subscription(SafetyState, 'safety/state', lambda m: states.append((time.monotonic(), m)), 10)
-    statuses = ros.collect(AxisStatus, f'axes/{AXIS}/status')
+    ros.node.create_subscription(SafetyState, SAFETY_STATE.name, lambda m: states.append((time.monotonic(), m)), 10)
+    statuses = ros.collect(AxisStatus, AXIS_STATUS.of(AXIS))
     safety = launch('sslfr_safety', 'safety', params={
         'require_site_and_time': False, 'watchdog.nodes': [NODE], 'watchdog.timeouts': [WATCHDOG],
         'watchdog.actions': ['STOW'], 'watchdog.startup_grace': 30.0})

@@ -32,6 +32,8 @@ import tty
 import pytest
 
 from conftest import NodeProcess
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, LIMIT_SWITCHES, SAFETY_RESET,
+                                   SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY)
 
 pytestmark = pytest.mark.timeout(150)
 
@@ -109,7 +111,7 @@ class Plant:
     """Simulated boards, tap, drivers, the safety node, and the test's planner."""
 
     def __init__(self, launch, ros, ros_env, tmp_path, axes=('mirrors',)):
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from sslfr_common.node import qos
         from sensor_msgs.msg import Temperature
         from trajectory_msgs.msg import JointTrajectory
 
@@ -150,14 +152,14 @@ class Plant:
         self.tap = self.taps['mirrors']
 
         self.temps: list = []                  # (arrival [steady s], message)
-        ros.node.create_subscription(Temperature, 'absorber/outlet_temperature',
+        ros.node.create_subscription(Temperature, ABSORBER_TEMPERATURE.of('outlet'),
                                      lambda m: self.temps.append((time.monotonic(), m)), 10)
-        self.switches = ros.collect(LimitSwitches, 'limit_switches')
-        self.statuses = {axis: ros.collect(AxisStatus, f'axes/{axis}/status') for axis in self.axes}
+        self.switches = ros.collect(LimitSwitches, LIMIT_SWITCHES.name)
+        self.statuses = {axis: ros.collect(AxisStatus, AXIS_STATUS.of(axis)) for axis in self.axes}
         self.status = self.statuses['mirrors']
         self.states: list = []
         self.state_arrivals: list[float] = []
-        ros.node.create_subscription(SafetyState, 'safety/state', self._on_state, 10)
+        ros.node.create_subscription(SafetyState, SAFETY_STATE.name, self._on_state, 10)
 
         self.absorber = launch('sslfr_drivers', 'absorber_board', params={'port': abs_link})
         self.drivers = {axis: launch('sslfr_drivers', 'axis_driver', name=f'{axis}_driver', params={
@@ -170,10 +172,9 @@ class Plant:
             'watchdog.nodes': watched, 'watchdog.timeouts': [3.0] + [2.0] * (len(watched) - 1),
             'watchdog.actions': ['STOW'] * len(watched)})
 
-        tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_traj = ros.node.create_publisher(JointTrajectory, 'tracker/trajectory', tl1)
-        self.pub_phase = ros.node.create_publisher(TrackerPhase, 'tracker/phase', tl1)
+        tl1 = qos(TRACKER_PHASE)
+        self.pub_traj = ros.node.create_publisher(JointTrajectory, TRACKER_TRAJECTORY.name, tl1)
+        self.pub_phase = ros.node.create_publisher(TrackerPhase, TRACKER_PHASE.name, tl1)
         self._TrackerPhase, self._JointTrajectory = TrackerPhase, JointTrajectory
         self._clients: dict = {}
         self._last_traj = 0.0
@@ -290,7 +291,7 @@ def test_overtemp_and_open_thermocouple_stow_on_the_wire(plant_factory, ros):
     assert plant.level() == SafetyState.STOW
     assert all(s == STOW_STEPS for _, s in plant.tap.moves(t_cool)), 'moved away from stow before reset'
     assert plant.mirrors_angle() > math.pi / 2 - 0.005
-    res = plant.call(Trigger, 'safety/reset', Trigger.Request())
+    res = plant.call(Trigger, SAFETY_RESET.name, Trigger.Request())
     assert res.success, res.message
     plant.wait_tracking(timeout=budget + 5.0)
 

@@ -10,6 +10,7 @@ from sslfr_interfaces.msg import LimitSwitches
 from sslfr_common.node import to_sec
 from sslfr_sim.runner import SimThread
 from sslfr_sim.sensors import AbsorberSim
+from sslfr_common.contract import ABSORBER_TEMPERATURE, DIAGNOSTICS, LIMIT_SWITCHES
 
 NOON = dt.datetime(2026, 6, 21, 12, 0, tzinfo=dt.timezone.utc).timestamp()
 
@@ -32,10 +33,10 @@ def sim(tmp_path):
 
 
 def test_temperatures_faults_switches_and_unplug(sim, launch, ros, tmp_path):
-    inlet = ros.collect(Temperature, 'absorber/inlet_temperature')
-    outlet = ros.collect(Temperature, 'absorber/outlet_temperature')
-    switches = ros.collect(LimitSwitches, 'limit_switches')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    inlet = ros.collect(Temperature, ABSORBER_TEMPERATURE.of('inlet'))
+    outlet = ros.collect(Temperature, ABSORBER_TEMPERATURE.of('outlet'))
+    switches = ros.collect(LimitSwitches, LIMIT_SWITCHES.name)
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'absorber_board', params={'port': str(tmp_path / 'abs0')})
     assert ros.spin_until(lambda: len(outlet) >= 8 and switches, 15), node.output()
     # heating curve: focused mirrors at noon raise the outlet above ambient (25 degC)
@@ -92,8 +93,8 @@ def test_temperatures_faults_switches_and_unplug(sim, launch, ros, tmp_path):
 
 
 def test_corrupted_link_is_survived_and_counted(sim, launch, ros, tmp_path):
-    outlet = ros.collect(Temperature, 'absorber/outlet_temperature')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    outlet = ros.collect(Temperature, ABSORBER_TEMPERATURE.of('outlet'))
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'absorber_board', params={'port': str(tmp_path / 'abs0')})
     assert ros.spin_until(lambda: len(outlet) >= 2, 15), node.output()
     sim.command('corrupt_frames 0.3')

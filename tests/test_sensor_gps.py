@@ -13,6 +13,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 from sslfr_common.node import to_sec
 from sslfr_sim.runner import SimThread
 from sslfr_sim.sensors import GpsSim
+from sslfr_common.contract import DIAGNOSTICS, GPS_FIX, GPS_TIME_REFERENCE
 
 START = dt.datetime(2026, 3, 21, 11, 0, tzinfo=dt.timezone.utc).timestamp()
 SITE = {'latitude_deg': 37.0931, 'longitude_deg': -2.3590, 'elevation': 510.0}
@@ -35,9 +36,9 @@ def gps_sim(tmp_path, request):
 
 
 def test_fix_time_loss_recovery_and_unplug(gps_sim, launch, ros, tmp_path):
-    fixes = ros.collect(NavSatFix, 'gps/fix')
-    times = ros.collect(TimeReference, 'gps/time_reference')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    fixes = ros.collect(NavSatFix, GPS_FIX.name)
+    times = ros.collect(TimeReference, GPS_TIME_REFERENCE.name)
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'gps', params={'port': str(tmp_path / 'gps0')})
     assert ros.spin_until(lambda: any(f.status.status == NavSatStatus.STATUS_FIX for f in fixes), 15), \
         node.output()
@@ -81,9 +82,9 @@ def test_fix_time_loss_recovery_and_unplug(gps_sim, launch, ros, tmp_path):
 
 @pytest.mark.parametrize('gps_sim', [{'framing': 'raw_nmea'}], indirect=True)
 def test_raw_nmea_garbage_and_time_jump(gps_sim, launch, ros, tmp_path):
-    fixes = ros.collect(NavSatFix, 'gps/fix')
-    times = ros.collect(TimeReference, 'gps/time_reference')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    fixes = ros.collect(NavSatFix, GPS_FIX.name)
+    times = ros.collect(TimeReference, GPS_TIME_REFERENCE.name)
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'gps', params={'port': str(tmp_path / 'gps0'),
                                                   'framing': 'raw_nmea'})
     assert ros.spin_until(lambda: any(f.status.status == NavSatStatus.STATUS_FIX for f in fixes), 15), \

@@ -9,6 +9,7 @@ from sslfr_interfaces.msg import Irradiance
 from sslfr_sim.world import Sky
 from sslfr_sim.runner import SimThread
 from sslfr_sim.sensors import DEFAULT_SITE, IrradianceSim
+from sslfr_common.contract import DIAGNOSTICS, IRRADIANCE_BEAM, IRRADIANCE_ILLUMINANCE
 
 T = dt.datetime(2026, 3, 21, 11, 0, tzinfo=dt.timezone.utc).timestamp()
 
@@ -30,9 +31,9 @@ def sim(tmp_path):
 
 
 def test_beam_saturation_and_unplug(sim, launch, ros, tmp_path):
-    lux = ros.collect(Illuminance, 'irradiance/illuminance')
-    beam = ros.collect(Irradiance, 'irradiance/beam')
-    diags = ros.collect(DiagnosticArray, 'diagnostics')
+    lux = ros.collect(Illuminance, IRRADIANCE_ILLUMINANCE.name)
+    beam = ros.collect(Irradiance, IRRADIANCE_BEAM.name)
+    diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'irradiance', params={'port': str(tmp_path / 'irr0')})
     # the board's auto-range settles within a few samples; then beam = clear-sky DNI
     assert ros.spin_until(lambda: len(beam) >= 6, 15), node.output()
@@ -80,7 +81,7 @@ def test_behind_the_xbee_coordinator(launch, ros, tmp_path):
     host.add_board(bytes.fromhex('0013A20040000012'),
                    IrradianceSim({'start_utc': T, 'period': 0.25, 'noise': 0.0}), FaultInjector())
     with SimThread(host, link=str(tmp_path / 'xbee')):
-        beam = ros.collect(Irradiance, 'irradiance/beam')
+        beam = ros.collect(Irradiance, IRRADIANCE_BEAM.name)
         node = launch('sslfr_drivers', 'irradiance',
                       params={'port': f'xbee:{tmp_path / "xbee"}?addr=0013A20040000012',
                               'luminous_efficacy': 120.0})

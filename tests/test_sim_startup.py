@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from conftest import ROOT
+from sslfr_common.contract import CLOCK, TRACKER_SUN
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -92,8 +93,8 @@ def test_sim_on_the_wall_clock_publishes_no_clock_and_runs_on_system_time(ros, r
     out, _ = refused.communicate(timeout=60)
     assert refused.returncode == 2 and '--wall-clock runs from now' in out, out
 
-    clocks = ros.collect(Clock, '/clock', qos_profile_sensor_data)
-    suns = ros.collect(SunPosition, 'tracker/sun')
+    clocks = ros.collect(Clock, CLOCK.name, qos_profile_sensor_data)
+    suns = ros.collect(SunPosition, TRACKER_SUN.name)
     end = time.strftime('%H:%M:%S', time.gmtime(time.time() + 15))
     proc = _sslfr(['sim', '--wall-clock', '--end', end, '--only', 'planner,safety', '--no-report',
                    '--out', str(tmp_path / 'out')], ros_env, tmp_path)

@@ -31,6 +31,7 @@ from sslfr_bringup import nodeset
 from sslfr_recording.day import planner_config, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, SAFETY_STATE
 
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
@@ -91,9 +92,9 @@ def morning(tmp_path_factory):
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp / 'roslog'), PYTHONUNBUFFERED='1')
     ros = RosHarness(dom)
-    live = {'fix': ros.collect(NavSatFix, 'gps/fix'), 'safety': ros.collect(SafetyState, 'safety/state'),
-            'mirrors': ros.collect(AxisStatus, 'axes/mirrors/status'),
-            'outlet': ros.collect(Temperature, 'absorber/outlet_temperature')}
+    live = {'fix': ros.collect(NavSatFix, GPS_FIX.name), 'safety': ros.collect(SafetyState, SAFETY_STATE.name),
+            'mirrors': ros.collect(AxisStatus, AXIS_STATUS.of('mirrors')),
+            'outlet': ros.collect(Temperature, ABSORBER_TEMPERATURE.of('outlet'))}
     faults = ['gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
               'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@12:10']
     args = ['--start', '09:40', '--end', '12:22', '--speed', str(SPEED)]
@@ -238,11 +239,11 @@ def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
     nobody watches the absorber any more (safety_silent_stow_after)."""
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     arrivals = {'safety': []}
-    ros.node.create_subscription(SafetyState, 'safety/state',
+    ros.node.create_subscription(SafetyState, SAFETY_STATE.name,
                                  lambda m: arrivals['safety'].append(time.monotonic()), 10)
 
     states = []                         # every mirrors status: (arrival, state)
-    ros.node.create_subscription(AxisStatus, 'axes/mirrors/status',
+    ros.node.create_subscription(AxisStatus, AXIS_STATUS.of('mirrors'),
                                  lambda m: states.append((time.monotonic(), m.state)), 10)
     text, summary, day = _sim(ros, ros_env, tmp_path / 'out',
                               ['--start', '10:00', '--end', '10:12', '--speed', '60',

@@ -23,6 +23,7 @@ from sslfr_common.contract import JOINTS
 from sslfr_recording.day import Day, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch
+from sslfr_common.contract import AXIS_STATUS, TRACKER_PHASE
 
 STEP = math.radians(0.006)            # seed 000 section 3.4: one motor step
 SENSOR_NOISE = math.radians(0.003)    # simulated position sensor, 1 sigma (sim/axis.py)
@@ -70,12 +71,12 @@ def _site(day: Day):
 @pytest.mark.parametrize('layout', ['composed', 'separate'])   # issue 16: both process layouts
 def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros, ros_env, tmp_path):
     from sslfr_interfaces.msg import AxisStatus, TrackerPhase
-    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sslfr_common.node import qos
 
     speed = 90.0
-    live_phase = ros.collect(TrackerPhase, 'tracker/phase',
-                             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    live_status = ros.collect(AxisStatus, 'axes/mirrors/status')
+    live_phase = ros.collect(TrackerPhase, TRACKER_PHASE.name,
+                             qos(TRACKER_PHASE))
+    live_status = ros.collect(AxisStatus, AXIS_STATUS.of('mirrors'))
     text, summary, day = _run_live(ros, ros_env, tmp_path / 'out',
                                    ['--start', '09:50', '--end', '10:20', '--speed', str(speed), '--layout', layout])
     # live: the phase was TRACKING and the mirrors driver was following

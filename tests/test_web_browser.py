@@ -8,7 +8,7 @@ password, presses Stow and sees the planner's phase become STOW, then switches t
 maintenance and jogs the mirrors by -0.5 deg through the driver (a 30 deg jog is refused). A screenshot of the
 page is kept as an artifact: out/test-artifacts/web-operator-page.png (and -phone.png at a
 phone's 390 px width, where nothing may be wider than the screen; paths printed).
-Page load time and the state-to-page delay are printed (README, measured figures).
+Page load time and the state-to-page delay are printed (docs/measurements.md).
 
 Set-up installs chromium + chromium-driver when root on Debian (scripts/setup-browser.sh);
 without them this test skips with the command to run, and fails under CI=true.

@@ -22,12 +22,13 @@ import urllib.error
 import urllib.request
 
 import pytest
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from sslfr_common.contract import IRRADIANCE_BEAM, SAFETY_STATE, TRACKER_PHASE
+from sslfr_common.node import qos
 
 from sslfr_web import auth
 
 PASSWORD = 'topic-level-pass'
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED = qos(TRACKER_PHASE)
 
 
 class Page:
@@ -98,13 +99,13 @@ def test_live_view_follows_the_topics_within_one_second_and_shows_the_nodes_limi
     from sslfr_interfaces.msg import Irradiance
     web, page = graph
     assert page.url.startswith('http://127.0.0.1:')               # the default bind: loopback only
-    pub = ros.node.create_publisher(Irradiance, 'irradiance/beam', 10)
+    pub = ros.node.create_publisher(Irradiance, IRRADIANCE_BEAM.name, 10)
     phases = ros.collect(__import__('sslfr_interfaces.msg', fromlist=['TrackerPhase']).TrackerPhase,
-                         'tracker/phase', LATCHED)
+                         TRACKER_PHASE.name, LATCHED)
     assert ros.spin_until(lambda: phases, 30), 'planner not publishing'
     reader = EventReader(page.url)
     reader.start()
-    ros.spin_until(lambda: ros.node.count_subscribers('irradiance/beam') >= 2, 15)   # web + safety
+    ros.spin_until(lambda: ros.node.count_subscribers(IRRADIANCE_BEAM.name) >= 2, 15)   # web + safety
     delays = []
     rng = __import__('random').Random(20)
     for k in range(10):
@@ -131,8 +132,8 @@ def test_live_view_follows_the_topics_within_one_second_and_shows_the_nodes_limi
 def test_commands_go_through_the_services_and_refusals_change_nothing(graph, ros, tmp_path):
     from sslfr_interfaces.msg import SafetyState, TrackerPhase
     web, page = graph
-    phases = ros.collect(TrackerPhase, 'tracker/phase', LATCHED)
-    safety = ros.collect(SafetyState, 'safety/state')
+    phases = ros.collect(TrackerPhase, TRACKER_PHASE.name, LATCHED)
+    safety = ros.collect(SafetyState, SAFETY_STATE.name)
     assert ros.spin_until(lambda: phases and safety, 30)
     mode0 = phases[-1].mode
     # no login: refused, nothing changes

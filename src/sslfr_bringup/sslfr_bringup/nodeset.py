@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
+from sslfr_common.contract import MIRRORS
 
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
@@ -502,7 +503,7 @@ def description_value(desc, key: str):
               'collector.mirror_width': o.line_width, 'collector.gap': o.gap,
               'collector.receiver_height': o.receiver_height - o.tube_diameter / 2.0,
               'collector.tube_diameter': o.tube_diameter}
-    m = desc.movements.get('mirrors')
+    m = desc.movements.get(MIRRORS)
     if m is not None and m.law == 'seed003_linkage':
         values['collector.tracking_step'] = m.law_params['step_s']
     v = values.get(key)

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, TextIO
 
+from sslfr_common.contract import CLOCK, DIAGNOSTICS
 from sslfr_common.sdnotify import Notifier, NotifyListener
 
 from sslfr_bringup.liveness import LivenessWatch
@@ -708,10 +709,11 @@ class RosSide(threading.Thread):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         from lifecycle_msgs.msg import Transition
-        from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
+        from sslfr_common.contract import collector_id
         from lifecycle_msgs.srv import ChangeState
         from rclpy.clock import Clock, ClockType
         from rclpy.executors import SingleThreadedExecutor
+        from sslfr_common.node import qos
         from sslfr_drivers.axis.lifecycle_ctl import ActiveWatch
 
         ctx = self._ctx = rclpy.Context()
@@ -722,7 +724,7 @@ class RosSide(threading.Thread):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         status: dict[str, dict] = {}
         clients: dict = {}
-        diag_pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        diag_pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
 
         def publish_diag():
             while True:
@@ -767,10 +769,9 @@ class RosSide(threading.Thread):
                                      lambda _m, t=topic: self.seen.__setitem__(t, self.seen.get(t, 0) + 1), 10)
         if self.clock_fn is not None:
             from rosgraph_msgs.msg import Clock as ClockMsg
-            from rclpy.qos import QoSProfile, ReliabilityPolicy
             from sslfr_common.timeconv import stamp
 
-            clock_pub = node.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+            clock_pub = node.create_publisher(ClockMsg, CLOCK.name, qos(CLOCK))
 
             def publish_clock():
                 t = self.clock_fn()

@@ -56,13 +56,13 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     config, params = nodeset_mod.site_config(config, namespace, run_dir, ns, params)
     if namespace.strip('/') and any(n.name == 'recorder' for n in ns.nodes):
         # each collector's bag names its collector: <id>_YYYY-MM-DD (a field, docs/field.md)
-        from sslfr_common.contract import collector_id
+        from sslfr_common.contract import CLOCK, DIAGNOSTICS, collector_id
         extra = {k: dict(v) for k, v in (extra or {}).items()}
         rec = extra.setdefault('recorder', {})
         rec.setdefault('prefix', collector_id(namespace))
         # the absolute /diagnostics carries every collector's statuses: subscribing to it
         # would connect each collector to all the others; the station records it
-        rec.setdefault('exclude', ['/clock', '/diagnostics'])
+        rec.setdefault('exclude', [CLOCK.name, DIAGNOSTICS.name])
     programs, missing = [], []
 
     def node_args(node):

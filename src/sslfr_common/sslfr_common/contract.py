@@ -1,6 +1,8 @@
 """The facts of the graph contract, defined once (docs/architecture.md).
 
-Pure Python (no rclpy, no generated messages), so every core can import it. Where
+Pure Python (no rclpy, no generated messages), so every core can import it. The topic
+and service table at the end is the one place a topic or service name is written
+(``test_topic_table.py`` scans the product code and docs/architecture.md). Where
 ROS carries a fact as message constants (phase codes in ``TrackerPhase``, safety
 levels in ``SafetyState``, link states in ``AxisStatus``) the values here are the
 same numbers, and ``test_contract.py`` fails if they ever differ, or if another
@@ -12,11 +14,13 @@ from __future__ import annotations
 
 import enum
 import math
+from dataclasses import dataclass
 
 # --------------------------------------------------------------------------- joints
 #: The tracker's three movements (seed 000 section 4), in the order of every
 #: per-axis tuple and of ``tracker/trajectory``'s joint_names.
-JOINTS: tuple[str, ...] = ('mirrors', 'mobile_structure', 'secondary_reflector')
+MIRRORS, MOBILE_STRUCTURE, SECONDARY_REFLECTOR = 'mirrors', 'mobile_structure', 'secondary_reflector'
+JOINTS: tuple[str, ...] = (MIRRORS, MOBILE_STRUCTURE, SECONDARY_REFLECTOR)
 
 #: The longitudinal movements (the structure and reflector tilts beta_M, beta_a).
 LONGITUDINAL_JOINTS: tuple[str, ...] = JOINTS[1:]
@@ -29,17 +33,17 @@ STEP_ANGLE = math.radians(0.006)
 #: toward either end, so -pi/2..+pi/2 signed, rest at 0. The limit switches of the
 #: boards (and of the simulated boards) sit at these ends.
 JOINT_RANGE: dict[str, tuple[float, float]] = {
-    'mirrors': (-math.pi / 4, math.pi / 2),
-    'mobile_structure': (-math.pi / 2, math.pi / 2),
-    'secondary_reflector': (-math.pi / 2, math.pi / 2),
+    MIRRORS: (-math.pi / 4, math.pi / 2),
+    MOBILE_STRUCTURE: (-math.pi / 2, math.pi / 2),
+    SECONDARY_REFLECTOR: (-math.pi / 2, math.pi / 2),
 }
 
 #: Stow (defocus) position per joint [rad], also where the SLEEP switch (the home
 #: reference) closes: mirrors go to the sleeping position +pi/2 (seed 000 section
 #: 3.5.2, "no dust is deposited on the mirrors"); the longitudinal axes go back to
 #: their 0 rad rest position.
-STOW_POSITION: dict[str, float] = {'mirrors': math.pi / 2, 'mobile_structure': 0.0,
-                                   'secondary_reflector': 0.0}
+STOW_POSITION: dict[str, float] = {MIRRORS: math.pi / 2, MOBILE_STRUCTURE: 0.0,
+                                   SECONDARY_REFLECTOR: 0.0}
 
 
 def driver_node(joint: str) -> str:
@@ -52,17 +56,17 @@ def driver_node(joint: str) -> str:
 #: ``sslfr_interfaces/LimitSwitches``), the joint each belongs to, and the nominal
 #: joint angle [rad] at which it is closed in normal operation.
 SWITCH_AXIS: dict[str, str] = {
-    'initial': 'mirrors',                      # beta_0 = -pi/4, sunrise end (seed 000 section 4)
-    'last': 'mirrors',                         # beta_0 = +pi/4, sunset end
-    'sleeping': 'mirrors',                     # beta_0 = +pi/2, sleeping position
-    'longitudinal_1': 'mobile_structure',      # beta_M = 0, starting position
-    'longitudinal_2': 'secondary_reflector',   # beta_a = 0, starting position
+    'initial': MIRRORS,                        # beta_0 = -pi/4, sunrise end (seed 000 section 4)
+    'last': MIRRORS,                           # beta_0 = +pi/4, sunset end
+    'sleeping': MIRRORS,                       # beta_0 = +pi/2, sleeping position
+    'longitudinal_1': MOBILE_STRUCTURE,        # beta_M = 0, starting position
+    'longitudinal_2': SECONDARY_REFLECTOR,     # beta_a = 0, starting position
 }
 SWITCHES: tuple[str, ...] = tuple(SWITCH_AXIS)
 SWITCH_POSITION: dict[str, float] = {
-    'initial': -math.pi / 4, 'last': math.pi / 4, 'sleeping': STOW_POSITION['mirrors'],
-    'longitudinal_1': STOW_POSITION['mobile_structure'],
-    'longitudinal_2': STOW_POSITION['secondary_reflector'],
+    'initial': -math.pi / 4, 'last': math.pi / 4, 'sleeping': STOW_POSITION[MIRRORS],
+    'longitudinal_1': STOW_POSITION[MOBILE_STRUCTURE],
+    'longitudinal_2': STOW_POSITION[SECONDARY_REFLECTOR],
 }
 
 #: The absorber tube's thermocouples (seed 000 section 3.5.3): ``absorber/<name>_temperature``.
@@ -128,12 +132,98 @@ class LinkState(enum.IntEnum):
 IDLE_DRIVER_STATES: frozenset[str] = frozenset({'unconfigured', 'inactive', 'finalized'})
 
 
+# --------------------------------------------------------------------------- topics
+class Qos(enum.Enum):
+    """The QoS profiles of docs/architecture.md (built as rclpy profiles once, in
+    ``sslfr_common.node.qos``)."""
+
+    R10 = 'R10'     # reliable, volatile, keep last 10
+    BE = 'BE'       # best effort, volatile, keep last 10
+    TL1 = 'TL1'     # reliable, transient local, keep last 1: latched (late joiners get the latest)
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A topic or service of the graph: relative name and ROS type (``pkg/msg/Type``,
+    ``pkg/srv/Type``). A name with a ``{field}`` (``axes/{axis}/status``) is a family,
+    one per axis or sensor: :meth:`of` gives a member's name."""
+
+    name: str
+    type: str
+
+    def of(self, part: str) -> str:
+        """The member of a family for ``part`` (an axis, a thermocouple)."""
+        head, brace, tail = self.name.partition('{')
+        if not brace:
+            raise ValueError(f'{self.name} is not a family of names')
+        return head + part + tail.partition('}')[2]
+
+
+@dataclass(frozen=True)
+class Topic(Endpoint):
+    """A topic: the publisher's QoS profile is :attr:`qos`; subscribers ask the same
+    unless docs/architecture.md says otherwise (the safety node subscribes best effort)."""
+
+    qos: Qos = Qos.R10
+
+    @property
+    def latched(self) -> bool:
+        """Transient local: a late subscriber gets the latest message."""
+        return self.qos is Qos.TL1
+
+
+#: The topics of the graph (docs/architecture.md, section Topics; a test compares the two).
+GPS_FIX = Topic('gps/fix', 'sensor_msgs/msg/NavSatFix')
+GPS_TIME_REFERENCE = Topic('gps/time_reference', 'sensor_msgs/msg/TimeReference')
+TRACKER_SUN = Topic('tracker/sun', 'sslfr_interfaces/msg/SunPosition')
+TRACKER_PHASE = Topic('tracker/phase', 'sslfr_interfaces/msg/TrackerPhase', Qos.TL1)
+TRACKER_TRAJECTORY = Topic('tracker/trajectory', 'trajectory_msgs/msg/JointTrajectory', Qos.TL1)
+JOINT_STATES = Topic('joint_states', 'sensor_msgs/msg/JointState')
+AXIS_STATUS = Topic('axes/{axis}/status', 'sslfr_interfaces/msg/AxisStatus')
+ABSORBER_TEMPERATURE = Topic('absorber/{thermocouple}_temperature', 'sensor_msgs/msg/Temperature')
+LIMIT_SWITCHES = Topic('limit_switches', 'sslfr_interfaces/msg/LimitSwitches')
+IRRADIANCE_ILLUMINANCE = Topic('irradiance/illuminance', 'sensor_msgs/msg/Illuminance')
+IRRADIANCE_BEAM = Topic('irradiance/beam', 'sslfr_interfaces/msg/Irradiance')
+SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
+DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')   # absolute: see collector_id
+CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos.BE)
+
+TOPICS: tuple[Topic, ...] = (
+    GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
+    AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
+    SAFETY_STATE, DIAGNOSTICS, CLOCK)
+
+#: Each family's members: the axes and the thermocouples.
+FAMILY_MEMBERS: dict[str, tuple[str, ...]] = {AXIS_STATUS.name: JOINTS,
+                                              ABSORBER_TEMPERATURE.name: THERMOCOUPLES}
+
+#: The services of the graph (docs/architecture.md, section Services).
+PLANNER_REPLAN = Endpoint('planner/replan', 'std_srvs/srv/Trigger')
+PLANNER_SET_MODE = Endpoint('planner/set_mode', 'sslfr_interfaces/srv/SetMode')
+AXIS_HOME = Endpoint('axes/{axis}/home', 'std_srvs/srv/Trigger')
+AXIS_JOG = Endpoint('axes/{axis}/jog', 'sslfr_interfaces/srv/Jog')
+SAFETY_ESTOP = Endpoint('safety/estop', 'std_srvs/srv/SetBool')
+SAFETY_RESET = Endpoint('safety/reset', 'std_srvs/srv/Trigger')
+
+SERVICES: tuple[Endpoint, ...] = (PLANNER_REPLAN, PLANNER_SET_MODE, AXIS_HOME, AXIS_JOG,
+                                  SAFETY_ESTOP, SAFETY_RESET)
+
+
+def topic_names() -> dict[str, Topic]:
+    """Every concrete topic name of the graph -> its topic (families expanded)."""
+    out: dict[str, Topic] = {}
+    for t in TOPICS:
+        for name in ([t.of(m) for m in FAMILY_MEMBERS[t.name]] if '{' in t.name else [t.name]):
+            out[name] = t
+    return out
+
+
 # --------------------------------------------------------------------------- diagnostics
 #: Every node's diagnostics go to the ABSOLUTE ``/diagnostics`` (the ROS convention that
 #: ``diagnostic_aggregator`` and rqt_robot_monitor read), also under a collector's
 #: namespace; the collector is named by each status' ``hardware_id``
-#: (:func:`collector_id`) and the status' ``name`` is ``"<node>: <task>"``.
-DIAGNOSTICS_TOPIC = '/diagnostics'
+#: (:func:`collector_id`) and the status' ``name`` is ``"<node>: <task>"`` (the topic:
+#: :data:`DIAGNOSTICS`).
 
 #: ``hardware_id`` of a collector run in the root namespace (a single collector)
 ROOT_COLLECTOR_ID = 'sslfr'

@@ -1,47 +1,15 @@
-"""A single-threaded executor whose wake-up and callbacks cost little (issue 16).
+"""A single-threaded executor whose wake-up and callbacks cost little.
 
-rclpy's ``SingleThreadedExecutor`` rebuilds its wait set in Python at every wake-up:
-for each subscription, timer, service, client and guard condition of every node it
-calls ``can_execute``, enters the handle's context manager through an ``ExitStack``,
-adds the handle, and after the wait scans every entity again for readiness. A node
-process of this project holds 60-130 entities (each node has 7 parameter and type
-services, each lifecycle driver 5 more), so that is several hundred Python calls per
-wake-up. Each callback then runs inside a ``Task`` wrapping a coroutine that calls
-``inspect.iscoroutinefunction`` on the callback, and the handler triggers the
-executor's own guard condition twice per callback (a wake-up meant for other threads
-of a multi-threaded executor), so every callback costs one or two further empty
-rebuilds. Profiled in the composed ``hardware`` process at real time, that machinery
-was about two thirds of the process's main-thread CPU.
-
-:class:`LeanExecutor` keeps rclpy's semantics for this process's case (one thread,
-synchronous callbacks) and per wake-up does only:
-
-- the entity lists and their handles are collected when an entity or a node was added
-  or removed (rclpy's ``Node`` calls :meth:`wake` on every create and destroy, and
-  ``add_node``/``remove_node`` come here) and reused otherwise;
-- no ``can_execute`` filter and no handle context managers while waiting: with one
-  thread nothing executes during the wait;
-- the node-management services every rclpy node carries (parameters, type
-  description, lifecycle: :data:`MANAGEMENT_SERVICES`, 7-12 per node, 57 in the
-  composed ``hardware`` process) join the wait set at most every
-  :data:`MANAGEMENT_PERIOD`: each service in a wait costs rmw a few microseconds, at
-  every wake-up of a process that wakes 50-70 times a second. Their requests wait
-  for the next wake-up that includes them (at most ``MANAGEMENT_PERIOD`` after the
-  previous one, or the caller's spin timeout in a process with nothing else to do);
-  the nodes' own services (e-stop, modes, jog...) stay in every wait;
-- readiness is looked up from the ready pointers (a dict), not by scanning entities;
-- the entities found ready are run one per :meth:`spin_once` (as rclpy does), each
-  called directly: taken from its handle under the handle's context manager, the
-  callback called, with its callback group's ``beginning_execution`` /
-  ``ending_execution`` around it; no ``Task``, no coroutine, no guard-condition
-  trigger; an exception of a callback propagates out of ``spin_once`` as in rclpy.
-
-Anything outside that case takes rclpy's own path: a callback that is a coroutine
-function (``async def``) runs in rclpy's ``Task``; while such a task is in flight (it
-awaits a future) or a node has waitables (actions, QoS-event handlers), whole
-wake-ups go through rclpy's implementation. It is the executor of
-:func:`sslfr_common.node.run_nodes` and ``run_node`` (the one ``main()`` of every node
-process); measured in benchmarks/bench_nodeset_cpu.py.
+rclpy's ``SingleThreadedExecutor`` rebuilds its wait set in Python at every wake-up and
+runs each callback inside a ``Task`` (plus two guard-condition triggers); in a node
+process of 60-130 entities that machinery was most of the main thread's CPU
+(docs/measurements.md, "The executor"). :class:`LeanExecutor` keeps rclpy's semantics
+for one thread and synchronous callbacks, but collects the entities' handles only when
+an entity or node is added or removed, waits on the nodes' management services
+(:data:`MANAGEMENT_SERVICES`: parameters, type description, lifecycle) at most every
+:data:`MANAGEMENT_PERIOD`, and calls each ready callback directly, one per
+:meth:`spin_once`. A coroutine callback, a task in flight or a waitable (actions,
+QoS-event handlers) goes through rclpy's own implementation.
 """
 from __future__ import annotations
 

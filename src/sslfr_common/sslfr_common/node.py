@@ -46,8 +46,10 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, \
     ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from .contract import Qos, Topic
 from .executor import LeanExecutor
 from .sdnotify import Notifier
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
@@ -56,6 +58,20 @@ from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec 
 CONFIG_ERRORS: tuple[type[BaseException], ...] = (
     ValueError, TypeError, ParameterException, InvalidParameterTypeException,
     InvalidParameterValueException)
+
+#: The rclpy profile of each QoS of the contract (docs/architecture.md), built once.
+QOS_PROFILES: dict[Qos, QoSProfile] = {
+    Qos.R10: QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+    Qos.BE: QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
+    Qos.TL1: QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL),
+}
+
+
+def qos(what: Topic | Qos) -> QoSProfile:
+    """The rclpy QoS profile of a topic of the contract (or of a profile)."""
+    return QOS_PROFILES[what.qos if isinstance(what, Topic) else what]
+
 
 #: Longest wait of one spin_once [s]; the signal wake-up makes stops immediate anyway.
 SPIN_TIMEOUT_S = 0.5

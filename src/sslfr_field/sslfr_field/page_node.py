@@ -16,12 +16,13 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import SetMode
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, JOINTS, LEVEL_NAMES, PHASE_NAMES, collector_id
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, IRRADIANCE_BEAM, JOINTS,
+                                   LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE,
+                                   collector_id)
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now
 from sslfr_web import commands
 from sslfr_web.app import Server
 
@@ -44,23 +45,23 @@ class FieldPageNode(LeanEvents, Node):
         self.namespaces = dict(zip(ids, nsp))
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.state = FieldState(zip(ids, nsp, pages), float(self.cfg['lost_after']))
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         st, now = self.state, lambda: steady_now(self.steady)
         for cid, ns in self.namespaces.items():
             sub = self.create_subscription
-            sub(TrackerPhase, f'{ns}/tracker/phase', lambda m, c=cid: st.on_phase(
-                c, now(), PHASE_NAMES.get(m.phase, str(m.phase)), m.mode, m.reason), latched)
-            sub(SafetyState, f'{ns}/safety/state', lambda m, c=cid: st.on_safety(
-                c, now(), LEVEL_NAMES.get(m.level, str(m.level)), m.reasons), 10)
-            sub(Irradiance, f'{ns}/irradiance/beam', lambda m, c=cid: st.on_beam(c, now(), m.beam), 10)
-            for which in ('inlet', 'outlet'):
-                sub(Temperature, f'{ns}/absorber/{which}_temperature',
-                    lambda m, c=cid, w=which: st.on_temperature(c, now(), w, m.temperature), 10)
+            sub(TrackerPhase, f'{ns}/{TRACKER_PHASE.name}', lambda m, c=cid: st.on_phase(
+                c, now(), PHASE_NAMES.get(m.phase, str(m.phase)), m.mode, m.reason), qos(TRACKER_PHASE))
+            sub(SafetyState, f'{ns}/{SAFETY_STATE.name}', lambda m, c=cid: st.on_safety(
+                c, now(), LEVEL_NAMES.get(m.level, str(m.level)), m.reasons), qos(SAFETY_STATE))
+            sub(Irradiance, f'{ns}/{IRRADIANCE_BEAM.name}', lambda m, c=cid: st.on_beam(c, now(), m.beam),
+                qos(IRRADIANCE_BEAM))
+            for which in THERMOCOUPLES:
+                sub(Temperature, f'{ns}/{ABSORBER_TEMPERATURE.of(which)}',
+                    lambda m, c=cid, w=which: st.on_temperature(c, now(), w, m.temperature), qos(ABSORBER_TEMPERATURE))
             for axis in JOINTS:
-                sub(AxisStatus, f'{ns}/axes/{axis}/status', lambda m, c=cid, a=axis: st.on_axis(
-                    c, now(), a, m.state, m.error, m.measured), 10)
+                sub(AxisStatus, f'{ns}/{AXIS_STATUS.of(axis)}', lambda m, c=cid, a=axis: st.on_axis(
+                    c, now(), a, m.state, m.error, m.measured), qos(AXIS_STATUS))
         self.clients_: dict = {}
-        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         self.op = FieldApp(self.cfg, self, self.namespaces)
         self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))

@@ -99,6 +99,7 @@ def main(argv: list[str]) -> int:
         print('sslfr field-report: no bag found in ' + ', '.join(ns.paths), file=sys.stderr)
         return 2
     from sslfr_recording.bag import BagError, BagReader
+    from sslfr_common.contract import TRACKER_PHASE
     from sslfr_recording.report import analyse
     rows = {}
     for b in bags:
@@ -108,7 +109,8 @@ def main(argv: list[str]) -> int:
             return 2
         try:
             reader = BagReader(b)
-            spaces = {t.rsplit('/tracker/phase', 1)[0] for t in reader.topics if t.endswith('/tracker/phase')}
+            phase = '/' + TRACKER_PHASE.name
+            spaces = {t.rsplit(phase, 1)[0] for t in reader.topics if t.endswith(phase)}
             if len(spaces) > 1:
                 print(f'sslfr field-report: skipped {b}: it holds several collectors ({", ".join(sorted(spaces))}), '
                       f'a station\'s field recording', file=sys.stderr)

@@ -27,12 +27,13 @@ import sys
 import tempfile
 from pathlib import Path
 
+from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
 from sslfr_field import field as field_mod
 
 #: the plant gateway's package and executable (SunSpec over Modbus TCP); started when installed
 GATEWAY = ('sslfr_gateway', 'modbus_gateway')
 #: the field recorder's topics per collector (relative to its namespace) and for the field
-RECORDED_PER_COLLECTOR = ('tracker/phase', 'safety/state')
+RECORDED_PER_COLLECTOR = (TRACKER_PHASE.name, SAFETY_STATE.name)
 
 
 def station_environment(f: field_mod.Field, base: dict | None = None) -> dict:
@@ -135,7 +136,7 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
             missing.append('field recorder (sslfr_recording/recorder)')
         else:
             import yaml
-            topics = ['/diagnostics'] + [f'{c.namespace}/{t}' for c in f.collectors for t in RECORDED_PER_COLLECTOR]
+            topics = [DIAGNOSTICS.name] + [f'{c.namespace}/{t}' for c in f.collectors for t in RECORDED_PER_COLLECTOR]
             pfile = Path(run_dir) / 'field_recorder.params.yaml'
             pfile.write_text(yaml.safe_dump({'field_recorder': {'ros__parameters': {
                 'output_dir': str(Path(out_dir) / 'bags'), 'prefix': f.id, 'topics': topics}}}))

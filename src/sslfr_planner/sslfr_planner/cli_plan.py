@@ -25,8 +25,8 @@ from .site import Site
 
 #: the most rows one day table may have (a step of 0.1 s; ~100 MB of CSV)
 MAX_ROWS = 864_000
-HEADER = ('utc,phase,zenith_deg,azimuth_deg,transversal_deg,longitudinal_deg,mirrors_deg,'
-          'mobile_structure_deg,secondary_reflector_deg')
+HEADER = ','.join(['utc', 'phase', 'zenith_deg', 'azimuth_deg', 'transversal_deg', 'longitudinal_deg',
+                   *(f'{joint}_deg' for joint in JOINTS)])
 
 
 def _date(text: str) -> datetime.date:

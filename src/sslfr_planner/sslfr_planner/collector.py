@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
+from sslfr_common.contract import (JOINT_RANGE, JOINTS, MIRRORS, MOBILE_STRUCTURE, SECONDARY_REFLECTOR, STEP_ANGLE,
+                                   STOW_POSITION)
 
 from . import geometry as _geometry
 
@@ -189,12 +190,12 @@ class Collector:
     geometry: FieldGeometry = field(default_factory=FieldGeometry)
     azimuth: float = 0.0
     law: str = 'continuous'
-    mirror_min: float = JOINT_RANGE['mirrors'][0]
-    mirror_max: float = JOINT_RANGE['mirrors'][1]
-    sleeping: float = STOW_POSITION['mirrors']
-    tilt_max: float = JOINT_RANGE['mobile_structure'][1]
-    structure_rest: float = STOW_POSITION['mobile_structure']
-    reflector_rest: float = STOW_POSITION['secondary_reflector']
+    mirror_min: float = JOINT_RANGE[MIRRORS][0]
+    mirror_max: float = JOINT_RANGE[MIRRORS][1]
+    sleeping: float = STOW_POSITION[MIRRORS]
+    tilt_max: float = JOINT_RANGE[MOBILE_STRUCTURE][1]
+    structure_rest: float = STOW_POSITION[MOBILE_STRUCTURE]
+    reflector_rest: float = STOW_POSITION[SECONDARY_REFLECTOR]
     step_angle: float = STEP_ANGLE
     gear_ratio: tuple = (1.0, 1.0, 1.0)
     pre_dawn_lead: float = 600.0

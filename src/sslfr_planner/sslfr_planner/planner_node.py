@@ -25,14 +25,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import NavSatFix
 from sslfr_interfaces.msg import SafetyState, SunPosition, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, PHASE_NAMES, collector_id
-from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, to_ns, to_sec
+from sslfr_common.contract import (DIAGNOSTICS, GPS_FIX, PHASE_NAMES, PLANNER_REPLAN, PLANNER_SET_MODE,
+                                   SAFETY_STATE, TRACKER_PHASE, TRACKER_SUN, TRACKER_TRAJECTORY, collector_id)
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, to_ns, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
 from sslfr_planner.description import for_node
@@ -44,9 +44,6 @@ from sslfr_planner.site_source import SiteSelector, distance_m
 from sslfr_planner.timejump import ClockJumpDetector
 from sslfr_planner.trajectory import finite_or_none
 
-#: QoS of tracker/phase and tracker/trajectory: late joiners get the latest one.
-TL1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TICK_PERIOD = 0.2      # [s] ROS time: phase/sun/trajectory bookkeeping
 ERROR_SHOWN_FOR = 60.0  # [s] steady: diagnostics stay ERROR this long after the last error
 DIAG_LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}
@@ -73,14 +70,14 @@ class PlannerNode(LeanEvents, Node):
         self._jump = ClockJumpDetector(self.cfg['time_jump_threshold'])
         self._guard = ParameterGuard(self, PLANNER_PARAMS, self.cfg, self._apply_parameters)
 
-        self.pub_sun = self.create_publisher(SunPosition, 'tracker/sun', 10)
-        self.pub_phase = self.create_publisher(TrackerPhase, 'tracker/phase', TL1)
-        self.pub_traj = self.create_publisher(JointTrajectory, 'tracker/trajectory', TL1)
-        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        self.create_subscription(NavSatFix, 'gps/fix', self._on_fix, 10)
-        self.create_subscription(SafetyState, 'safety/state', self._on_safety, 10)
-        self.create_service(Trigger, 'planner/replan', self._srv_replan)
-        self.create_service(SetMode, 'planner/set_mode', self._srv_set_mode)
+        self.pub_sun = self.create_publisher(SunPosition, TRACKER_SUN.name, qos(TRACKER_SUN))
+        self.pub_phase = self.create_publisher(TrackerPhase, TRACKER_PHASE.name, qos(TRACKER_PHASE))
+        self.pub_traj = self.create_publisher(JointTrajectory, TRACKER_TRAJECTORY.name, qos(TRACKER_TRAJECTORY))
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
+        self.create_subscription(NavSatFix, GPS_FIX.name, self._on_fix, qos(GPS_FIX))
+        self.create_subscription(SafetyState, SAFETY_STATE.name, self._on_safety, qos(SAFETY_STATE))
+        self.create_service(Trigger, PLANNER_REPLAN.name, self._srv_replan)
+        self.create_service(SetMode, PLANNER_SET_MODE.name, self._srv_set_mode)
 
         self._jump_step, self._jump_handle = None, None
         self._watch_ros_time()
@@ -152,7 +149,7 @@ class PlannerNode(LeanEvents, Node):
 
     # ------------------------------------------------------------------- services
     def _srv_replan(self, request, response):
-        self.control.request_replan('planner/replan service')
+        self.control.request_replan(f'{PLANNER_REPLAN.name} service')
         self._tick()
         schedule = self.cycle.current_schedule
         response.success = schedule is not None and self.control.pending_replan is None

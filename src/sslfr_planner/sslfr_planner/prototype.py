@@ -10,13 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import MIRRORS
 
 from . import mirror_laws
 from .collector import FieldGeometry
 from .description import Description
-
-MIRRORS = JOINTS[0]
 
 
 def field_geometry(desc: Description) -> FieldGeometry:

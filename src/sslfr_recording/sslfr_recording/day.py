@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES,
+                                   JOINTS, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY)
 from sslfr_common.timeconv import to_sec
 
 from .bag.metadata import BagError
@@ -24,15 +25,15 @@ from .bag.reader import BagReader, message_time
 
 #: the day's topics (relative names; found in any namespace) -> Day attribute
 TOPICS = {
-    'tracker/phase': 'phase', 'safety/state': 'safety', 'gps/fix': 'fix',
-    'absorber/inlet_temperature': 'inlet', 'absorber/outlet_temperature': 'outlet',
-    'irradiance/beam': 'beam', 'tracker/trajectory': 'trajectory', 'joint_states': 'joints',
-    **{f'axes/{a}/status': 'axes' for a in JOINTS},
+    TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix',
+    ABSORBER_TEMPERATURE.of('inlet'): 'inlet', ABSORBER_TEMPERATURE.of('outlet'): 'outlet',
+    IRRADIANCE_BEAM.name: 'beam', TRACKER_TRAJECTORY.name: 'trajectory', JOINT_STATES.name: 'joints',
+    **{AXIS_STATUS.of(a): 'axes' for a in JOINTS},
 }
 #: topic -> its columns (a key of _FIELDS); joint_states is split by joint instead
-_KIND = {'tracker/phase': 'phase', 'safety/state': 'safety', 'gps/fix': 'fix', 'irradiance/beam': 'beam',
-         'absorber/inlet_temperature': 'temperature', 'absorber/outlet_temperature': 'temperature',
-         'tracker/trajectory': 'trajectory', **{f'axes/{a}/status': 'status' for a in JOINTS}}
+_KIND = {TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix', IRRADIANCE_BEAM.name: 'beam',
+         ABSORBER_TEMPERATURE.of('inlet'): 'temperature', ABSORBER_TEMPERATURE.of('outlet'): 'temperature',
+         TRACKER_TRAJECTORY.name: 'trajectory', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
 
 
 @dataclass
@@ -117,7 +118,7 @@ class Day:
         if len(ok):
             i = int(ok[0])
             return {'latitude': float(self.fix['latitude'][i]), 'longitude': float(self.fix['longitude'][i]),
-                    'altitude': float(self.fix['altitude'][i]), 'source': 'gps/fix'}
+                    'altitude': float(self.fix['altitude'][i]), 'source': GPS_FIX.name}
         return {}
 
     def counter(self, status_prefix: str, key: str) -> Series:
@@ -218,8 +219,8 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
     """
     reader = bag if isinstance(bag, BagReader) else BagReader(bag)
     names = {key: find_topic(reader.topics, key) if topics is None or key in topics else None for key in TOPICS}
-    if any(names[f'axes/{a}/status'] for a in JOINTS):
-        names['joint_states'] = None          # the status holds the measured angles
+    if any(names[AXIS_STATUS.of(a)] for a in JOINTS):
+        names[JOINT_STATES.name] = None          # the status holds the measured angles
     by_topic = {t: k for k, t in names.items() if t}
     rows: dict[str, list] = {k: [] for k in _KIND}
     joint_rows: dict[str, list] = {a: [] for a in JOINTS}
@@ -236,14 +237,14 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
             raise
         except Exception as exc:  # noqa: BLE001 - decoder errors vary
             raise BagError(f'cannot decode a {raw.type} message on {raw.topic}: {exc}') from exc
-        if key == 'joint_states':
+        if key == JOINT_STATES.name:
             t = message_time(m.header, raw.log_time)
             for name, pos in zip(m.name, m.position):
                 if name in joint_rows:
                     joint_rows[name].append((t, [float(pos)]))
             continue
         values = [f(m) for f in _FIELDS[_KIND[key]].values()]
-        if key == 'tracker/trajectory':
+        if key == TRACKER_TRAJECTORY.name:
             # a trajectory's stamp is its first point's time: when it was sent is the log time
             rows[key].append((to_sec(raw.log_time), values))
             tr = _trajectory(m, message_time(m.header, raw.log_time))
@@ -255,16 +256,16 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
     series = {k: _series(rows[k], _FIELDS[kind]) for k, kind in _KIND.items()}
     return Day(
         bag=str(reader.path), start=to_sec(reader.start_ns), end=to_sec(reader.end_ns),
-        axes={a: series[f'axes/{a}/status'] for a in JOINTS},
+        axes={a: series[AXIS_STATUS.of(a)] for a in JOINTS},
         joints={a: _series(joint_rows[a], ('measured',)) for a in JOINTS if joint_rows[a]},
-        phase=series['tracker/phase'], safety=series['safety/state'],
-        inlet=series['absorber/inlet_temperature'], outlet=series['absorber/outlet_temperature'],
-        beam=series['irradiance/beam'], fix=series['gps/fix'], trajectory=series['tracker/trajectory'],
+        phase=series[TRACKER_PHASE.name], safety=series[SAFETY_STATE.name],
+        inlet=series[ABSORBER_TEMPERATURE.of('inlet')], outlet=series[ABSORBER_TEMPERATURE.of('outlet')],
+        beam=series[IRRADIANCE_BEAM.name], fix=series[GPS_FIX.name], trajectory=series[TRACKER_TRAJECTORY.name],
         trajectories=trajectories, topics=counts, _reader=reader)
 
 
 def _read_diagnostics(reader: BagReader) -> Series:
-    topic = find_topic(reader.topics, 'diagnostics')
+    topic = find_topic(reader.topics, DIAGNOSTICS.name)
     rows = []
     for raw, msg in (reader.decoded([topic]) if topic else ()):
         for st in msg.status:

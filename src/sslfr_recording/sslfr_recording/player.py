@@ -14,7 +14,8 @@ import sys
 import threading
 import time
 
-from sslfr_common.node import message_class
+from sslfr_common.contract import CLOCK
+from sslfr_common.node import message_class, qos
 from sslfr_common.timeconv import stamp_from_ns
 
 from .bag.metadata import BagError
@@ -91,7 +92,7 @@ class Player:
             self.publishers[name] = node.create_publisher(
                 cls, out, _qos_for(info, QoSProfile, ReliabilityPolicy, DurabilityPolicy))
         self.clock_pub = node.create_publisher(
-            Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)) \
+            Clock, CLOCK.name, qos(CLOCK)) \
             if publish_clock else None
         self._last_clock_ns = None
         self._thread = threading.Thread(target=self._run, name='replay', daemon=True)

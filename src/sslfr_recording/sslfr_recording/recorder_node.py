@@ -21,8 +21,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
-from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, message_class, run_node
+from sslfr_common.contract import DIAGNOSTICS, collector_id
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, message_class, qos, run_node
 
 from .bag import recorder_config as rc
 from .bag.schema import DefinitionNotFoundError
@@ -51,7 +51,7 @@ class Recorder(LeanEvents, Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._restart_discovery()
         self._poll_timer = self.create_timer(0.25, self._poll, clock=steady)
-        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         self.get_logger().info(
             f'recording to {self.session.root} ({"one bag per UTC day" if cfg["per_day"] else "one bag"}, '

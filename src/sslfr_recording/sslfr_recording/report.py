@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, LinkState
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, TRACKER_TRAJECTORY, LinkState
 
 from .day import TOPICS, Day, read_day, reference
 from .report_energy import energy_estimate
@@ -28,7 +28,7 @@ MOVE_CAP = 300.0
 
 
 #: the topics the report reads (not the trajectories, not the diagnostics)
-REPORT_TOPICS = tuple(k for k in TOPICS if k != 'tracker/trajectory')
+REPORT_TOPICS = tuple(k for k in TOPICS if k != TRACKER_TRAJECTORY.name)
 
 @dataclass
 class ErrorStats:

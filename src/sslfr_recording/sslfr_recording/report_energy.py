@@ -42,10 +42,8 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
         if good.sum() >= 2:
             held[axis] = np.interp(t, ta[good], va['measured'][good])
     args = (t, beam, table.zenith, table.azimuth)
-    e_ideal = day_energy(*args, ideal['mirrors'], ideal['mobile_structure'], ideal['secondary_reflector'],
-                         params, c.azimuth) / 1000.0
-    e_held = day_energy(*args, held['mirrors'], held['mobile_structure'], held['secondary_reflector'],
-                        params, c.azimuth) / 1000.0
+    e_ideal = day_energy(*args, *(ideal[a] for a in JOINTS), params, c.azimuth) / 1000.0
+    e_held = day_energy(*args, *(held[a] for a in JOINTS), params, c.azimuth) / 1000.0
     missing = [a for a in JOINTS if a not in measured]
     note = 'seed 000 optical model on the 3-D ray trace (docs/optics.md), recorded beam irradiance'
     if missing:

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import JOINT_STATES, JOINTS
 
 from .report import MOVE_CAP, DayReport
 
@@ -130,7 +130,7 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
                 ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label='measured', lw=1, ls='--')
             else:
                 t, v = rep.series[f'joint_{a}']
-                ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label='joint_states', lw=1)
+                ax.plot(*_decimate(hours(t), np.degrees(v['measured'])), label=JOINT_STATES.name, lw=1)
             if f'ideal_{a}' in rep.series:
                 t, y = rep.series[f'ideal_{a}']
                 ax.plot(*_decimate(hours(t), np.degrees(y)), label='ideal', lw=0.8, alpha=0.7)

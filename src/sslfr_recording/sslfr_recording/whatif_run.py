@@ -19,6 +19,9 @@ import time
 from pathlib import Path
 
 from sslfr_bringup.host import acquire_domain, find_executable, install_prefix
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, GPS_TIME_REFERENCE, IRRADIANCE_BEAM,
+                                   IRRADIANCE_ILLUMINANCE, JOINT_STATES, JOINTS, LIMIT_SWITCHES, SAFETY_STATE,
+                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY)
 
 from .bag.metadata import BagError
 from .bag.playback import absolute
@@ -29,13 +32,12 @@ from .player import run_player
 #: Inputs played in what-if mode (relative names): the sensors (GPS, absorber
 #: temperatures, irradiance, limit switches) and the axes' measured state, which the
 #: safety supervisor watches (heartbeat watchdogs) and the planner does not produce.
-WHATIF_INPUTS = ['gps/fix', 'gps/time_reference', 'absorber/inlet_temperature',
-                 'absorber/outlet_temperature', 'irradiance/beam', 'irradiance/illuminance',
-                 'limit_switches', 'joint_states', 'axes/mirrors/status',
-                 'axes/mobile_structure/status', 'axes/secondary_reflector/status']
+WHATIF_INPUTS = [GPS_FIX.name, GPS_TIME_REFERENCE.name, *(ABSORBER_TEMPERATURE.of(s) for s in THERMOCOUPLES),
+                 IRRADIANCE_BEAM.name, IRRADIANCE_ILLUMINANCE.name, LIMIT_SWITCHES.name, JOINT_STATES.name,
+                 *(AXIS_STATUS.of(a) for a in JOINTS)]
 #: (package, executable, decisions it publishes) of the deciding nodes started fresh.
-DECIDERS = [('sslfr_planner', 'planner', ['tracker/phase', 'tracker/trajectory']),
-            ('sslfr_safety', 'safety', ['safety/state'])]
+DECIDERS = [('sslfr_planner', 'planner', [TRACKER_PHASE.name, TRACKER_TRAJECTORY.name]),
+            ('sslfr_safety', 'safety', [SAFETY_STATE.name])]
 #: Node name of the decisions' recorder.
 RECORDER_NODE = 'whatif_recorder'
 #: Decisions recorded and compared in what-if mode.

@@ -84,9 +84,7 @@ class SafetyConfig:
     min_valid_unix_time: float = 1_704_067_200.0  # [s] 2024-01-01T00:00Z
     watchdogs: dict = field(default_factory=lambda: {
         'planner': (5.0, 'STOW'),
-        'mirrors_driver': (2.0, 'STOW'),
-        'mobile_structure_driver': (2.0, 'STOW'),
-        'secondary_reflector_driver': (2.0, 'STOW'),
+        **{driver_node(joint): (2.0, 'STOW') for joint in JOINTS},
         'absorber_board': (2.0, 'STOW'),
         'irradiance': (5.0, 'WARN'),
         'gps': (5.0, 'WARN'),

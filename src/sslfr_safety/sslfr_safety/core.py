@@ -1,87 +1,22 @@
 """Safety supervisor: the pure core of the ``safety`` node (no rclpy).
 
-The supervisor keeps the SSLFR from damaging itself. Seed 000 section 3.5.3: the two
-type-K thermocouples (MAX6675) watch the absorber tube inlet and outlet; "the maximum
-temperature value is 150 degC. In the case this value is exceeded, the mirrors would
-move to the sleeping position" (beta_0 = +pi/2, seed 000 section 4, i.e. defocus).
-Around that rule the supervisor adds what any trusted tracker does: thermocouple
-plausibility, limit switches outside homing, heartbeat watchdogs on every link, axes
-whose driver is not driving them, an operator e-stop and "no site, no time -> sleep".
+Seed 000 section 3.5.3: above 150 degC at the absorber tube "the mirrors would move to
+the sleeping position" (beta_0 = +pi/2: defocus). Around that rule the supervisor adds
+what a trusted tracker does: thermocouple plausibility, limit switches outside homing,
+heartbeat watchdogs, axes whose driver is not driving them, an operator e-stop and "no
+site, no time -> sleep". The rules (condition, level, clearing, reason texts, operator
+hint) are the table :data:`sslfr_safety.rules.RULES`, described there.
 
-Shape (PX4's failsafe framework: rules as data, one generic evaluation)
------------------------------------------------------------------------
-- The rules are the table :data:`sslfr_safety.rules.RULES`: each names its
-  condition, level, how it clears, its reason texts and the operator's hint.
-- :class:`SafetyCore` keeps the facts. State changes ONLY in its event handlers: the
-  inputs (``on_*``), the operator calls (:meth:`~SafetyCore.estop`,
-  :meth:`~SafetyCore.reset`) and the passing of time (:meth:`~SafetyCore.on_time`:
-  time-detected faults, recoveries). Events raise faults of the rules that an input
-  trips (over-temperature, invalid thermocouple, switch trips).
-- :meth:`SafetyCore.verdict` is the ONE evaluation: read-only, over every rule.
-  :meth:`SafetyCore.evaluate` = ``on_time`` + ``verdict`` + the transition record.
+:class:`SafetyCore` keeps the facts and changes them only in its event handlers: the
+inputs (``on_*``), :meth:`~SafetyCore.estop`, :meth:`~SafetyCore.reset` and the passing
+of time (:meth:`~SafetyCore.on_time`). :meth:`SafetyCore.verdict` is the one read-only
+evaluation over every rule. A refused request returns ``(False, reason)`` and changes
+nothing.
 
-Time model
-----------
-Every timeout and hold time is measured on the **steady clock** (monotonic seconds,
-``clock.steady()``; the node uses ROS ``STEADY_TIME`` = CLOCK_MONOTONIC). Inputs carry
-their *arrival* time on that clock; message header stamps (ROS time, possibly sim
-time) are never used for ages. The wall clock (``clock.wall()``, Unix seconds UTC) is
-used only to judge whether the system time is plausible at all (``min_valid_unix_time``)
-and to label transitions for people. A wall-clock or ROS-time step of +/-1 h therefore
-neither fakes a timeout nor stalls a watchdog (unit-tested with :class:`FakeClock`).
-
-The rules (keys ``kind:name``; texts and clearing in rules.py)
----------------------------------------------------------------
-``overtemp:<sensor>``  STOW, latched. A valid sample > ``temperature_limit`` [degC]
-    trips at once (the node evaluates it in the subscription callback). Reset allowed
-    only when the sensor is fresh and has stayed below ``temperature_limit -
-    hysteresis`` for ``cool_hold`` [s]; ``auto_reset`` clears it by itself then.
-``thermocouple:<sensor>``  STOW: open circuit / NaN / out of the physical range
-    (immediate); *stuck*: no change > ``stuck_tolerance`` [K] for ``stuck_timeout``
-    [s] while the sun is on the receiver (phase TRACKING and beam irradiance, when
-    known, >= ``stuck_min_beam`` [W/m^2]); *silent*: no sample for > ``silent_timeout``
-    [s] (default 2 s) while TRACKING. Held until the sensor has recovered: fresh valid
-    samples for ``sensor_recover_hold`` [s] (and, for *stuck*, a change), whatever the
-    phase does meanwhile, so the stow it causes cannot clear it (no stow/track
-    oscillation). With ``sensor_fault_latched`` it needs :meth:`SafetyCore.reset` instead.
-``switch:<name>``  ESTOP for the switch's axis (SWITCH_AXIS), latched. A switch closing
-    while its axis is not homing and its nominal angle (``switch_positions``) is not
-    on the axis' path, i.e. not within the span of the angles measured over the last
-    ``switch_lookback`` [s] and the commanded angle (+/- ``switch_window`` [rad], from
-    a fresh axis status), plus the axis' stow position (STOW_POSITION) when a verdict
-    of this core required it to stow (not stopped) within the look-back, is a trip. The look-back
-    absorbs the different delays of the switch and status messages of a moving axis
-    (a fast axis may reach its stow switch before its next 5 Hz status says it was
-    commanded there). The seed's switches are position
-    references the mechanism reaches or passes in normal operation (mirrors on the
-    sleeping switch every night, passing the ``last`` switch on the way), hence the
-    path test. With the position unknown (no fresh status, or NaN: no board, the axis
-    cannot move) the closure is judged as soon as a position is known. Reset
-    acknowledges a trip even while the switch is still closed (so the axis can be
-    jogged off it); it re-arms when the switch opens.
-``stuck_switch:<name>``  ESTOP for the axis, latched: detected at homing, when the
-    switch stays closed while the axis travels more than ``stuck_switch_travel``
-    [rad], or when two switches of one axis read closed together during homing.
-    Reset refused while the switch still reads closed.
-``watchdog:<node>``  WARN or STOW per the ``watchdogs`` table (node -> (timeout [s],
-    action)), from the arrival times of the node's topics; self-clearing when the node
-    speaks again. A node never heard is judged from start-up + ``startup_grace``.
-``axis:<axis>``  STOW (the other axes defocus): the axis' driver reported a lifecycle
-    state of IDLE_DRIVER_STATES (unconfigured, inactive, finalized) or a board link
-    that is not up. Self-clearing once the driver reports active, link up and the axis
-    referenced (``homed``). After a silence > ``status_max_age`` the first report must
-    show that again (a restarted driver still homing is not ready). An axis whose
-    driver is watched and has never reported is not ready either (no OK at start-up
-    before the drivers say they drive their axes).
-``estop``  ESTOP of every axis, latched until :meth:`SafetyCore.estop` ``(False)``;
-    the release leaves ``post_estop`` (STOW) until :meth:`SafetyCore.reset`, so a
-    released e-stop never resumes tracking by itself.
-``site`` / ``time``  STOW, self-clearing: no GPS fix since boot and no persisted (or
-    configured) site reported by the planner; no GPS fix and an implausible (or, with
-    ``trust_system_clock`` false, any) system clock. The tracker stays asleep.
-
-Refused requests (reset while hot, release without e-stop, nothing to reset) return
-``(False, reason)`` and leave the state unchanged.
+Every timeout and hold time is measured on the steady clock (``clock.steady()``) from
+the inputs' arrival times, never from header stamps; the wall clock only judges whether
+the system time is plausible (``min_valid_unix_time``) and labels transitions. A
+wall-clock or ROS-time step therefore neither fakes a timeout nor stalls a watchdog.
 """
 from __future__ import annotations
 

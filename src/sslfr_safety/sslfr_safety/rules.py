@@ -276,12 +276,18 @@ def _acknowledge_switch(core, name: str) -> None:
 
 # ------------------------------------------------------------------ the table
 RULES: tuple[Rule, ...] = (
+    # A valid sample above ``temperature_limit`` [degC] trips at once (raised by
+    # SafetyCore.on_temperature, which the node calls in the subscription callback).
+    # Reset once the sensor is fresh and below limit - ``hysteresis`` for ``cool_hold``.
     Rule('overtemp', Level.STOW, Clear.RESET,
          {'hot': '{sensor} over-temperature: {value:.1f} degC > {limit:.1f} degC (latched until reset)'},
          'Wait until the absorber has cooled below the limit minus the hysteresis for the hold time '
          '(stowed mirrors defocus it), then press Safety reset.',
          names=lambda core: THERMOCOUPLES, blocker=_overtemp_blocker,
          option=('auto_reset', Clear.RESET_OR_RECOVERY)),
+    # Open circuit / NaN / out of the physical range: raised by on_temperature at once;
+    # stuck and silent: the condition. Held until the sensor has recovered, whatever the
+    # phase does meanwhile: the stow it causes cannot clear it (no stow/track oscillation).
     Rule('thermocouple', Level.STOW, Clear.RECOVERY,
          {'invalid': '{sensor} thermocouple invalid ({what}): temperature not watched',
           'silent': '{sensor} thermocouple silent > {timeout:.1f} s while tracking: temperature not watched',
@@ -292,12 +298,22 @@ RULES: tuple[Rule, ...] = (
          names=lambda core: THERMOCOUPLES, condition=_thermocouple_detect, blocker=_sensor_blocker,
          option=('sensor_fault_latched', Clear.RESET),
          held_note='clears by itself once the sensor has recovered'),
+    # A switch closing while its axis is not homing and its nominal angle
+    # (``switch_positions``) is off the axis' path: outside the span of the angles
+    # measured over the last ``switch_lookback`` [s] and the commanded angle, +/-
+    # ``switch_window`` [rad], plus the axis' stow position when a verdict of the core
+    # stowed it within the look-back (a fast axis reaches its stow switch before its next
+    # 5 Hz status). The seed's switches are references the mechanism reaches or passes in
+    # normal operation, hence the path test. Raised by SafetyCore._judge_closure; with
+    # the position unknown (no board) judged once a position is known.
     Rule('switch', Level.ESTOP, Clear.RESET,
          {'trip': 'limit switch {switch} tripped outside homing ({axis} at {measured:.3f} rad, '
                   'commanded {commanded:.3f} rad, switch at {nominal:.3f} rad): {axis} stopped'},
          'Check the axis and the switch on site; once the switch reads open press Safety reset, '
          'then home the axis.',
          stops=lambda name: (SWITCH_AXIS[name],), stow_others=True, on_reset=_acknowledge_switch),
+    # At homing: the switch stays closed while the axis travels more than
+    # ``stuck_switch_travel`` [rad], or two switches of one axis read closed together.
     Rule('stuck_switch', Level.ESTOP, Clear.RESET,
          {'travel': 'limit switch {switch} stuck closed (closed over {travel:.3f} rad of {axis} homing '
                     'travel): {axis} stopped',
@@ -306,6 +322,8 @@ RULES: tuple[Rule, ...] = (
          'Free or repair the stuck limit switch (it must read open), then press Safety reset and '
          'home the axis.',
          blocker=_stuck_switch_blocker, stops=lambda name: (SWITCH_AXIS[name],), stow_others=True),
+    # ``safety/estop`` true; its release leaves ``post_estop`` until a reset, so a released
+    # e-stop never resumes tracking by itself.
     Rule('estop', Level.ESTOP, Clear.RELEASE,
          {'engaged': 'operator e-stop (safety/estop): every axis stopped'},
          'Release the e-stop, then press Safety reset once the cause is gone.',
@@ -313,6 +331,8 @@ RULES: tuple[Rule, ...] = (
     Rule('post_estop', Level.STOW, Clear.RESET,
          {'released': 'e-stop released: stowing until safety/reset'},
          'Press Safety reset: the tracker stays stowed until then.'),
+    # Per the ``watchdogs`` table (node -> (timeout [s], action)), from the arrival times
+    # of the node's topics; a node never heard is judged from start-up + ``startup_grace``.
     Rule('watchdog', lambda core, node: Level[core.config.watchdogs[node][1]], Clear.SELF,
          {'waiting': '{node} not heard yet (start-up)',
           'silent': '{node} silent > {timeout:.1f} s (heartbeat watchdog)',
@@ -320,16 +340,22 @@ RULES: tuple[Rule, ...] = (
          'That node is not publishing: check that it runs (./sslfr up restarts it) and its board '
          'link; clears by itself when it is heard again.',
          names=lambda core: core.config.watchdogs, condition=_watchdog),
+    # No GPS fix since boot and no persisted (or configured) site reported by the planner.
     Rule('site', Level.STOW, Clear.SELF,
          {'none': 'no site: no GPS fix since boot and no persisted site from the planner: '
                   'staying in the sleeping position'},
          'Wait for a GPS fix, or set site.latitude_deg / site.longitude_deg in the site config.',
          condition=_no_site),
+    # No GPS fix and an implausible (or, with ``trust_system_clock`` false, any) system clock.
     Rule('time', Level.STOW, Clear.SELF,
          {'none': 'no time: no GPS fix since boot and no trusted system clock: staying in the '
                   'sleeping position'},
          'Wait for a GPS fix (a trusted time); check the GPS antenna.',
          condition=_no_time),
+    # The condition (_axis_not_ready); after a silence > ``status_max_age`` the first
+    # report must show the axis ready again (a restarted driver still homing is not).
+    # An active driver re-homing with its link up is no fault; its silence is the
+    # watchdog rule's.
     Rule('axis', Level.STOW, Clear.SELF,
          {'unreported': '{axis} axis not ready: no status from its driver yet',
           'idle': '{axis} axis not ready: its driver is {state}, not active',

@@ -30,7 +30,6 @@ import math
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix, NavSatStatus, Temperature
 from std_srvs.srv import SetBool, Trigger
@@ -38,12 +37,13 @@ from trajectory_msgs.msg import JointTrajectory
 
 from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetyState, TrackerPhase
 
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, JOINTS, SWITCHES, THERMOCOUPLES, Level, collector_id
-from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, run_node, stamp, steady_now, to_sec
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
+                                   LIMIT_SWITCHES, SAFETY_ESTOP, SAFETY_RESET, SAFETY_STATE, SWITCHES,
+                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY, Level, Qos, collector_id)
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, stamp, steady_now, to_sec
 from sslfr_safety.core import SafetyCore
 from sslfr_safety.params import TABLE, config_from
 
-_BEST_EFFORT = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 _DIAG_LEVEL = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
                Level.STOW: DiagnosticStatus.ERROR, Level.ESTOP: DiagnosticStatus.ERROR}
 
@@ -90,21 +90,21 @@ class SafetyNode(LeanEvents, Node):
         self._since_msg = None
         self._guard = _Guard(self, values)
 
-        self._pub = self.create_publisher(SafetyState, 'safety/state', 10)
-        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._pub = self.create_publisher(SafetyState, SAFETY_STATE.name, qos(SAFETY_STATE))
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         for sensor in THERMOCOUPLES:
-            self._subscribe(Temperature, f'absorber/{sensor}_temperature',
+            self._subscribe(Temperature, ABSORBER_TEMPERATURE.of(sensor),
                             lambda m, s=sensor: self._on_temperature(s, m),
                             lambda s=sensor: self._on_temperature(s, None))
-        self._subscribe(LimitSwitches, 'limit_switches', self._on_switches)
-        self._subscribe(TrackerPhase, 'tracker/phase', self._on_phase)
-        self._subscribe(JointTrajectory, 'tracker/trajectory', self._on_trajectory)
+        self._subscribe(LimitSwitches, LIMIT_SWITCHES.name, self._on_switches)
+        self._subscribe(TrackerPhase, TRACKER_PHASE.name, self._on_phase)
+        self._subscribe(JointTrajectory, TRACKER_TRAJECTORY.name, self._on_trajectory)
         for axis in JOINTS:
-            self._subscribe(AxisStatus, f'axes/{axis}/status', lambda m, a=axis: self._on_axis(a, m))
-        self._subscribe(NavSatFix, 'gps/fix', self._on_fix)
-        self._subscribe(Irradiance, 'irradiance/beam', self._on_beam)
-        self.create_service(SetBool, 'safety/estop', self._srv_estop)
-        self.create_service(Trigger, 'safety/reset', self._srv_reset)
+            self._subscribe(AxisStatus, AXIS_STATUS.of(axis), lambda m, a=axis: self._on_axis(a, m))
+        self._subscribe(NavSatFix, GPS_FIX.name, self._on_fix)
+        self._subscribe(Irradiance, IRRADIANCE_BEAM.name, self._on_beam)
+        self.create_service(SetBool, SAFETY_ESTOP.name, self._srv_estop)
+        self.create_service(Trigger, SAFETY_RESET.name, self._srv_reset)
 
         self._steady_ros = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = self.create_timer(1.0 / values['publish_rate'], self._tick, clock=self._steady_ros)
@@ -144,7 +144,7 @@ class SafetyNode(LeanEvents, Node):
                     on_bad()
                 return
             handler(msg)
-        self.create_subscription(msg_type, topic, receive, _BEST_EFFORT, raw=True)
+        self.create_subscription(msg_type, topic, receive, qos(Qos.BE), raw=True)
 
     def _on_temperature(self, sensor: str, msg: Temperature | None) -> None:
         value = math.nan if msg is None else msg.temperature
@@ -182,9 +182,9 @@ class SafetyNode(LeanEvents, Node):
         response.success, response.message = self.core.estop(bool(request.data))
         # (one call site per severity: rclpy refuses a severity change at a call site)
         if response.success:
-            self.get_logger().warning(f'safety/estop {request.data}: {response.message}')
+            self.get_logger().warning(f'{SAFETY_ESTOP.name} {request.data}: {response.message}')
         else:
-            self.get_logger().error(f'safety/estop {request.data}: {response.message}')
+            self.get_logger().error(f'{SAFETY_ESTOP.name} {request.data}: {response.message}')
         self._evaluate(publish_on_change=True)
         return response
 
@@ -192,9 +192,9 @@ class SafetyNode(LeanEvents, Node):
         self.core.evaluate()
         response.success, response.message = self.core.reset()
         if response.success:
-            self.get_logger().info(f'safety/reset: {response.message}')
+            self.get_logger().info(f'{SAFETY_RESET.name}: {response.message}')
         else:
-            self.get_logger().error(f'safety/reset: {response.message}')
+            self.get_logger().error(f'{SAFETY_RESET.name}: {response.message}')
         self._evaluate(publish_on_change=True)
         return response
 

@@ -32,7 +32,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from sslfr_common.contract import JOINT_RANGE, STOW_POSITION
+from sslfr_common.contract import JOINT_RANGE, MIRRORS, STOW_POSITION
 from sslfr_drivers.link import messages as m
 from sslfr_sim.base import Refuse, SimBoard
 
@@ -46,10 +46,10 @@ WATCHDOG_STOP_S = 0.15
 class AxisConfig:
     """Physical parameters of one simulated axis (SI units, radians)."""
 
-    axis: str = 'mirrors'
-    lo: float = JOINT_RANGE['mirrors'][0]     # [rad] LOW switch
-    hi: float = JOINT_RANGE['mirrors'][1]     # [rad] HIGH switch
-    sleep: float = STOW_POSITION['mirrors']   # [rad] SLEEP switch centre
+    axis: str = MIRRORS
+    lo: float = JOINT_RANGE[MIRRORS][0]       # [rad] LOW switch
+    hi: float = JOINT_RANGE[MIRRORS][1]       # [rad] HIGH switch
+    sleep: float = STOW_POSITION[MIRRORS]     # [rad] SLEEP switch centre
     step_rad: float = m.DEFAULT_STEP_RAD    # [rad/step]
     max_speed: float = 3000.0           # [steps/s]
     accel: float = 6000.0               # [steps/s^2]
@@ -100,7 +100,7 @@ class AxisSim(SimBoard):
             kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
         if opts.get('no_sensor') in ('1', 'true', True):
             kw['has_sensor'] = False
-        cfg = AxisConfig.for_axis(opts.get('axis', 'mirrors'), **kw)
+        cfg = AxisConfig.for_axis(opts.get('axis', MIRRORS), **kw)
         return cls(cfg, board_id=board_id, rng=rng)
 
     # ------------------------------------------------------------------ state

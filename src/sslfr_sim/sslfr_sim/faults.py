@@ -43,7 +43,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from sslfr_common.contract import JOINTS
+from sslfr_common.contract import JOINTS, MIRRORS
 
 KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
@@ -128,7 +128,7 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         on_node = kind in ('kill', 'hang')
         what = 'NODE' if on_node else 'BOARD'
         raise FaultSpecError(f'fault {spec!r}: {kind} needs :{what} (e.g. {kind}:'
-                             f'{"planner" if on_node else "mirrors"}@10:00'
+                             f'{"planner" if on_node else MIRRORS}@10:00'
                              f'{"+60" if dur_rule == "required" else ""})')
     elif not needs_target and target:
         raise FaultSpecError(f'fault {spec!r}: {kind} takes no target')

@@ -28,6 +28,7 @@ import socket
 import sys
 import time
 
+from sslfr_common.contract import MIRRORS
 from sslfr_drivers.link import messages as m
 from sslfr_sim import board_class
 from sslfr_sim.axis import AxisConfig
@@ -47,7 +48,7 @@ def config_record(kind: str, options: dict, board_id: int) -> m.ConfigRecord:
     rec = m.ConfigRecord.defaults(int(_KINDS[kind]))
     kw = {'board_id': board_id}
     if kind == 'axis':
-        axis = options.get('axis', 'mirrors')
+        axis = options.get('axis', MIRRORS)
         kw['axis'] = m.ConfigRecord.AXES.index(axis)
         for key in ('max_speed', 'accel'):
             if key in options:
@@ -87,7 +88,7 @@ class FirmwareBoard:
         record = config_record(kind, options, board_id)
         mech = sensor = None
         if kind == 'axis':
-            axis = options.get('axis', 'mirrors')
+            axis = options.get('axis', MIRRORS)
             init = options.get('initial_angle_deg')
             self.cfg = AxisConfig.for_axis(axis)
             mech = axis_mech(axis, math.radians(float(init)) if init not in (None, '') else None)

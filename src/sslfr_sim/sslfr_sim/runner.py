@@ -42,6 +42,7 @@ import socket
 import sys
 import time
 
+from sslfr_common.contract import JOINTS, MIRRORS
 from sslfr_drivers.link.endpoint import (PtyEndpoint, close_control, listen_control,
                                          serve_until_signalled)
 from sslfr_sim.base import FaultInjector, SimBoard
@@ -299,8 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
                'corrupt_frames P, disconnect S, unplug S, stall on|off, reset, '
                'set_angle DEG, quit; suffix @ADDR selects one XBee board.')
     p.add_argument('--kind', default='axis', help='board kind (plain mode): axis, ...')
-    p.add_argument('--axis', default='mirrors',
-                   help='axis name for kind axis: mirrors|mobile_structure|secondary_reflector')
+    p.add_argument('--axis', default=MIRRORS, help=f'axis name for kind axis: {"|".join(JOINTS)}')
     p.add_argument('--opt', action='append', default=[], metavar='KEY=VALUE',
                    help='board model option (axis: max_speed, accel [steps/s, steps/s^2], '
                         'sensor_noise_deg, initial_angle_deg, no_sensor=1)')

@@ -55,7 +55,8 @@ import os
 import random
 import time
 
-from sslfr_common.contract import JOINT_RANGE, STOW_POSITION, SWITCH_AXIS, SWITCH_POSITION, SWITCHES
+from sslfr_common.contract import (JOINT_RANGE, MIRRORS, MOBILE_STRUCTURE, STOW_POSITION, SWITCH_AXIS, SWITCH_POSITION,
+                                   SWITCHES)
 from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
@@ -342,8 +343,8 @@ class AbsorberSim(_SensorSim):
     def _ideal(self, utc: float) -> dict[str, float]:
         sun = self.sky.sun(utc)
         if not sun.above_horizon:
-            return {'mirrors': STOW_POSITION['mirrors']}
-        return {'mirrors': max(SWITCH_POSITION['initial'], min(SWITCH_POSITION['last'], sun.transversal / 2))}
+            return {MIRRORS: STOW_POSITION[MIRRORS]}
+        return {MIRRORS: max(SWITCH_POSITION['initial'], min(SWITCH_POSITION['last'], sun.transversal / 2))}
 
     def update(self, dt):
         utc = self.utc()
@@ -357,8 +358,8 @@ class AbsorberSim(_SensorSim):
             dni = self.sky.dni(utc) if sun.above_horizon else 0.0
             # the mirrors turn about the tilted rows: theta_t in their frame (planner's command)
             tt = float(raytrace.transversal_angle(raytrace.sun_vector(sun.zenith, sun.azimuth),
-                                                  angles.get('mobile_structure', 0.0)))
-            power = self.thermal.focused_power(dni, tt, angles.get('mirrors'))
+                                                  angles.get(MOBILE_STRUCTURE, 0.0)))
+            power = self.thermal.focused_power(dni, tt, angles.get(MIRRORS))
             self.thermal.step(sim_dt, power)
         if self.now >= self._next_thermo:
             self._next_thermo = max(self._next_thermo + self.thermo_period, self.now)

@@ -50,6 +50,7 @@ from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
+from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float, ros_namespace
 
 
@@ -154,8 +155,8 @@ def _watch_topics(ns) -> dict:
     """Sensor topics whose first message tells the simulation that a node is fed."""
     from sensor_msgs.msg import NavSatFix, Temperature
     from sslfr_interfaces.msg import Irradiance
-    by_node = {'gps': ('gps/fix', NavSatFix), 'absorber_board': ('absorber/outlet_temperature', Temperature),
-               'irradiance': ('irradiance/beam', Irradiance)}
+    by_node = {'gps': (GPS_FIX.name, NavSatFix), 'absorber_board': (ABSORBER_TEMPERATURE.of('outlet'), Temperature),
+               'irradiance': (IRRADIANCE_BEAM.name, Irradiance)}
     return dict(by_node[n.name] for n in ns.nodes if n.name in by_node)
 
 

@@ -37,16 +37,17 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Awaitable, Callable, Mapping
 
-from sslfr_common.contract import JOINTS, MODES
+from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, JOINTS, MODES, PLANNER_REPLAN, PLANNER_SET_MODE,
+                                   SAFETY_ESTOP, SAFETY_RESET)
 
 #: service key -> (relative service name, service type). ``{axis}`` is filled per axis.
 SERVICES: dict[str, tuple[str, str]] = {
-    'set_mode': ('planner/set_mode', 'sslfr_interfaces/srv/SetMode'),
-    'replan': ('planner/replan', 'std_srvs/srv/Trigger'),
-    'estop': ('safety/estop', 'std_srvs/srv/SetBool'),
-    'reset': ('safety/reset', 'std_srvs/srv/Trigger'),
-    'jog': ('axes/{axis}/jog', 'sslfr_interfaces/srv/Jog'),
-    'home': ('axes/{axis}/home', 'std_srvs/srv/Trigger'),
+    'set_mode': (PLANNER_SET_MODE.name, PLANNER_SET_MODE.type),
+    'replan': (PLANNER_REPLAN.name, PLANNER_REPLAN.type),
+    'estop': (SAFETY_ESTOP.name, SAFETY_ESTOP.type),
+    'reset': (SAFETY_RESET.name, SAFETY_RESET.type),
+    'jog': (AXIS_JOG.name, AXIS_JOG.type),
+    'home': (AXIS_HOME.name, AXIS_HOME.type),
 }
 MAX_JOG_SPEED = 2.0     # [rad/s] a speed above this is refused (the driver caps it anyway)
 RESEND_S = 1.0          # [s, wall] a ``resend`` command's request is sent again this often until answered

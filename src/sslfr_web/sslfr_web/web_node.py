@@ -17,11 +17,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, JOINTS, collector_id
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, run_node, steady_now, to_sec
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
+                                   SAFETY_ESTOP, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE, TRACKER_SUN, collector_id)
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
 
 from . import commands, remote
 from .app import OperatorApp, Server
@@ -46,31 +46,30 @@ class WebNode(LeanEvents, Node):
         self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         st = self.state
         sub = self.create_subscription        # no QoS-event handlers: LeanEvents
-        sub(TrackerPhase, 'tracker/phase', st.on_phase, latched)
-        sub(SafetyState, 'safety/state', st.on_safety, 10)
-        sub(SunPosition, 'tracker/sun', st.on_sun, 10)
-        sub(Irradiance, 'irradiance/beam', st.on_beam, 10)
-        sub(NavSatFix, 'gps/fix', st.on_fix, 10)
-        for name in ('inlet', 'outlet'):
-            sub(Temperature, f'absorber/{name}_temperature', lambda m, n=name: st.on_temperature(n, m), 10)
+        sub(TrackerPhase, TRACKER_PHASE.name, st.on_phase, qos(TRACKER_PHASE))
+        sub(SafetyState, SAFETY_STATE.name, st.on_safety, qos(SAFETY_STATE))
+        sub(SunPosition, TRACKER_SUN.name, st.on_sun, qos(TRACKER_SUN))
+        sub(Irradiance, IRRADIANCE_BEAM.name, st.on_beam, qos(IRRADIANCE_BEAM))
+        sub(NavSatFix, GPS_FIX.name, st.on_fix, qos(GPS_FIX))
+        for name in THERMOCOUPLES:
+            sub(Temperature, ABSORBER_TEMPERATURE.of(name), lambda m, n=name: st.on_temperature(n, m),
+                qos(ABSORBER_TEMPERATURE))
         for axis in JOINTS:
-            sub(AxisStatus, f'axes/{axis}/status', st.on_axis, 10)
+            sub(AxisStatus, AXIS_STATUS.of(axis), st.on_axis, qos(AXIS_STATUS))
         # Service clients are made when first needed: every entity costs the executor
         # time at each wake-up (~45 messages/s), so idle clients are not kept around.
         # (the e-stop's client is made at once: no discovery wait when it is pressed)
         self._service_types = commands.all_service_names(JOINTS)
-        self.clients_ = {'safety/estop': self.create_client(_srv_class(self._service_types['safety/estop'][1]),
-                                                            'safety/estop')}
+        self.clients_ = {SAFETY_ESTOP.name: self.create_client(_srv_class(SAFETY_ESTOP.type), SAFETY_ESTOP.name)}
         self._param_clients: dict = {}
         self._remote_asked: dict = {}
         self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
-        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self.op = OperatorApp(self.cfg, self)
         self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))
         self.url = self.server.start()                 # OSError (address in use ...) -> main

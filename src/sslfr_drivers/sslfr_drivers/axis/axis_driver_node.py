@@ -20,10 +20,10 @@ import threading
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
-from sslfr_common.node import ParameterGuard, declare_parameters, run_node, steady_now, to_sec
+from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, AXIS_STATUS, DIAGNOSTICS, JOINT_STATES, SAFETY_STATE,
+                                   TRACKER_PHASE, TRACKER_TRAJECTORY, collector_id)
+from sslfr_common.node import ParameterGuard, declare_parameters, qos, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
@@ -74,16 +74,15 @@ class AxisDriver(ManagedNode):
         self._opening: BackgroundOpen | None = None
         self.rate = TimeRate()
 
-        tl1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_status = self.create_publisher(AxisStatus, f'axes/{self.axis}/status', 10)
-        self.pub_joint = self.create_publisher(JointState, 'joint_states', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        self.create_subscription(JointTrajectory, 'tracker/trajectory', self._on_trajectory, tl1)
-        self.create_subscription(SafetyState, 'safety/state', self._on_safety, 10)
-        self.create_subscription(TrackerPhase, 'tracker/phase', self._on_phase, tl1)
-        self.create_service(Trigger, f'axes/{self.axis}/home', self._on_home)
-        self.create_service(Jog, f'axes/{self.axis}/jog', self._on_jog)
+        self.pub_status = self.create_publisher(AxisStatus, AXIS_STATUS.of(self.axis), qos(AXIS_STATUS))
+        self.pub_joint = self.create_publisher(JointState, JOINT_STATES.name, qos(JOINT_STATES))
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
+        self.create_subscription(JointTrajectory, TRACKER_TRAJECTORY.name, self._on_trajectory,
+                                 qos(TRACKER_TRAJECTORY))
+        self.create_subscription(SafetyState, SAFETY_STATE.name, self._on_safety, qos(SAFETY_STATE))
+        self.create_subscription(TrackerPhase, TRACKER_PHASE.name, self._on_phase, qos(TRACKER_PHASE))
+        self.create_service(Trigger, AXIS_HOME.of(self.axis), self._on_home)
+        self.create_service(Jog, AXIS_JOG.of(self.axis), self._on_jog)
         self._status_timer = self.create_timer(self._publish_period(p), self._publish, clock=self.steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
         if p['autostart']:

@@ -31,8 +31,8 @@ from sensor_msgs.msg import Temperature
 
 from sslfr_interfaces.msg import LimitSwitches
 
-from sslfr_common.contract import SWITCHES, THERMOCOUPLES
-from sslfr_common.node import run_node, stamp, to_sec
+from sslfr_common.contract import ABSORBER_TEMPERATURE, LIMIT_SWITCHES, SWITCHES, THERMOCOUPLES
+from sslfr_common.node import qos, run_node, stamp, to_sec
 from sslfr_drivers.link.sensor_messages import SwitchSample, ThermocoupleSample
 from sslfr_drivers.sensors import max6675
 from sslfr_drivers.sensors.debounce import SwitchTracker
@@ -60,9 +60,9 @@ class AbsorberBoardNode(SensorBoardNode):
         self._faults = {w: max6675.FAULT_NONE for w in THERMOCOUPLES}
         self._fault_counts = {w: 0 for w in THERMOCOUPLES}
         self._last_temp = {w: math.nan for w in THERMOCOUPLES}
-        self._pub_t = {s: self.create_publisher(Temperature, f'absorber/{s}_temperature', 10)
+        self._pub_t = {s: self.create_publisher(Temperature, ABSORBER_TEMPERATURE.of(s), qos(ABSORBER_TEMPERATURE))
                        for s in THERMOCOUPLES}
-        self._pub_sw = self.create_publisher(LimitSwitches, 'limit_switches', 10)
+        self._pub_sw = self.create_publisher(LimitSwitches, LIMIT_SWITCHES.name, qos(LIMIT_SWITCHES))
         self._start_board()
         self._sw_timer = self.create_timer(1.0 / self._values['switch_rate'], self._publish_switches,
                                            clock=self._steady)

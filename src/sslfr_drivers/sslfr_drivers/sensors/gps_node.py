@@ -21,7 +21,8 @@ import sys
 
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
-from sslfr_common.node import run_node, stamp, to_sec
+from sslfr_common.contract import GPS_FIX, GPS_TIME_REFERENCE
+from sslfr_common.node import qos, run_node, stamp, to_sec
 from sslfr_drivers.link.sensor_messages import NmeaChunk
 from sslfr_drivers.sensors import nmea
 from sslfr_drivers.sensors.health import fix_report
@@ -45,8 +46,8 @@ class GpsNode(SensorBoardNode):
         self._last_jump = 0.0
         self._last_fix_status = None
         self._last_fix: nmea.FixRecord | None = None
-        self._fix_pub = self.create_publisher(NavSatFix, 'gps/fix', 10)
-        self._time_pub = self.create_publisher(TimeReference, 'gps/time_reference', 10)
+        self._fix_pub = self.create_publisher(NavSatFix, GPS_FIX.name, qos(GPS_FIX))
+        self._time_pub = self.create_publisher(TimeReference, GPS_TIME_REFERENCE.name, qos(GPS_TIME_REFERENCE))
         self._start_board()
         self.get_logger().info(
             f'gps: port {self._values["port"] or "(none)"} framing {self._values["framing"]}')

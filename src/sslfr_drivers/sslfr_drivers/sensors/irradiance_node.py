@@ -19,7 +19,8 @@ from sensor_msgs.msg import Illuminance
 
 from sslfr_interfaces.msg import Irradiance
 
-from sslfr_common.node import run_node
+from sslfr_common.contract import IRRADIANCE_BEAM, IRRADIANCE_ILLUMINANCE
+from sslfr_common.node import qos, run_node
 from sslfr_drivers.link.sensor_messages import AlsSample
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.sensors.sensor_node import SensorBoardNode
@@ -35,8 +36,8 @@ class IrradianceNode(SensorBoardNode):
         self._saturated_count = 0
         self._invalid = 0
         self._last: veml7700.Sample | None = None
-        self._pub_lux = self.create_publisher(Illuminance, 'irradiance/illuminance', 10)
-        self._pub_beam = self.create_publisher(Irradiance, 'irradiance/beam', 10)
+        self._pub_lux = self.create_publisher(Illuminance, IRRADIANCE_ILLUMINANCE.name, qos(IRRADIANCE_ILLUMINANCE))
+        self._pub_beam = self.create_publisher(Irradiance, IRRADIANCE_BEAM.name, qos(IRRADIANCE_BEAM))
         self._start_board()
         self.get_logger().info(f'irradiance: port {self._values["port"] or "(none)"}, '
                                f'efficacy {self._values["luminous_efficacy"]:.1f} lm/W')

@@ -20,8 +20,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from sslfr_common.contract import DIAGNOSTICS_TOPIC, collector_id
-from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters
+from sslfr_common.contract import DIAGNOSTICS, collector_id
+from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos
 from sslfr_common.params import ParamTable
 from sslfr_drivers.sensors.health import RateMeter, Report, board_report
 from sslfr_drivers.sensors.sensor_params import SOURCE_KEYS
@@ -59,7 +59,7 @@ class SensorBoardNode(LeanEvents, Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._meter = RateMeter()
         self._diag_name = f'{name}: board'
-        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self._source: BoardSource | None = None
         self._guard: ParameterGuard | None = None
 

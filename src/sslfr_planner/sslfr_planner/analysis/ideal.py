@@ -15,10 +15,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from sslfr_common.contract import MIRRORS, MOBILE_STRUCTURE
 
 from .. import laws, raytrace
 from ..description import Description
-from ..prototype import MIRRORS, commanded_lines, exact_lines, field_geometry
+from ..prototype import commanded_lines, exact_lines, field_geometry
 from .optics import OpticalParameters, incidence_factor, optical_yield, power
 
 
@@ -44,7 +45,7 @@ def longitudinal(desc: Description, sun):
         return np.zeros(shape), np.zeros(shape)
     if law == 'continuous':
         bm, ba = laws.continuous(sun, field_geometry(desc))
-        lo, hi = desc.movements['mobile_structure'].range
+        lo, hi = desc.movements[MOBILE_STRUCTURE].range
         return np.clip(bm, lo, hi), np.clip(ba, lo, hi)
     raise ValueError(f'longitudinal law {law!r} needs the site and date: use the planner table')
 

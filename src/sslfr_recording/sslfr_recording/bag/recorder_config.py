@@ -14,6 +14,7 @@ import functools
 import os
 from typing import Any, Iterable
 
+from sslfr_common.contract import CLOCK
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 from sslfr_common.timeconv import to_sec
 
@@ -48,7 +49,7 @@ TABLE = ParamTable((
     ParamSpec('prefix', 'sslfr', 'bag directory name prefix: <prefix>_YYYY-MM-DD'),
     ParamSpec('topics', [''], 'topics to record (relative names are resolved in the node '
                               'namespace); empty = every topic with a publisher'),
-    ParamSpec('exclude', ['/clock'], 'topics never recorded (besides /rosout, /parameter_events)'),
+    ParamSpec('exclude', [CLOCK.name], 'topics never recorded (besides /rosout, /parameter_events)'),
     ParamSpec('discovery_period', 1.0, 'period of topic discovery [s]', 's', 0.1, 60.0),
     ParamSpec('per_day', True, 'one bag per UTC day of ROS time (else one bag per run)'),
     ParamSpec('max_file_size', 0, 'split the bag into a new .mcap at this size [bytes]; 0 = off',

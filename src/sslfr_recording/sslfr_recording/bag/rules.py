@@ -173,7 +173,7 @@ RULES: dict[str, Rule] = {r.id: r for r in _RULES}
 
 
 def describe() -> str:
-    """The rule list as text (``sslfr bag check --rules``; README and docs/bags.md)."""
+    """The rule list as text (``sslfr bag check --rules``; docs/bags.md)."""
     lines = []
     for r in _RULES:
         lines.append(f'{r.id} [{r.severity}] {r.text}  ({r.citation()})')

@@ -22,12 +22,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY
 
 from ..day import Trajectory, read_day
 
 #: the topics that hold a run's decisions
-DECISION_TOPICS = ('tracker/phase', 'safety/state', 'tracker/trajectory')
+DECISION_TOPICS = (TRACKER_PHASE.name, SAFETY_STATE.name, TRACKER_TRAJECTORY.name)
 
 
 @dataclass
@@ -235,10 +235,10 @@ def compare(recorded: Decisions, new: Decisions, grid_s: float = 1.0,
     else:
         start, end = max(starts), min(ends)
     grid = np.arange(start, end + 1e-9, grid_s) if end > start else np.array([start])
-    phase = compare_steps('tracker/phase', recorded.phase_t, recorded.phase, new.phase_t,
+    phase = compare_steps(TRACKER_PHASE.name, recorded.phase_t, recorded.phase, new.phase_t,
                           new.phase, grid, tolerance_s, recorded.phase_reason, new.phase_reason) \
         if len(recorded.phase) and len(new.phase) else None
-    safety = compare_steps('safety/state', recorded.safety_t, recorded.safety, new.safety_t,
+    safety = compare_steps(SAFETY_STATE.name, recorded.safety_t, recorded.safety, new.safety_t,
                            new.safety, grid, tolerance_s, recorded.safety_reasons,
                            new.safety_reasons) \
         if len(recorded.safety) and len(new.safety) else None
