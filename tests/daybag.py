@@ -6,13 +6,15 @@ safety/state at ``safety_hz`` (one STOW 13:00-13:10 "outlet over-temperature"),
 axes/mirrors/status at ``status_hz`` with a known sinusoidal error (amplitude
 ``err_amp`` rad), absorber temperatures (peak 152 degC at 13:00), irradiance/beam
 (half-sine 800 W/m2 between 06:00 and 20:00 -> H = 800 * 14 h * 2/pi / 1000 kWh/m2),
-gps/fix, and tracker/trajectory every ``traj_period`` s.
+gps/fix, and tracker/trajectory every ``traj_period`` s; optionally /rosout lines
+(rcl_interfaces/msg/Log) at given times.
 """
 from __future__ import annotations
 
 import datetime as dt
 import math
 
+from rcl_interfaces.msg import Log
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, TrackerPhase
@@ -61,10 +63,13 @@ def _time(field, t: float):
 
 def write_day(directory, start: float = DAY0, end: float = DAY0 + 86400, status_hz: float = 1.0,
               safety_hz: float = 1.0, err_amp: float = 0.002, traj_period: float = 60.0,
-              phase_offset: float = 0.0, options: WriterOptions | None = None) -> dict:
+              phase_offset: float = 0.0, options: WriterOptions | None = None,
+              error_of=None, state: str = 'active', logs=()) -> dict:
     """Write the day [start, end) to ``directory``; return the message counts per topic.
 
-    ``phase_offset`` [s] shifts every phase transition (to make a what-if differ).
+    ``phase_offset`` [s] shifts every phase transition (to make a what-if differ);
+    ``error_of(t)`` [rad] replaces the sinusoidal error; ``state`` is the status' state;
+    ``logs``: (t [s], level, node, text) written on /rosout at t.
     """
     w = BagWriter(directory, options or WriterOptions(fsync=False))
     tl = [profile(durability='transient_local', depth=1)]
@@ -76,7 +81,9 @@ def write_day(directory, start: float = DAY0, end: float = DAY0 + 86400, status_
     w.add_topic('/absorber/inlet_temperature', 'sensor_msgs/msg/Temperature', [profile()])
     w.add_topic('/irradiance/beam', 'sslfr_interfaces/msg/Irradiance', [profile()])
     w.add_topic('/gps/fix', 'sensor_msgs/msg/NavSatFix', [profile()])
-    events = []
+    if logs:
+        w.add_topic('/rosout', 'rcl_interfaces/msg/Log', [profile(durability='transient_local', depth=1000)])
+    events = [(t, ('log', lg)) for lg in logs for t in [lg[0]]]
     t = start
     while t < end:
         events.append((t, 'sec'))
@@ -91,10 +98,16 @@ def write_day(directory, start: float = DAY0, end: float = DAY0 + 86400, status_
         while start + k / safety_hz < end:
             events.append((start + k / safety_hz, 'safety'))
             k += 1
-    events.sort()
+    events.sort(key=lambda e: e[0])
     seq = 0
     for t, kind in events:
         ns = int(round(t * 1e9))
+        if isinstance(kind, tuple):
+            _, level, node, text = kind[1]
+            line = Log(level=level, name=node, msg=text, file='x.py', function='f', line=1)
+            _time(line.stamp, t)
+            w.write('/rosout', serialize_message(line), ns)
+            continue
         if kind == 'sec':
             ph = phase_at(t - phase_offset)
             m = TrackerPhase(phase=ph, phase_name=['NIGHT', 'PRE_DAWN', 'TRACKING', 'STOWING'][ph],
@@ -122,8 +135,8 @@ def write_day(directory, start: float = DAY0, end: float = DAY0 + 86400, status_
                 w.write('/tracker/trajectory', serialize_message(_stamp(traj, t)), ns)
         if kind == 'sec' and status_hz == 1.0 or kind == 'status':
             sp = mirror_setpoint(t)
-            err = err_amp * math.sin(2 * math.pi * t / 600.0)
-            st = AxisStatus(axis='mirrors', state='active', commanded=sp, setpoint=sp,
+            err = err_amp * math.sin(2 * math.pi * t / 600.0) if error_of is None else error_of(t)
+            st = AxisStatus(axis='mirrors', state=state, commanded=sp, setpoint=sp,
                             measured=sp + err, error=err, link_state=2, homed=True)
             w.write('/axes/mirrors/status', serialize_message(_stamp(st, t)), ns)
         if kind == 'sec' and safety_hz == 1.0 or kind == 'safety':

@@ -18,7 +18,9 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rclpy.serialization import serialize_message
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rcl_interfaces.msg import Log
+from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from diagnostic_msgs.msg import DiagnosticArray
@@ -115,10 +117,14 @@ def test_recorder_bag_read_back_by_two_readers(launch, ros, tmp_path):
             p_phase.publish(data)
             sent['/tracker/phase'].append((data, ph))
         ros.spin_for(0.05)
+    node.get_logger().warning('a line for the bag')      # /rosout: the nodes' log lines
     ros.spin_for(1.0)
     assert rec.stop() == 0
     (bag,) = _bag_dirs(tmp_path / 'bags')
     assert (bag / 'metadata.yaml').exists()
+    lines = [(dec.level, dec.name, dec.msg) for tp, _, _, dec in _read_rosbags(bag) if tp == '/rosout']
+    assert (30, node.get_name(), 'a line for the bag') in lines, lines
+    assert any(name == 'recorder' and 'recording /rosout' in msg for _, name, msg in lines), lines
     for reader in (_read_rosbags, _read_mcap_ros2):
         got = reader(bag)
         for topic, items in sent.items():
@@ -151,6 +157,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
     w.add_topic('/axes/mirrors/status', 'sslfr_interfaces/msg/AxisStatus', [profile()])
     w.add_topic('/tracker/phase', 'sslfr_interfaces/msg/TrackerPhase',
                 [profile(durability='transient_local', depth=1)])
+    w.add_topic('/rosout', 'rcl_interfaces/msg/Log', [profile(durability='transient_local', depth=1000)])
     for k in range(80):  # 20 Hz
         tk = t0 + k * 50_000_000
         m = Temperature(temperature=50.0 + k)
@@ -161,16 +168,19 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
         if k % 20 == 0:
             w.write('/tracker/phase',
                     dds_padded(serialize_message(TrackerPhase(phase=2, reason=str(k)))), tk + 2_000_000)
+        if k % 30 == 10:   # the day's log lines: replayed on /rosout, as ros2 bag play does
+            w.write('/rosout', dds_padded(serialize_message(Log(level=30, name='day_node', msg=f'line {k}'))),
+                    tk + 3_000_000)
     w.close()
     rec = launch('sslfr_recording', 'recorder', params={
         'output_dir': str(tmp_path / 'two'), 'chunk_duration': 0.5, 'fsync': False,
         'discovery_period': 0.2, 'use_sim_time': True,
-        'topics': ['/absorber/inlet_temperature', '/axes/mirrors/status', '/tracker/phase']})
+        'topics': ['/absorber/inlet_temperature', '/axes/mirrors/status', '/tracker/phase', '/rosout']})
     diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     out = _sslfr(['replay', str(tmp_path / 'one'), '--rate', '1', '--no-progress',
                   '--wait-subscribers', '15'], ros_env)
     assert out.returncode == 0, out.stderr
-    assert 'replayed 164 messages' in out.stdout
+    assert 'replayed 167 messages' in out.stdout
 
     def written():   # the recorder's own count (diagnostics, 1 Hz)
         for arr in reversed(diags):
@@ -178,12 +188,14 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
                 if st.name.endswith(': recording'):
                     return int({kv.key: kv.value for kv in st.values}.get('written', 0))
         return 0
-    assert ros.spin_until(lambda: written() >= 164, 15), written()
+    assert ros.spin_until(lambda: written() >= 167, 15), written()
     assert rec.stop() == 0
     (bag2,) = _bag_dirs(tmp_path / 'two')
     assert bag2.name == 'sslfr_2026-06-21'          # sim time: the recorded day
     a = list(BagReader(tmp_path / 'one').messages())
-    b = list(BagReader(bag2).messages())
+    # the second recorder's /rosout also holds the live nodes' own lines (recorder, replay)
+    b = [m for m in BagReader(bag2).messages()
+         if m.topic != '/rosout' or deserialize_message(m.data, Log).name == 'day_node']
     assert len(b) == len(a)
     for topic in {m.topic for m in a}:
         ma = [m for m in a if m.topic == topic]
@@ -194,7 +206,7 @@ def test_record_replay_round_trip_lossless(launch, ros, ros_env, tmp_path):
         # latency, bounded generously for a loaded 2-core machine (a stall of ~0.3 s)
         err = max(abs(x.log_time - y.log_time) for x, y in zip(ma, mb)) / 1e9
         assert err < 0.5, (topic, err)
-    assert _read_rosbags(bag2)[0][2] == b[0].data
+    assert _read_rosbags(bag2)[0][2] == next(iter(BagReader(bag2).messages())).data
 
 
 def test_sigkill_then_recover_loses_at_most_5_s(launch, ros, ros_env, tmp_path):
@@ -413,7 +425,7 @@ def test_two_sigints_during_the_stop_still_finish_the_bag(launch, ros, tmp_path,
     rec.signal(signal.SIGINT)
     assert rec.proc.wait(15) == 0, rec.output()
     out = rec.output()
-    assert 'Traceback' not in out and 'rosout' not in out, out
+    assert 'Traceback' not in out and 'publish log message to rosout' not in out, out
     (bag,) = _bag_dirs(tmp_path / 'bags')
     assert (bag / 'metadata.yaml').exists() and not list(bag.glob('*.tmp')), list(bag.iterdir())
     report = check_bag(bag)

@@ -6,6 +6,9 @@ show its reaction and recover), so the node set starts once:
 
   10:05 gps-loss +900 s     -> gps/fix NO_FIX; the planner keeps its site, tracking goes on
   10:25 link-drop:mirrors +600 s (3 s wall) -> link not UP, frames lost; then UP and tracking
+  09:48 slip:mobile_structure +2400 s: 0.5 deg -> the accuracy alarm: WARN past 0.06 deg,
+                               ERROR past 0.36 deg (diagnostics, /rosout, the report's
+                               time above each threshold); the re-homing at 10:50 ends it
   10:50 board-reset:mobile_structure -> the axis loses its reference, re-homes, tracks again
   11:05 thermocouple-open +600 s -> outlet NaN; safety raises a thermocouple reason
   11:25 kill:planner +500 s -> no trajectory; the drivers finish the horizon, then hold
@@ -13,7 +16,9 @@ show its reaction and recover), so the node set starts once:
                                tracking again within RESTART_WALL of the restart
   12:10 overtemp            -> safety STOW (latched), mirrors to the sleeping position
 
-The safety supervisor kill (stow within 1.2 s, wall) is its own short run.
+The day's bag also holds every node's log lines (/rosout): the drivers' and the
+safety's warnings are checked there and in the day report's timeline. The safety
+supervisor kill (stow within 1.2 s, wall) is its own short run.
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ from sslfr_bringup import nodeset
 from sslfr_recording.day import planner_config, read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
-from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, SAFETY_STATE
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, ROSOUT, SAFETY_STATE
 
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
@@ -43,6 +48,7 @@ TOL = STEP + 4 * math.radians(0.003)
 #: difference of degrees)
 TRACK = 3 * TOL
 LAG = SPEED * 0.5     # [s sim] a loaded 2-core machine: the axis may lag by 0.5 s wall
+SLIP = 'slip:mobile_structure@09:48+2400:0.5'
 #: [s wall] a released planner's process back to tracking: start (rclpy import, ~1-2.6 s
 #: loaded), discovery of /clock and the day plan (~2 s loaded), the safety's OK and the
 #: mirrors' way back from the stow (measured 4.9 s with two test workers and a browser
@@ -75,7 +81,7 @@ def _sim(ros, env, out, args, timeout=150.0, watch=None):
     summary = json.loads((out / 'sim.json').read_text())
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     assert bags, text
-    return text, summary, read_day(bags[-1])
+    return text, summary, read_day(bags[-1]), bags[-1]
 
 
 @pytest.fixture(scope='module')
@@ -84,6 +90,8 @@ def morning(tmp_path_factory):
     from harness import RosHarness, acquire_test_domain
     import fcntl
     import os
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.msg import Log
     from sslfr_interfaces.msg import AxisStatus, SafetyState
     from sensor_msgs.msg import NavSatFix, Temperature
 
@@ -94,19 +102,23 @@ def morning(tmp_path_factory):
     ros = RosHarness(dom)
     live = {'fix': ros.collect(NavSatFix, GPS_FIX.name), 'safety': ros.collect(SafetyState, SAFETY_STATE.name),
             'mirrors': ros.collect(AxisStatus, AXIS_STATUS.of('mirrors')),
-            'outlet': ros.collect(Temperature, ABSORBER_TEMPERATURE.of('outlet'))}
-    faults = ['gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
+            'outlet': ros.collect(Temperature, ABSORBER_TEMPERATURE.of('outlet')),
+            'diagnostics': ros.collect(DiagnosticArray, DIAGNOSTICS.name), 'rosout': ros.collect(Log, ROSOUT.name)}
+    faults = [SLIP, 'gps-loss@10:05+900', 'link-drop:mirrors@10:25+600', 'board-reset:mobile_structure@10:50',
               'thermocouple-open@11:05+600', 'kill:planner@11:25+500', 'overtemp@12:10']
-    args = ['--start', '09:40', '--end', '12:22', '--speed', str(SPEED)]
+    # the slip (0.5 deg) passes the driver's lost-step check (lost_step_tolerance 0.29 deg),
+    # which would fault the axis: looser here, so that the accuracy alarm is what reacts
+    args = ['--start', '09:40', '--end', '12:22', '--speed', str(SPEED),
+            '--set', 'mobile_structure_driver:lost_step_tolerance=0.02']
     for f in faults:
         args += ['--fault', f]
     try:
-        text, summary, day = _sim(ros, env, tmp / 'out', args)
+        text, summary, day, bag = _sim(ros, env, tmp / 'out', args)
     finally:
         ros.close()
         fcntl.flock(fh, fcntl.LOCK_UN)
         fh.close()
-    return {'text': text, 'summary': summary, 'day': day, 'live': live}
+    return {'text': text, 'summary': summary, 'day': day, 'live': live, 'bag': bag}
 
 
 def _fired(morning, spec):
@@ -245,7 +257,7 @@ def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
     states = []                         # every mirrors status: (arrival, state)
     ros.node.create_subscription(AxisStatus, AXIS_STATUS.of('mirrors'),
                                  lambda m: states.append((time.monotonic(), m.state)), 10)
-    text, summary, day = _sim(ros, ros_env, tmp_path / 'out',
+    text, summary, day, _ = _sim(ros, ros_env, tmp_path / 'out',
                               ['--start', '10:00', '--end', '10:12', '--speed', '60',
                                '--fault', 'kill:safety@10:06',
                                # 20 Hz status: the observation adds at most 0.05 s
@@ -270,3 +282,104 @@ def test_killed_safety_stops_axes_within_1_2_s(ros, ros_env, tmp_path):
                 f'mirrors states around it: {seq}; sim output:\n' + '\n'.join(lines))
     assert after, explain()
     assert after[0][0] - last_safety <= 1.2, (after[0][0] - last_safety, explain())
+
+
+def _levels(arrays, name):
+    """(level, message) of each ``name`` status in the collected diagnostics, in order."""
+    return [(st.level[0] if isinstance(st.level, bytes) else int(st.level), st.message)
+            for arr in arrays for st in arr.status if st.name == name]
+
+
+def test_slip_raises_accuracy_warn_then_error_live_in_the_bag_and_in_the_report(morning):
+    """A coupling slipping 0.5 deg over 2400 s (mobile structure): its driver's accuracy
+    diagnostics go WARN (past 0.06 deg) then ERROR (past 0.36 deg), live and in the bag,
+    each change logged on /rosout; the day report counts the time above each threshold
+    from the slip's progress until the re-homing of the board reset ends it."""
+    from sslfr_recording import report, report_render
+    from sslfr_recording.bag.reader import BagReader
+    t0, _ = _applied(morning, SLIP)
+    t_reset = _fired(morning, 'board-reset:mobile_structure@10:50')['sim_time']
+    name = 'mobile_structure_driver: accuracy'
+    live = _levels(morning['live']['diagnostics'], name)
+    levels = [lvl for lvl, _ in live]
+    assert 1 in levels and 2 in levels, live[:5]
+    assert levels.index(1) < levels.index(2), 'WARN before ERROR'
+    assert all(lvl == 0 for lvl in levels[:levels.index(1)])
+    err_msg = live[levels.index(2)][1]
+    assert '> 0.360 deg' in err_msg and 'mobile_structure: tracking error' in err_msg, err_msg
+    lines = [(m.level, m.msg) for m in morning['live']['rosout'] if m.name.endswith('mobile_structure_driver')]
+    warn = [i for i, (lvl, msg) in enumerate(lines) if lvl == 30 and '> 0.060 deg' in msg]
+    error = [i for i, (lvl, msg) in enumerate(lines) if lvl == 40 and '> 0.360 deg' in msg]
+    assert warn and error and warn[0] < error[0], lines
+    # in the bag: the recorded diagnostics (ROS time) go WARN, then ERROR, each within the
+    # filter's delay of the moment the recorded error (status: measured - setpoint) passed
+    # its threshold: the 60 s window, a status period (5 Hz wall), a diagnostics period
+    # (1 Hz wall) and a loaded machine's lag
+    day = morning['day']
+    rec = [(t, lvl) for t, n, lvl in zip(day.diagnostics.t, day.diagnostics['name'], day.diagnostics['level'])
+           if n == name]
+    first = {lvl: min((t for t, x in rec if x == lvl), default=None) for lvl in (1, 2)}
+    assert first[1] is not None and first[2] is not None and first[1] < first[2], first
+    st = day.axes['mobile_structure'].between(t0, t_reset)
+    err = np.abs(st['measured'] - st['setpoint'])
+    tracking = np.isin(st['state'], ('following', 'waiting'))
+    cross = {lvl: st.t[np.argmax(tracking & (err > math.radians(thr)))] for lvl, thr in ((1, 0.06), (2, 0.36))}
+    assert np.any(tracking & (err > math.radians(0.36))), 'the slip shows in the measured position'
+    late = 60.0 + SPEED / 5 + SPEED + LAG
+    for lvl in (1, 2):
+        assert cross[lvl] - SPEED / 5 <= first[lvl] <= cross[lvl] + late, (lvl, first[lvl] - cross[lvl])
+    # the report: time above each threshold, by the driver's filter replayed on the recorded
+    # status, equals what the driver itself counted (its last recorded diagnostics; the
+    # alarm is over after the re-homing, so the count no longer grows), within a status
+    # period per change; and it is bounded by the time from the crossing to the reset
+    rep = report.analyse(BagReader(morning['bag']))
+    acc = rep.accuracy['mobile_structure']
+    counted = day.counter(name, 'time_above_warn_s')['value'][-1], day.counter(name, 'time_above_error_s')['value'][-1]
+    assert acc['warn_s'] == pytest.approx(counted[0], abs=2 * SPEED / 5), (acc, counted)
+    assert acc['error_s'] == pytest.approx(counted[1], abs=2 * SPEED / 5), (acc, counted)
+    assert 0 < acc['error_s'] < acc['warn_s'] <= t_reset - cross[1] + late, (acc, t_reset - cross[1])
+    assert math.degrees(acc['peak']) == pytest.approx(0.5, abs=0.05)
+    for other in ('mirrors', 'secondary_reflector'):
+        assert rep.accuracy[other]['error_s'] == 0, (other, rep.accuracy[other])
+    text = report_render.render_text(rep)
+    assert f'mobile_structure     {acc["warn_s"]:8.0f} s / {acc["error_s"]:6.0f} s of ' in text, text
+
+
+def test_the_bag_holds_the_drivers_and_safetys_warnings_and_the_report_lists_them(morning):
+    """/rosout is in the day's bag: the drivers' and the safety's warnings and errors
+    are there at the time of their fault (log time = the day's ROS time), and the day
+    report's timeline lists them beside the phase and safety changes."""
+    from sslfr_recording import report, report_render
+    from sslfr_recording.bag.reader import BagReader
+    reader = BagReader(morning['bag'])
+    assert '/rosout' in reader.topics
+    logs = [(raw.log_time / 1e9, m.level, m.name, m.msg) for raw, m in reader.decoded(['/rosout'])]
+    assert {name for _, _, name, _ in logs} >= {'planner', 'safety', 'mirrors_driver', 'absorber_board'}
+
+    def found(node, level, needle, t_from, t_to):
+        # log time = the recorder's ROS time (/clock at 20 Hz wall: SPEED / 20 s steps) may
+        # be up to one /clock period behind the simulator's own clock that timed the fault
+        hits = [t for t, lvl, name, msg in logs if name == node and lvl >= level and needle in msg
+                and t_from - SPEED / 20 <= t <= t_to]
+        assert hits, (node, level, needle, [x for x in logs if x[2] == node][:20])
+        return hits[0]
+    t_reset = _fired(morning, 'board-reset:mobile_structure@10:50')['sim_time']
+    t_reset_line = found('mobile_structure_driver', 30, 'board reset', t_reset, t_reset + 3 * SPEED)
+    t_tc, _ = _applied(morning, 'thermocouple-open@11:05+600')
+    t_open_line = found('absorber_board', 40, 'open thermocouple', t_tc, t_tc + 3 * SPEED)
+    t_tc_line = found('safety', 30, 'thermocouple', t_tc, t_tc + 3 * SPEED)   # WARN (STOW: ERROR)
+    t_hot = _fired(morning, 'overtemp@12:10')['sim_time']
+    t_hot_line = found('safety', 40, 'over-temperature', t_hot, t_hot + 3 * SPEED)
+    # the report lists them at those times, beside the safety changes
+    rep = report.analyse(reader)
+    timeline = [(t, kind, text) for t, kind, text, _, _ in rep.timeline]
+    for t, kinds, node in ((t_reset_line, ('WARN',), 'mobile_structure_driver'),
+                           (t_open_line, ('ERROR',), 'absorber_board'), (t_tc_line, ('WARN', 'ERROR'), 'safety'),
+                           (t_hot_line, ('ERROR',), 'safety')):
+        assert any(abs(x - t) < 1e-6 and k in kinds and text.startswith(node + ': ') for x, k, text in timeline), \
+            (t, kinds, node)
+    safety_changes = [t for t, kind, text in timeline if kind == 'safety' and text.startswith('STOW')]
+    assert any(abs(t - t_hot_line) <= SPEED for t in safety_changes), 'the over-temperature STOW beside its line'
+    text = report_render.render_text(rep)
+    assert f'{report_render.utc(t_hot_line)}  ERROR  safety: ' in text
+    assert 'log lines: ' in text and 'safety' in text.split('log lines: ')[1].splitlines()[0]

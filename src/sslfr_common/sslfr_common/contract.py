@@ -127,6 +127,18 @@ class LinkState(enum.IntEnum):
     LINK_FAULT = 3
 
 
+class DriveKind(str, enum.Enum):
+    """How a movement is driven and where its position comes from (docs/collectors.md)."""
+
+    STEPPER_SWITCHES = 'stepper_switches'                          # seed 000: stepper, limit switches, encoder
+    LINEAR_ACTUATOR_INCLINOMETER = 'linear_actuator_inclinometer'  # seed 004: PWM actuator, inclinometer
+    STEPPER_NO_SWITCHES = 'stepper_no_switches'                    # seed 003: stepper, referenced by the operator
+
+
+#: The drive kinds' names, the first the default.
+DRIVE_KINDS: tuple[str, ...] = tuple(k.value for k in DriveKind)
+
+
 #: Lifecycle states in which an axis driver does not drive its axis
 #: (``AxisStatus.state`` carries the lifecycle label then).
 IDLE_DRIVER_STATES: frozenset[str] = frozenset({'unconfigured', 'inactive', 'finalized'})
@@ -140,6 +152,7 @@ class Qos(enum.Enum):
     R10 = 'R10'     # reliable, volatile, keep last 10
     BE = 'BE'       # best effort, volatile, keep last 10
     TL1 = 'TL1'     # reliable, transient local, keep last 1: latched (late joiners get the latest)
+    LOG = 'LOG'     # rcl's /rosout profile: reliable, transient local, keep last 1000, lifespan 10 s
 
 
 @dataclass(frozen=True)
@@ -188,10 +201,13 @@ SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
 DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')   # absolute: see collector_id
 CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos.BE)
 
+#: rcl's log topic: every node's logger publishes it (rcl's QoS), the recorder keeps it.
+ROSOUT = Topic('/rosout', 'rcl_interfaces/msg/Log', Qos.LOG)
+
 TOPICS: tuple[Topic, ...] = (
     GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
     AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
-    SAFETY_STATE, DIAGNOSTICS, CLOCK)
+    SAFETY_STATE, DIAGNOSTICS, CLOCK, ROSOUT)
 
 #: Each family's members: the axes and the thermocouples.
 FAMILY_MEMBERS: dict[str, tuple[str, ...]] = {AXIS_STATUS.name: JOINTS,

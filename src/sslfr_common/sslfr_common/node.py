@@ -46,6 +46,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, \
     ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
@@ -65,6 +66,8 @@ QOS_PROFILES: dict[Qos, QoSProfile] = {
     Qos.BE: QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
     Qos.TL1: QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL),
+    Qos.LOG: QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL, lifespan=Duration(seconds=10)),
 }
 
 

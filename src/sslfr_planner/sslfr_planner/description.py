@@ -24,17 +24,17 @@ from typing import Any, Mapping
 
 import yaml
 
-from sslfr_common.contract import JOINTS, LONGITUDINAL_JOINTS, SWITCHES
+from sslfr_common.contract import DRIVE_KINDS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
+from sslfr_common.drives import LeverGeometry
 
 #: drive kinds (issue 34 item 3): (a) stepper with limit switches, optional encoder or
 #: laser sensor (seed 000); (b) linear actuator closed on an inclinometer (seed 004);
 #: (c) stepper without switches, referenced by an operator at a known angle (seed 003)
-DRIVE_KINDS = ('stepper_switches', 'linear_actuator_inclinometer', 'stepper_no_switches')
 #: position feedback each drive kind accepts ('steps': open loop, the step count)
 FEEDBACK_FOR_DRIVE = {
-    'stepper_switches': ('steps', 'encoder', 'laser_sensor'),
-    'linear_actuator_inclinometer': ('inclinometer',),
-    'stepper_no_switches': ('steps', 'encoder'),
+    DriveKind.STEPPER_SWITCHES.value: ('steps', 'encoder', 'laser_sensor'),
+    DriveKind.LINEAR_ACTUATOR_INCLINOMETER.value: ('inclinometer',),
+    DriveKind.STEPPER_NO_SWITCHES.value: ('steps', 'encoder'),
 }
 #: movement laws -> the movements each needs (all of them must be in the collector).
 #: Mirror laws: half_transversal (seed 000 eq. 13, beta_0 = theta_t'/2), lepten_linear
@@ -74,7 +74,11 @@ class Movement:
     None; ``switches``: switch name -> angle where it closes [rad] (stepper_switches);
     ``reference``: the known angle at which an operator references a drive without
     switches [rad]; ``feedback_line``: the mirror line (1-based) carrying the
-    inclinometer; ``law_params``: the law's own constants (radians, see the law).
+    inclinometer; ``law_params``: the law's own constants (radians, see the law);
+    ``actuator``, ``inclinometer`` (linear actuator drives, SI and radians: the
+    ``_deg`` / ``_m`` / ``_s`` suffixes of the file dropped): lever geometry, PWM
+    speed, stall and time-out limits; inclinometer offset, noise, resolution
+    (:mod:`sslfr_common.drives`, :func:`lever_geometry`).
     """
 
     name: str
@@ -91,6 +95,15 @@ class Movement:
     reference: float | None = None
     feedback_line: int | None = None
     law_params: dict = field(default_factory=dict)
+    actuator: dict = field(default_factory=dict)
+    inclinometer: dict = field(default_factory=dict)
+
+
+def lever_geometry(mv: Movement) -> LeverGeometry:
+    """The :class:`LeverGeometry` of a linear actuator movement (its ``actuator`` block)."""
+    a = mv.actuator
+    return LeverGeometry(lever=a['lever'], mount_distance=a['mount_distance'],
+                         mount_angle=a['mount_angle'], stroke=tuple(a['stroke']))
 
 
 @dataclass(frozen=True)
@@ -185,7 +198,17 @@ _MOVEMENT = {'drive': ('str', True), 'feedback': ('str', True), 'law': ('str', T
              'range_deg': ('range', True), 'sleep_deg': ('num', True), 'stow_deg': ('num', True),
              'step_deg': ('num', False), 'gear_ratio': ('num', False), 'deadband_deg': ('num', False),
              'switches_deg': ('map', False), 'reference_deg': ('num', False),
-             'feedback_line': ('int', False), 'law_params': ('map', False)}
+             'feedback_line': ('int', False), 'law_params': ('map', False),
+             'actuator': ('map', False), 'inclinometer': ('map', False)}
+#: a linear actuator drive's mechanics (seed 004 section 2.1; docs/collectors.md): lever
+#: pivot-to-pin length, pivot-to-base-mount distance, the angle between them at line
+#: angle 0, the actuator's stroke, its speed at full PWM duty and the duty below which
+#: it does not start, the stall window and least inclinometer change, the move time-out
+_ACTUATOR = {'lever_m': ('num', True), 'mount_distance_m': ('num', True), 'mount_angle_deg': ('num', True),
+             'stroke_m': ('range', True), 'max_speed_m_s': ('num', True), 'min_duty': ('num', True),
+             'stall_window_s': ('num', True), 'stall_min_deg': ('num', True), 'move_timeout_s': ('num', True)}
+#: the inclinometer: mounting offset (reading - line angle), noise 1-sigma, resolution
+_INCLINOMETER = {'offset_deg': ('num', True), 'noise_deg': ('num', True), 'resolution_deg': ('num', True)}
 _BOARD = {'name': ('str', True), 'kind': ('str', True), 'hardware': ('str', False), 'movement': ('str', False)}
 _SENSOR = {'name': ('str', True), 'kind': ('str', True), 'board': ('str', True), 'part': ('str', False)}
 _OPTICS = {'lines': ('int', True), 'central_line': ('bool', True), 'line_width': ('num', True),
@@ -300,10 +323,12 @@ def _movement(c: _Checker, name: str, raw: Any) -> Movement | None:
             ok = False
     inside('sleep_deg', m['sleep_deg'])
     inside('stow_deg', m['stow_deg'])
-    need = {'stepper_switches': ('step_deg', 'switches_deg'), 'stepper_no_switches': ('step_deg', 'reference_deg'),
-            'linear_actuator_inclinometer': ('deadband_deg', 'feedback_line')}[drive]
-    banned = {'step_deg', 'gear_ratio', 'deadband_deg', 'switches_deg', 'reference_deg', 'feedback_line'} - set(need)
-    if drive != 'linear_actuator_inclinometer':
+    need = {DriveKind.STEPPER_SWITCHES.value: ('step_deg', 'switches_deg'),
+            DriveKind.STEPPER_NO_SWITCHES.value: ('step_deg', 'reference_deg'),
+            DriveKind.LINEAR_ACTUATOR_INCLINOMETER.value: ('deadband_deg', 'feedback_line', 'actuator', 'inclinometer')}[drive]
+    banned = {'step_deg', 'gear_ratio', 'deadband_deg', 'switches_deg', 'reference_deg', 'feedback_line',
+              'actuator', 'inclinometer'} - set(need)
+    if drive != DriveKind.LINEAR_ACTUATOR_INCLINOMETER.value:
         banned -= {'gear_ratio'}
     for k in need:
         if k not in m and k not in (raw or {}):
@@ -337,6 +362,13 @@ def _movement(c: _Checker, name: str, raw: Any) -> Movement | None:
     params = _law_params(c, key, law, m.get('law_params'))
     if params is None:
         ok = False
+    actuator, inclinometer = {}, {}
+    if 'actuator' in m:
+        actuator = _actuator(c, key, m['actuator'], (_rad(lo), _rad(hi)) if lo < hi else None)
+        ok = ok and actuator is not None
+    if 'inclinometer' in m:
+        inclinometer = _inclinometer(c, key, m['inclinometer'], m.get('deadband_deg'))
+        ok = ok and inclinometer is not None
     if not ok:
         return None
     return Movement(name=name, drive=drive, feedback=m['feedback'], law=law,
@@ -345,7 +377,61 @@ def _movement(c: _Checker, name: str, raw: Any) -> Movement | None:
                     gear_ratio=float(m.get('gear_ratio', 1.0)),
                     deadband=_rad(m['deadband_deg']) if 'deadband_deg' in m else None,
                     switches=switches, reference=_rad(m['reference_deg']) if 'reference_deg' in m else None,
-                    feedback_line=m.get('feedback_line'), law_params=params)
+                    feedback_line=m.get('feedback_line'), law_params=params,
+                    actuator=actuator, inclinometer=inclinometer)
+
+
+def _si(block: dict) -> dict:
+    """File units to SI: ``_deg`` keys to radians, ``_m`` / ``_s`` / ``_m_s`` suffixes dropped."""
+    out = {}
+    for k, v in block.items():
+        if k.endswith('_deg'):
+            out[k[:-4]] = _rad(v)
+        else:
+            name = k[:-4] if k.endswith('_m_s') else k[:-2] if k.endswith(('_m', '_s')) else k
+            out[name] = tuple(float(x) for x in v) if isinstance(v, list) else float(v)
+    return out
+
+
+def _actuator(c: _Checker, key: str, raw: Any, rng: tuple[float, float] | None) -> dict | None:
+    """The ``actuator`` block of a linear actuator movement, validated (None: reported)."""
+    n = len(c.problems)
+    a = c.section(raw, _ACTUATOR, f'{key}.actuator')
+    if len(c.problems) > n:
+        return None
+    for k in ('lever_m', 'mount_distance_m', 'max_speed_m_s', 'stall_window_s', 'stall_min_deg', 'move_timeout_s'):
+        if not a[k] > 0:
+            c.add(f'{key}.actuator.{k}', f'must be > 0, got {a[k]}')
+    if not 0 <= a['min_duty'] < 1:
+        c.add(f'{key}.actuator.min_duty', f'must be in [0, 1), got {a["min_duty"]}')
+    if not a['move_timeout_s'] > a['stall_window_s']:
+        c.add(f'{key}.actuator.move_timeout_s', 'must exceed stall_window_s')
+    if len(c.problems) > n:
+        return None
+    out = _si(a)
+    if rng is not None:
+        geo = LeverGeometry(out['lever'], out['mount_distance'], out['mount_angle'], out['stroke'])
+        for text in geo.problems(rng):
+            c.add(f'{key}.actuator', text)
+    return out if len(c.problems) == n else None
+
+
+def _inclinometer(c: _Checker, key: str, raw: Any, deadband_deg: float | None) -> dict | None:
+    """The ``inclinometer`` block, validated: noise and resolution >= 0 and below the
+    deadband (a loop cannot hold a band narrower than its sensor's noise)."""
+    n = len(c.problems)
+    i = c.section(raw, _INCLINOMETER, f'{key}.inclinometer')
+    if len(c.problems) > n:
+        return None
+    for k in ('noise_deg', 'resolution_deg'):
+        if not i[k] >= 0:
+            c.add(f'{key}.inclinometer.{k}', f'must be >= 0, got {i[k]}')
+        elif deadband_deg is not None and not i[k] < deadband_deg / 2:
+            c.add(f'{key}.inclinometer.{k}', f'{i[k]} deg: must be below half the deadband '
+                                             f'({deadband_deg} deg) or the loop hunts')
+    if abs(i['offset_deg']) > 90:
+        c.add(f'{key}.inclinometer.offset_deg', f'must be within [-90, 90] deg, got {i["offset_deg"]}')
+    return _si(i) if len(c.problems) == n else None
 
 
 def _law_params(c: _Checker, key: str, law: str, raw: Any) -> dict | None:

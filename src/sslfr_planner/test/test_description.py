@@ -71,11 +71,17 @@ def test_seed004_numbers():
     assert o.lines * o.line_width * o.line_length == pytest.approx(54.0)     # abstract: 54 m^2 of mirrors
     assert math.degrees(o.azimuth) == pytest.approx(4.6) and o.rotation_radius == 0.065
     assert o.line_width + o.gap == pytest.approx(0.5097, abs=1e-4)         # the pitch behind Table 1 (test_lepten)
+    # the lever drive (assumed sizes): the stroke the +/-40 deg range needs, law of cosines
+    geo = d.lever_geometry(m)
+    assert geo.length(m.range[0]) == pytest.approx(0.32460, abs=1e-5)
+    assert geo.length(m.range[1]) == pytest.approx(0.50954, abs=1e-5)
+    assert m.actuator['max_speed'] == 0.005 and m.actuator['stall_window'] == 2.0
+    assert math.degrees(m.inclinometer['noise']) == pytest.approx(0.01)
 
 
 # ------------------------------------------------------------------ refusals
 def _broken(tmp_path, edit):
-    data = yaml.safe_load(SEED004.read_text()) if edit[0] == 4 else yaml.safe_load(SEED000.read_text())
+    data = yaml.safe_load({4: SEED004, 3: SEED003, 0: SEED000}[edit[0]].read_text())
     edit[1](data)
     p = tmp_path / 'broken.yaml'
     p.write_text(yaml.safe_dump(data))
@@ -115,6 +121,23 @@ def _broken(tmp_path, edit):
     (4, lambda x: x['movements']['mirrors'].update(step_deg=0.1), 'movements.mirrors.step_deg',
      'not a property of a linear_actuator_inclinometer drive'),
     (4, lambda x: x['sensors'][0].update(board='actuator'), 'sensors[0].board', 'not a board'),
+    (4, lambda x: x['movements']['mirrors'].pop('actuator'), 'movements.mirrors.actuator',
+     'a linear_actuator_inclinometer drive needs it'),
+    (4, lambda x: x['movements']['mirrors']['actuator'].update(stroke_m=[0.35, 0.53]), 'movements.mirrors.actuator',
+     'outside stroke_m [0.35, 0.53]'),
+    (4, lambda x: x['movements']['mirrors']['actuator'].update(mount_angle_deg=30.0), 'movements.mirrors.actuator',
+     'within (5, 175) deg'),
+    (4, lambda x: x['movements']['mirrors']['actuator'].update(min_duty=1.0), 'movements.mirrors.actuator.min_duty',
+     'must be in [0, 1)'),
+    (4, lambda x: x['movements']['mirrors']['actuator'].update(move_timeout_s=1.0),
+     'movements.mirrors.actuator.move_timeout_s', 'must exceed stall_window_s'),
+    (4, lambda x: x['movements']['mirrors']['actuator'].pop('lever_m'), 'movements.mirrors.actuator.lever_m',
+     'missing'),
+    (4, lambda x: x['movements']['mirrors']['inclinometer'].update(noise_deg=0.03),
+     'movements.mirrors.inclinometer.noise_deg', 'below half the deadband'),
+    (3, lambda x: x['movements']['mirrors'].update(inclinometer={'offset_deg': 0.0, 'noise_deg': 0.0,
+                                                                'resolution_deg': 0.0}),
+     'movements.mirrors.inclinometer', 'not a property of a stepper_no_switches drive'),
 ])
 def test_refused_naming_file_and_key(tmp_path, seed, change, key, text):
     msg, path = _broken(tmp_path, (seed, change))

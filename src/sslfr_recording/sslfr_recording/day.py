@@ -16,24 +16,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES,
+from sslfr_common.contract import (ROSOUT, ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES,
                                    JOINTS, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY)
 from sslfr_common.timeconv import to_sec
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader, message_time
 
+ROSOUT_KEY = ROSOUT.name.lstrip('/')   # found in any namespace, like the graph's relative names
+
 #: the day's topics (relative names; found in any namespace) -> Day attribute
 TOPICS = {
     TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix',
     ABSORBER_TEMPERATURE.of('inlet'): 'inlet', ABSORBER_TEMPERATURE.of('outlet'): 'outlet',
     IRRADIANCE_BEAM.name: 'beam', TRACKER_TRAJECTORY.name: 'trajectory', JOINT_STATES.name: 'joints',
+    ROSOUT_KEY: 'logs',
     **{AXIS_STATUS.of(a): 'axes' for a in JOINTS},
 }
 #: topic -> its columns (a key of _FIELDS); joint_states is split by joint instead
 _KIND = {TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix', IRRADIANCE_BEAM.name: 'beam',
          ABSORBER_TEMPERATURE.of('inlet'): 'temperature', ABSORBER_TEMPERATURE.of('outlet'): 'temperature',
-         TRACKER_TRAJECTORY.name: 'trajectory', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
+         TRACKER_TRAJECTORY.name: 'trajectory', ROSOUT_KEY: 'log', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
 
 
 @dataclass
@@ -78,7 +81,8 @@ class Day:
     ``safety``: level, reasons, stow_required, stopped_axes; ``inlet``/``outlet``:
     absorber temperature value [degC]; ``beam``: g [W/m^2], saturated; ``fix``: status,
     latitude, longitude, altitude; ``trajectory``: points per trajectory at the log time
-    it was sent, ``trajectories`` the same messages as :class:`Trajectory`; ``topics``:
+    it was sent, ``trajectories`` the same messages as :class:`Trajectory`; ``logs``:
+    the nodes' log lines (``/rosout``: level, name, msg) at their log time; ``topics``:
     message count per topic; ``diagnostics`` (decoded on first use): name, level,
     message, values.
     """
@@ -97,6 +101,8 @@ class Day:
     trajectory: Series
     trajectories: list[Trajectory]
     topics: dict[str, int]
+    logs: Series = field(default_factory=Series)     # /rosout: level, name (node), msg at log time
+    has_rosout: bool = False
     _reader: BagReader | None = field(default=None, repr=False)
     _diagnostics: Series | None = field(default=None, repr=False)
 
@@ -179,6 +185,7 @@ _FIELDS = {
     'fix': {'status': lambda m: int(m.status.status), 'latitude': lambda m: float(m.latitude),
             'longitude': lambda m: float(m.longitude), 'altitude': lambda m: float(m.altitude)},
     'trajectory': {'points': lambda m: len(m.points)},
+    'log': {'level': lambda m: int(m.level), 'name': lambda m: str(m.name), 'msg': lambda m: str(m.msg)},
 }
 
 
@@ -244,6 +251,11 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
                     joint_rows[name].append((t, [float(pos)]))
             continue
         values = [f(m) for f in _FIELDS[_KIND[key]].values()]
+        if key == ROSOUT_KEY:
+            # a line's own stamp is its node's system clock: the log time is the day's ROS
+            # time (simulated or replayed days included)
+            rows[key].append((to_sec(raw.log_time), values))
+            continue
         if key == TRACKER_TRAJECTORY.name:
             # a trajectory's stamp is its first point's time: when it was sent is the log time
             rows[key].append((to_sec(raw.log_time), values))
@@ -261,7 +273,8 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
         phase=series[TRACKER_PHASE.name], safety=series[SAFETY_STATE.name],
         inlet=series[ABSORBER_TEMPERATURE.of('inlet')], outlet=series[ABSORBER_TEMPERATURE.of('outlet')],
         beam=series[IRRADIANCE_BEAM.name], fix=series[GPS_FIX.name], trajectory=series[TRACKER_TRAJECTORY.name],
-        trajectories=trajectories, topics=counts, _reader=reader)
+        trajectories=trajectories, topics=counts, logs=series[ROSOUT_KEY],
+        has_rosout=names[ROSOUT_KEY] is not None, _reader=reader)
 
 
 def _read_diagnostics(reader: BagReader) -> Series:

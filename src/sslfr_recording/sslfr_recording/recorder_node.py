@@ -9,6 +9,10 @@ transient local only if all are, as rosbag2 does) and the publishers' offered Qo
 profiles are stored in the bag. Log time = ROS time of reception (so
 ``use_sim_time`` days land in their day bag); publish time = the DDS source timestamp.
 
+``/rosout`` (every node's log lines) is recorded too; the lines a publisher keeps
+for late joiners (transient local) are recorded only when they are not older than the
+recorder (:func:`.bag.recorder_config.log_line_kept`).
+
 Diagnostics (``diagnostics``, 1 Hz, steady clock): OK while recording, ERROR with the
 reason when the free-disk guard stopped recording or writes fail. The guard only
 stops recording; it never touches another node.
@@ -16,12 +20,13 @@ stops recording; it never touches another node.
 from __future__ import annotations
 
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from sslfr_common.contract import DIAGNOSTICS, collector_id
+from sslfr_common.contract import DIAGNOSTICS, ROSOUT, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, message_class, qos, run_node
 
 from .bag import recorder_config as rc
@@ -44,9 +49,13 @@ class Recorder(LeanEvents, Node):
         self._bad_types: set[str] = set()
         self.received = 0
         self.written = 0        # messages written over the node's life (all sessions)
+        self.written_data = 0   # of which not /rosout (sslfr record: a run that recorded only
+                                # log lines, its own included, recorded nothing)
         self.write_errors = 0   # write errors over the node's life
         self.last_error = ''
         self.no_clock = 0
+        self.old_log_lines = 0     # /rosout lines older than this recorder (already recorded)
+        self._started_ns = time.time_ns()
         self._discover_timer = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._restart_discovery()
@@ -136,6 +145,8 @@ class Recorder(LeanEvents, Node):
     def _make_callback(self, topic: str):
         clock = self.get_clock()
         session_ref = self
+        started = self._started_ns if topic == ROSOUT.name else None
+        data_topic = int(started is None)
 
         def callback(data: bytes, info) -> None:
             session_ref.received += 1
@@ -146,12 +157,16 @@ class Recorder(LeanEvents, Node):
             src = None
             if isinstance(info, dict):
                 src = info.get('source_timestamp')
+            if started is not None and not rc.log_line_kept(int(src or 0), started):
+                session_ref.old_log_lines += 1
+                return
             session = session_ref.session
             errors = session.stats.write_errors
             if session.write(topic, bytes(data), now, src if src else now,
                              int(info.get('publication_sequence_number', 0) or 0)
                              if isinstance(info, dict) else 0):
                 session_ref.written += 1
+                session_ref.written_data += data_topic
             elif session.stats.write_errors > errors:
                 session_ref._on_write_error(session.stats.last_error)
         return callback
@@ -187,6 +202,7 @@ class Recorder(LeanEvents, Node):
         kv = {'bag': str(s.bag_dir or ''), 'topics': len(s.topics), 'received': self.received,
               'written': s.stats.written, 'dropped_disk_full': s.stats.dropped_disk,
               'write_errors': s.stats.write_errors, 'dropped_no_clock': self.no_clock,
+              'dropped_old_log_lines': self.old_log_lines,
               'free_bytes': s.disk.free_bytes if s.disk else -1}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in kv.items()]
         arr = DiagnosticArray(status=[st])
@@ -213,9 +229,11 @@ def main(args=None, require_data: bool = False) -> int:
     if code or not require_data or not built:
         return code
     node = built[0]
-    if node.written == 0 or node.write_errors:
+    if node.written_data == 0 or node.write_errors:
         why = (f'{node.write_errors} write error(s), last: {node.last_error}' if node.write_errors
                else f'no message received on {", ".join(node.cfg["topics"]) if any(node.cfg["topics"]) else "any topic"}')
-        print(f'sslfr record: recorded {node.written} message(s): {why}', file=sys.stderr, flush=True)
+        lines = node.written - node.written_data
+        print(f'sslfr record: recorded {node.written_data} message(s)'
+              + (f' and {lines} /rosout log line(s)' if lines else '') + f': {why}', file=sys.stderr, flush=True)
         return 1
     return 0

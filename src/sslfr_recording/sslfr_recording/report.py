@@ -2,29 +2,30 @@
 recorded day decoded once (:class:`~.day.Day`): time in each phase, per-axis tracking
 error while tracking (vs the setpoint and vs the run's ideal reference, outside the
 axis' deliberate moves: :func:`axis_moves`), moves, safety and commanded stows,
-temperatures, irradiance and irradiation, link faults, and the absorbed-energy estimate
-(:mod:`.report_energy`). Pure (no rclpy); plain data for the text, plots and tests.
+temperatures, irradiance and irradiation, link faults, the absorbed-energy estimate
+(:mod:`.report_energy`), each axis' time above the accuracy alarm's thresholds (the
+driver's own filter, :class:`sslfr_common.accuracy.AccuracyAlarm`, replayed on the
+recorded status and phase, thresholds from the ``<axis>_driver`` sections of the site
+config) and the day's timeline: phase and safety-level changes beside the nodes'
+warnings and errors (``/rosout`` lines of level WARN and above, repeats collapsed).
+Pure (no rclpy); plain data for the text, plots and tests.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from sslfr_common import accuracy as accuracy_mod
+from sslfr_common.accuracy import MOVE_CAP, MOVE_RATE, SETTLE  # noqa: F401 - one definition (the alarm's)
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, TRACKER_TRAJECTORY, LinkState
 
 from .day import TOPICS, Day, read_day, reference
 from .report_energy import energy_estimate
 
 MAX_GAP_S = 120.0
-#: a setpoint moving faster than this is a deliberate move, not sun tracking [rad/s]: the
-#: longitudinal laws' jump bound (0.05 deg in 1 s, docs/optics.md), ten times the fastest
-#: sun-following axis rate (~0.004 deg/s)
-MOVE_RATE = math.radians(0.05)
-#: a move ends when the axis is back within this of its setpoint [rad] (~10 motor steps)
-SETTLE = 1e-3
-#: a move not settled after this long ends anyway: what follows counts as tracking error [s]
-MOVE_CAP = 300.0
+#: rcl_interfaces/msg/Log levels: the timeline lists WARN and above
+LOG_LEVELS = {10: 'DEBUG', 20: 'INFO', 30: 'WARN', 40: 'ERROR', 50: 'FATAL'}
+LOG_WARN = 30
 
 
 #: the topics the report reads (not the trajectories, not the diagnostics)
@@ -75,6 +76,10 @@ class DayReport:
     irradiance: dict = field(default_factory=dict)
     links: dict = field(default_factory=dict)             # axis -> dict
     energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'achieved_kwh', 'note'
+    accuracy: dict = field(default_factory=dict)          # axis -> accuracy_of() dict
+    timeline: list = field(default_factory=list)          # (t, kind, text, repeats, last_t), time order
+    log_counts: dict = field(default_factory=dict)        # (level name, node) -> lines
+    has_rosout: bool = False                              # the bag holds /rosout
     series: dict = field(default_factory=dict, repr=False)
 
 
@@ -190,6 +195,69 @@ def _ideal(day: Day, config: str | None):
                  'parameters from ' + (str(config) if config else 'the planner defaults') + ', site from the bag')
 
 
+def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfig:
+    """The accuracy alarm's thresholds of ``axis``: the driver's defaults, overlaid with
+    the ``<axis>_driver`` section of a site params file (judged as ``sslfr up`` does)."""
+    from sslfr_bringup import nodeset
+    p = {spec.name: spec.default for spec in accuracy_mod.PARAM_SPECS}
+    if config:
+        flat = nodeset.node_params(nodeset.checked_params(nodeset.load(), nodeset.resolve_config(config)),
+                                   f'{axis}_driver')
+        p.update({k: float(v) for k, v in flat.items() if k in p})
+    return accuracy_mod.AccuracyConfig.from_params(p)
+
+
+def accuracy_of(axis: str, t: np.ndarray, v: dict, phases, config: str | None = None) -> dict:
+    """The driver's accuracy alarm replayed on the recorded status samples of ``axis``
+    (times [s], the status' state / setpoint / measured [rad], the planner's phase in
+    force at each sample (-1: none before it)): time [s] at or above each level, time
+    judged (tracking), the largest filtered error [rad] and the level changes
+    [(t, level, line)]."""
+    alarm = accuracy_mod.AccuracyAlarm(axis, accuracy_config(axis, config))
+    changes = []
+    for ti, state, phase, sp, me in zip(t, v['state'], phases, v['setpoint'], v['measured']):
+        change = alarm.sample(float(ti), accuracy_mod.tracking(state, int(phase)), float(sp), float(me))
+        if change:
+            changes.append((float(ti), *change))
+    c = alarm.cfg
+    return {'warn_s': alarm.time_above[accuracy_mod.WARN], 'error_s': alarm.time_above[accuracy_mod.ERROR],
+            'judged_s': alarm.judged_time, 'peak': alarm.peak, 'warn': c.warn, 'error': c.error,
+            'window': c.window, 'changes': changes}
+
+
+def timeline(pt, pv, st, sv, logs) -> tuple[list, dict]:
+    """The day's events in time order: phase changes, safety-level changes (with their
+    reasons) and the nodes' log lines of level WARN and above (``logs``: (t [s], level,
+    node, text)). A line repeating the previous line of the same node and level is
+    counted on it (repeats, last time). Returns (entries (t, kind, text, repeats,
+    last_t), counts {(level name, node): lines})."""
+    out, counts = [], {}
+    for i in range(len(pt)):
+        if i == 0 or pv['phase'][i] != pv['phase'][i - 1]:
+            reason = str(pv['reason'][i])
+            out.append([float(pt[i]), 'phase', PHASE_NAMES.get(int(pv['phase'][i]), '?')
+                        + (f' ({reason})' if reason else ''), 1, float(pt[i])])
+    for i in range(len(st)):
+        if i == 0 or sv['level'][i] != sv['level'][i - 1]:
+            reasons = '; '.join(sv['reasons'][i])
+            out.append([float(st[i]), 'safety', LEVEL_NAMES.get(int(sv['level'][i]), '?')
+                        + (f': {reasons}' if reasons else ''), 1, float(st[i])])
+    last: dict = {}
+    for t, level, node, text in sorted(logs, key=lambda x: x[0]):
+        name = LOG_LEVELS.get(level, str(level))
+        counts[(name, node)] = counts.get((name, node), 0) + 1
+        prev = last.get((level, node))
+        if prev is not None and prev[2] == f'{node}: {text}':
+            prev[3] += 1
+            prev[4] = t
+            continue
+        entry = [t, name, f'{node}: {text}', 1, t]
+        last[(level, node)] = entry
+        out.append(entry)
+    out.sort(key=lambda e: e[0])
+    return [tuple(e) for e in out], counts
+
+
 def analyse(source, config: str | None = None) -> DayReport:
     """The report's figures of a recorded day: ``source`` a :class:`~.day.Day`, a
     :class:`BagReader` or a bag path (decoded once, :func:`~.day.read_day`); ``config``
@@ -267,6 +335,9 @@ def analyse(source, config: str | None = None) -> DayReport:
                            'frames_lost': int(v['frames_lost'].max() - v['frames_lost'][0]) if len(t) else 0,
                            'frames_bad': int(v['frames_bad'].max() - v['frames_bad'][0]) if len(t) else 0,
                            'fault_samples': int(np.sum(v['fault_bits'] != 0))}
+        phases = np.asarray(pv['phase'])[np.clip(np.searchsorted(pt, t, side='right') - 1, 0, None)] \
+            if len(pt) else np.full(len(t), -1)
+        rep.accuracy[axis] = accuracy_of(axis, t, v, phases, config)
     if not rep.tracking:
         for axis, s in day.joints.items():
             rep.series[f'joint_{axis}'] = (s.t, s.cols)
@@ -290,6 +361,11 @@ def analyse(source, config: str | None = None) -> DayReport:
                           'H_kWh_m2': beam_irradiation(bt, g), 'saturated': int(np.sum(day.beam['saturated']))}
         rep.series['beam'] = (bt, g)
     rep.series['phase'] = (pt, pv['phase'])
+    lg = day.logs
+    logs = [(float(t), int(lvl), str(n), str(m)) for t, lvl, n, m in zip(lg.t, lg['level'], lg['name'], lg['msg'])
+            if int(lvl) >= LOG_WARN] if len(lg) else []
+    rep.timeline, rep.log_counts = timeline(pt, pv, st, sv, logs)
+    rep.has_rosout = day.has_rosout
     if len(bt) > 1:
         rep.energy = energy_estimate(rep.site, bt, day.beam['g'].astype(float),
                                      {a: (s.t, s.cols) for a, s in day.axes.items() if len(s)}, config)

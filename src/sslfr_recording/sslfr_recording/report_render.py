@@ -8,8 +8,12 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import JOINT_STATES, JOINTS
+from sslfr_common.tracking_loss import loss_text
 
 from .report import MOVE_CAP, DayReport
+
+#: the timeline's longest listing in the text (the counts cover the rest)
+TIMELINE_MAX = 300
 
 
 def utc(t: float, fmt: str = '%H:%M:%S') -> str:
@@ -89,7 +93,37 @@ def render_text(rep: DayReport) -> str:
         lines.append(f'link            {axis}: {lk["drops"]} drop(s), not up {lk["time_not_up"]:.0f} s, '
                      f'{lk["frames_lost"]} frames lost, {lk["frames_bad"]} bad, '
                      f'{lk["fault_samples"]} samples with fault bits')
+    if rep.accuracy:
+        a0 = next(iter(rep.accuracy.values()))
+        lines.append(f'accuracy alarm  time above {math.degrees(a0["warn"]):.2f} deg (WARN) / '
+                     f'{math.degrees(a0["error"]):.2f} deg (ERROR), RMS over {a0["window"]:g} s while tracking')
+    for axis, a in rep.accuracy.items():
+        lines.append(f'  {axis:<20} {a["warn_s"]:8.0f} s / {a["error_s"]:6.0f} s of {a["judged_s"]:.0f} s judged; '
+                     f'largest {math.degrees(a["peak"]):.3f} deg'
+                     + (f' ({loss_text(a["peak"], axis)})' if a['peak'] > a['warn'] else ''))
+    lines += render_timeline(rep)
     return '\n'.join(lines)
+
+
+def render_timeline(rep: DayReport) -> list[str]:
+    """The timeline section: counts of log lines per level and node, then the events
+    (at most :data:`TIMELINE_MAX`)."""
+    lines = ['timeline (UTC): phase and safety changes, the nodes\' warnings and errors (/rosout)']
+    if rep.log_counts:
+        by_level: dict = {}
+        for (level, node), n in sorted(rep.log_counts.items()):
+            by_level.setdefault(level, []).append((node, n))
+        lines.append('  log lines: ' + '; '.join(f'{lvl} {sum(n for _, n in v)} ('
+                                                  + ', '.join(f'{node} {n}' for node, n in v) + ')'
+                                                  for lvl, v in by_level.items()))
+    else:
+        lines.append('  log lines: no warning or error in /rosout' if rep.has_rosout else '  log lines: none recorded')
+    for t, kind, text, repeats, last_t in rep.timeline[:TIMELINE_MAX]:
+        more = f' (x{repeats} until {utc(last_t)})' if repeats > 1 else ''
+        lines.append(f'  {utc(t)}  {kind:<6} {text}{more}')
+    if len(rep.timeline) > TIMELINE_MAX:
+        lines.append(f'  ... {len(rep.timeline) - TIMELINE_MAX} more entries (see the counts above)')
+    return lines
 
 
 def _decimate(t, y, n=20000):

@@ -353,6 +353,47 @@ def test_report_figures_on_a_known_day(tmp_path):
         assert (tmp_path / 'r' / f'{png}.png').stat().st_size > 5000 and f'({png}.png)' in md
 
 
+def test_report_accuracy_times_and_timeline_of_warnings(tmp_path):
+    """A known error profile: 0.1 deg from 10:00, 0.5 deg from 10:30, 0 from 10:40 (the
+    mirrors following): by hand, the 60 s RMS passes 0.06 deg at 10:00:22 (sqrt(k/60) 0.1
+    > 0.06), 0.36 deg at 10:30:30, falls below 0.8 x 0.36 at 10:40:41 and below
+    0.8 x 0.06 at 10:41:00; and /rosout lines listed at their log times beside the phase
+    and safety changes, repeats collapsed, INFO left out."""
+    from daybag import DAY0, STOW, write_day
+
+    from sslfr_recording import report, report_render
+    h10 = DAY0 + 10 * 3600
+
+    def err(t):
+        return math.radians(0.1 if h10 <= t < h10 + 1800 else 0.5 if h10 + 1800 <= t < h10 + 2400 else 0.0)
+    logs = [(h10 + 22.5, 30, 'mirrors_driver', 'mirrors: tracking error 0.061 deg ...'),
+            (h10 + 100.0, 20, 'planner', 'an INFO line'),
+            (STOW[0] + 0.2, 40, 'safety', 'STOW: absorber: outlet 152.0 degC > 150 degC'),
+            *[(STOW[0] + k, 30, 'mirrors_driver', 'link lost') for k in (1, 2, 3)],
+            (STOW[0] + 4, 30, 'safety', 'link lost')]
+    write_day(tmp_path / 'd', h10 - 600, STOW[1] + 60, error_of=err, state='following', logs=logs)
+    rep = report.analyse(BagReader(tmp_path / 'd'))
+    acc = rep.accuracy['mirrors']
+    assert acc['warn_s'] == pytest.approx(41 * 60 - 22, abs=2)
+    assert acc['error_s'] == pytest.approx(10 * 60 + 41 - 30, abs=2)
+    assert math.degrees(acc['peak']) == pytest.approx(0.5, abs=1e-6)
+    assert [lvl for _, lvl, _ in acc['changes']] == [1, 2, 1, 0]
+    kinds = [(report_render.utc(t), kind, text, n) for t, kind, text, n, _ in rep.timeline]
+    assert ('10:00:22', 'WARN', 'mirrors_driver: mirrors: tracking error 0.061 deg ...', 1) in kinds
+    assert ('13:00:00', 'safety', 'STOW: absorber: outlet 152.0 degC > 150 degC', 1) in kinds
+    assert ('13:00:00', 'ERROR', 'safety: STOW: absorber: outlet 152.0 degC > 150 degC', 1) in kinds
+    assert ('13:00:01', 'WARN', 'mirrors_driver: link lost', 3) in kinds      # repeats collapsed
+    assert ('13:00:04', 'WARN', 'safety: link lost', 1) in kinds
+    assert ('13:10:00', 'safety', 'OK', 1) in kinds
+    assert not any('INFO' in k[2] for k in kinds)
+    assert [k[0] for k in kinds] == sorted(k[0] for k in kinds)
+    assert rep.log_counts == {('WARN', 'mirrors_driver'): 4, ('ERROR', 'safety'): 1, ('WARN', 'safety'): 1}
+    text = report_render.render_text(rep)
+    assert f'mirrors              {acc["warn_s"]:8.0f} s / {acc["error_s"]:6.0f} s of ' in text, text
+    assert '13:00:01  WARN   mirrors_driver: link lost (x3 until 13:00:03)' in text
+    assert 'log lines: ERROR 1 (safety 1); WARN 5 (mirrors_driver 4, safety 1)' in text
+
+
 def test_playback_helpers():
     from sslfr_recording.bag.playback import Timeline, parse_time_spec
     from sslfr_recording.replay import remap_table
@@ -422,3 +463,16 @@ def test_bag_info_prints_what_ros2_bag_info_prints(tmp_path, monkeypatch, capsys
         '                   /u2: reliable volatile keep_last 10 (1 publisher(s))',
     ]
     assert format_size(size).endswith(' KiB') and format_size(512) == '512 B' and format_size(1536) == '1.5 KiB'
+
+
+def test_recorder_keeps_rosout_but_not_its_own_history():
+    """/rosout is recorded like any topic; lines older than the recorder (a publisher's
+    transient-local history re-sent to a restarted recorder) are not."""
+    from sslfr_recording.bag import recorder_config as rc
+    assert rc.wanted('/rosout', [], ['/clock'])
+    assert not rc.wanted('/parameter_events', [], [])
+    assert not rc.wanted('/rosout', [], ['/rosout'])          # still excludable
+    start = 1_782_000_000 * 10**9
+    assert rc.log_line_kept(start + 1, start) and rc.log_line_kept(start, start)
+    assert not rc.log_line_kept(start - 5 * 10**9, start)
+    assert rc.log_line_kept(0, start)                          # no source timestamp: kept

@@ -11,6 +11,8 @@ here with one line each.
 
 KINDS: dict[str, str] = {
     'axis': 'sslfr_sim.axis:AxisSim',
+    'actuator': 'sslfr_sim.actuator:ActuatorSim',
+    'axis_noswitch': 'sslfr_sim.switchless:SwitchlessAxisSim',
     'gps': 'sslfr_sim.sensors:GpsSim',
     'absorber': 'sslfr_sim.sensors:AbsorberSim',
     'irradiance': 'sslfr_sim.sensors:IrradianceSim',

@@ -23,7 +23,9 @@ Model
   closes, except the switch a HOME is looking for.
 * Position sensor (inclinometer/encoder): ``angle + N(0, sensor_noise)`` [rad].
 * Faults: ``stalled`` (counter advances, joint does not), watchdog (1 s silence ->
-  decelerate to stop, fault WATCHDOG), reset (power cycle).
+  decelerate to stop, fault WATCHDOG), reset (power cycle), a slipping coupling
+  (:meth:`AxisSim.slip`: the joint, and so the sensor, turns away from the motor at a
+  steady rate until the slip is complete; the counter does not see it).
 """
 from __future__ import annotations
 
@@ -81,6 +83,8 @@ class AxisSim(SimBoard):
         c = self.cfg
         self.angle = c.sleep if c.initial_angle is None else c.initial_angle
         self.stalled = False
+        self.slip_left = 0.0         # [rad] of a slipping coupling still to come
+        self.slip_rate = 0.0         # [rad/s] its rate (wall time, as the motion)
         super().__init__(board_id=board_id, rng=rng, **kw)
         axis = m.ConfigRecord.AXES.index(c.axis) if c.axis in m.ConfigRecord.AXES else 0
         self.config = dataclasses.replace(self.config, axis=axis, max_speed=c.max_speed, accel=c.accel)
@@ -253,10 +257,23 @@ class AxisSim(SimBoard):
         self.homed = True
         self.faults &= ~m.FaultBits.RESET
 
+    def slip(self, angle: float, duration: float) -> None:
+        """Let the coupling slip: the joint turns ``angle`` [rad] relative to the motor,
+        at a steady rate over ``duration`` [s of the board's time], and stays there (the
+        step counter does not see it; the sensor does). A power cycle does not undo it."""
+        if duration <= 0:
+            raise ValueError('slip duration must be > 0 s')
+        self.slip_left += angle
+        self.slip_rate = abs(self.slip_left) / duration
+
     def update(self, dt: float) -> None:
         if dt <= 0:
             return
         c = self.cfg
+        if self.slip_left:
+            d = math.copysign(min(abs(self.slip_left), self.slip_rate * dt), self.slip_left)
+            self.slip_left -= d
+            self.angle = min(max(self.angle + d, c.lo - c.overtravel), c.hi + c.overtravel)
         # integrate in sub-steps of <= 2 ms so switches are not jumped over
         n = max(1, int(math.ceil(dt / 0.002)))
         h = dt / n

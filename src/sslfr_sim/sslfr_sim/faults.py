@@ -12,6 +12,9 @@ is a simulated duration, > 0)::
                                                for the rest of the run
     hang:NODE@HH:MM                            SIGSTOP the process of a node (its
                                                executor stops as in a deadlock)
+    slip:AXIS@HH:MM+SECONDS:DEG                the axis' coupling slips: the joint (and its
+                                               encoder) turns DEG away from the motor over
+                                               SECONDS, and stays there
 
 BOARD is a board of the node set (``mirrors``, ``mobile_structure``,
 ``secondary_reflector``, ``gps``, ``absorber``, ``irradiance``); NODE a node name.
@@ -36,6 +39,10 @@ hang                no executor beat: the supervisor SIGKILLs the process within
                     its watchdog_timeout (5 s) and restarts it; meanwhile safety
                     stows if the node is a watched one (or, safety hung, the axes
                     stop on their own heartbeat watchdog); then tracking resumes
+slip                the axis' accuracy alarm: WARN past 0.06 deg, ERROR past
+                    0.36 deg (``<axis>_driver: accuracy`` diagnostics, log);
+                    past ``lost_step_tolerance`` (0.29 deg by default) the
+                    driver's lost-step check faults the axis
 ==================  ==========================================================
 """
 from __future__ import annotations
@@ -45,7 +52,7 @@ from dataclasses import dataclass
 
 from sslfr_common.contract import JOINTS, MIRRORS
 
-KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang')
+KINDS = ('overtemp', 'thermocouple-open', 'link-drop', 'board-reset', 'gps-loss', 'kill', 'hang', 'slip')
 #: kind -> (target required?, duration: 'required' | 'optional' | 'forbidden')
 _RULES = {
     'overtemp': (False, 'optional'),
@@ -55,6 +62,7 @@ _RULES = {
     'gps-loss': (False, 'required'),
     'kill': (True, 'optional'),
     'hang': (True, 'forbidden'),
+    'slip': (True, 'required'),
 }
 DEFAULT_BOARDS = (*JOINTS, 'gps', 'absorber', 'irradiance')
 #: board each sensor fault is fired at
@@ -62,7 +70,8 @@ FAULT_BOARD = {'overtemp': 'absorber', 'thermocouple-open': 'absorber', 'gps-los
 
 _SPEC = re.compile(r'^(?P<kind>[a-z-]+)(?::(?P<target>[A-Za-z0-9_/]+))?'
                    r'@(?P<hh>\d{1,2}):(?P<mm>\d{2})(?::(?P<ss>\d{2}(?:\.\d+)?))?'
-                   r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?$')
+                   r'(?:\+(?P<dur>\d+(?:\.\d*)?|\.\d+))?'
+                   r'(?::(?P<amount>[-+]?(?:\d+(?:\.\d*)?|\.\d+)))?$')
 
 
 class FaultSpecError(ValueError):
@@ -92,6 +101,7 @@ class Fault:
     target: str | None
     duration: float | None
     spec: str
+    amount: float | None = None     # slip: the joint's angle away from the motor [deg]
 
     @property
     def end(self) -> float | None:
@@ -101,7 +111,7 @@ class Fault:
     @property
     def board(self) -> str | None:
         """The simulated board that receives this fault (None for ``kill``, ``hang``)."""
-        if self.kind in ('link-drop', 'board-reset'):
+        if self.kind in ('link-drop', 'board-reset', 'slip'):
             return self.target
         return FAULT_BOARD.get(self.kind)
 
@@ -111,7 +121,7 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
     text = spec.strip()
     m = _SPEC.match(text)
     if not m:
-        raise FaultSpecError(f'fault {spec!r}: expected KIND[:TARGET]@HH:MM[:SS][+SECONDS], '
+        raise FaultSpecError(f'fault {spec!r}: expected KIND[:TARGET]@HH:MM[:SS][+SECONDS][:DEG], '
                              f'KIND one of {", ".join(KINDS)}')
     kind, target, dur = m['kind'], m['target'], m['dur']
     if kind not in _RULES:
@@ -132,7 +142,9 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
                              f'{"+60" if dur_rule == "required" else ""})')
     elif not needs_target and target:
         raise FaultSpecError(f'fault {spec!r}: {kind} takes no target')
-    if kind in ('link-drop', 'board-reset') and target not in boards:
+    if kind == 'slip' and target not in JOINTS:
+        raise FaultSpecError(f'fault {spec!r}: slip needs an axis ({", ".join(JOINTS)}), not {target!r}')
+    if kind in ('link-drop', 'board-reset', 'slip') and target not in boards:
         raise FaultSpecError(f'fault {spec!r}: unknown board {target!r} (known: {", ".join(boards)})')
     if kind in ('kill', 'hang') and nodes is not None and target not in nodes:
         raise FaultSpecError(f'fault {spec!r}: unknown node {target!r} (known: {", ".join(nodes)})')
@@ -143,7 +155,14 @@ def parse(spec: str, boards=DEFAULT_BOARDS, nodes=None) -> Fault:
         raise FaultSpecError(f'fault {spec!r}: {kind} is instantaneous, no +SECONDS')
     if duration is not None and not duration > 0:
         raise FaultSpecError(f'fault {spec!r}: duration must be > 0 s')
-    return Fault(kind=kind, at=hh * 3600.0 + mm * 60.0 + ss, target=target, duration=duration, spec=text)
+    amount = float(m['amount']) if m['amount'] is not None else None
+    if kind == 'slip' and (amount is None or amount == 0 or abs(amount) > 90):
+        raise FaultSpecError(f'fault {spec!r}: slip needs the slipped angle in degrees, 0 < |DEG| <= 90: '
+                             'slip:AXIS@HH:MM+SECONDS:DEG')
+    if kind != 'slip' and amount is not None:
+        raise FaultSpecError(f'fault {spec!r}: {kind} takes no :DEG after its duration')
+    return Fault(kind=kind, at=hh * 3600.0 + mm * 60.0 + ss, target=target, duration=duration, spec=text,
+                 amount=amount)
 
 
 def format_fault(f: Fault) -> str:
@@ -155,7 +174,8 @@ def format_fault(f: Fault) -> str:
         when += f':{int(ss):02d}' if ss == int(ss) else f':{ss:05.2f}'
     target = f':{f.target}' if f.target and not (f.kind == 'thermocouple-open' and f.target == 'outlet') else ''
     dur = '' if f.duration is None else f'+{f.duration:g}'
-    return f'{f.kind}{target}@{when}{dur}'
+    amount = '' if f.amount is None else f':{f.amount:g}'
+    return f'{f.kind}{target}@{when}{dur}{amount}'
 
 
 class Schedule:

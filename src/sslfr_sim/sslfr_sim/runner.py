@@ -25,6 +25,8 @@ of an XBee sim, default all)::
     stall on|off            steps are counted but the joint does not move
     reset                   power-cycle the board (position lost, BOOT sent)
     set_angle DEG           move the joint by hand (board not told) [deg]
+    slip DEG SECONDS        the coupling slips: the joint turns DEG away from the motor
+                            over SECONDS (wall) and stays there
     {"cmd": ...}            a JSON object: passed to the board model's control()
                             (sensor boards, see sim.sensors), "board": ADDR|INDEX
     quit                    exit
@@ -235,6 +237,11 @@ class Runner:
                 board.stalled = args[0] in ('on', '1', 'true')
             elif cmd == 'reset':
                 board.reset()
+            elif cmd == 'slip':
+                import math
+                if not hasattr(board, 'slip'):
+                    return {'ok': False, 'error': f'board {board.name} has no coupling to slip'}
+                board.slip(math.radians(float(args[0])), float(args[1]))
             elif cmd == 'set_angle':
                 import math
                 board.angle = math.radians(float(args[0]))
@@ -298,7 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog='sim_board', description='Simulated SSLFR board(s) on a real pty.',
         epilog='Control commands (one line on --control): status, drop P, corrupt P, '
                'corrupt_frames P, disconnect S, unplug S, stall on|off, reset, '
-               'set_angle DEG, quit; suffix @ADDR selects one XBee board.')
+               'set_angle DEG, slip DEG SECONDS, quit; suffix @ADDR selects one XBee board.')
     p.add_argument('--kind', default='axis', help='board kind (plain mode): axis, ...')
     p.add_argument('--axis', default=MIRRORS, help=f'axis name for kind axis: {"|".join(JOINTS)}')
     p.add_argument('--opt', action='append', default=[], metavar='KEY=VALUE',

@@ -119,6 +119,8 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
         return [f'disconnect {f.duration / speed:.3f}'] if active else []
     if f.kind == 'board-reset':
         return ['reset'] if active else []
+    if f.kind == 'slip':     # the slip stays after its duration (the coupling is not repaired)
+        return [f'slip {f.amount:g} {f.duration / speed:.3f}'] if active else []
     cmd = {'cmd': 'fault', 'kind': f.kind, 'active': active}
     if f.kind == 'thermocouple-open':
         cmd['target'] = f.target
@@ -312,6 +314,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     for f in faults:
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
             print(f'sslfr sim: fault {f.spec}: board {f.board} is not simulated in this node set', file=sys.stderr)
+            return 2
+        if f.kind == 'slip' and args.boards == 'firmware':
+            print(f'sslfr sim: fault {f.spec}: a slipping coupling is simulated by the Python boards only '
+                  '(--boards sim), not by the firmware harness', file=sys.stderr)
             return 2
     out = Path(args.out or f'out/sim-{date}').resolve()
     out.mkdir(parents=True, exist_ok=True)

@@ -42,21 +42,34 @@ def test_parse_each_kind(spec, kind, at, target, duration, board):
     ('hang:nobody@10:00', 'unknown node'),
     ('hang:planner@10:00+30', 'instantaneous'),
     ('thermocouple-open:middle@10:00', 'inlet or outlet'),
+    ('slip:mirrors@10:00+60', 'slipped angle'),
+    ('slip:mirrors@10:00+60:0', 'slipped angle'),
+    ('slip:mirrors@10:00+60:91', 'slipped angle'),
+    ('slip:gps@10:00+60:0.5', 'needs an axis'),
+    ('slip:mirrors@10:00:0.5', 'needs a duration'),
+    ('link-drop:mirrors@10:00+5:0.5', 'takes no :DEG'),
 ])
 def test_bad_specs_are_refused_with_the_reason(spec, needle):
     with pytest.raises(FaultSpecError, match=needle):
         parse(spec, nodes=['planner', 'safety'])
 
 
+def test_slip_spec():
+    f = parse('slip:secondary_reflector@10:05+600:-0.5')
+    assert (f.kind, f.at, f.target, f.duration, f.amount, f.board) == \
+        ('slip', 36300.0, 'secondary_reflector', 600.0, -0.5, 'secondary_reflector')
+    assert format_fault(f) == 'slip:secondary_reflector@10:05+600:-0.5'
+
+
 @given(kind=st.sampled_from(faults.KINDS), at=st.integers(0, 86399), dur=st.integers(1, 7200),
        board=st.sampled_from(faults.DEFAULT_BOARDS))
 def test_format_parse_round_trip(kind, at, dur, board):
     target = {'link-drop': board, 'board-reset': board, 'kill': 'planner', 'hang': 'safety',
-              'thermocouple-open': 'inlet'}.get(kind)
+              'thermocouple-open': 'inlet', 'slip': 'mirrors'}.get(kind)
     duration = None if kind in ('board-reset', 'hang') else float(dur)
-    f = Fault(kind, float(at), target, duration, '')
+    f = Fault(kind, float(at), target, duration, '', amount=0.25 if kind == 'slip' else None)
     g = parse(format_fault(f))
-    assert (g.kind, g.at, g.target, g.duration) == (f.kind, f.at, f.target, f.duration)
+    assert (g.kind, g.at, g.target, g.duration, g.amount) == (f.kind, f.at, f.target, f.duration, f.amount)
 
 
 def test_schedule_returns_each_start_and_end_once_in_order():
@@ -77,3 +90,15 @@ def test_sim_set_option_parses_yaml_values():
     for bad in ('planner=1', 'planner:x', 'ghost:x=1'):
         with pytest.raises(ValueError):
             parse_set(bad, ['planner'])
+
+
+def test_sim_refuses_a_slip_on_firmware_boards(tmp_path, capsys):
+    """The slipping coupling is a model of the Python boards: refused (exit 2, one line)
+    before anything starts with --boards firmware."""
+    from sslfr_sim.sim_cli import main
+    code = main(['--boards', 'firmware', '--fault', 'slip:mirrors@10:00+60:0.5', '--out', str(tmp_path / 'o'),
+                 '--start', '10:00', '--end', '10:05'])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert 'slipping coupling is simulated by the Python boards only' in err, err
+    assert not (tmp_path / 'o').exists()

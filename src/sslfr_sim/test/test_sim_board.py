@@ -127,6 +127,28 @@ def test_reset_loses_position_and_stall(board):
     assert abs(st.sensor_angle - before) < math.radians(0.02)   # joint did not move
 
 
+def test_slipping_coupling_turns_the_joint_not_the_counter(board):
+    """``slip DEG SECONDS``: the joint (and its sensor) turns DEG away from the motor at a
+    steady rate over SECONDS and stays there; the step counter does not see it."""
+    link, ctl = board
+    link.set_zero(15000)
+    before = ctl.cmd('status')['boards'][0]
+    assert ctl.cmd('slip -0.5 1.0') == {'ok': True}
+    with pytest.raises(RuntimeError, match='could not convert'):     # malformed: refused, board goes on
+        ctl.cmd('slip 0.1 oops')
+    half = wait_for(lambda: abs(ctl.cmd('status')['boards'][0]['angle'] - before['angle']) > math.radians(0.1), 2)
+    assert half
+    mid = ctl.cmd('status')['boards'][0]['angle'] - before['angle']
+    assert math.radians(-0.5) < mid < 0, 'under way, at a steady rate'
+    time.sleep(1.2)
+    s = ctl.cmd('status')['boards'][0]
+    assert s['angle'] - before['angle'] == pytest.approx(math.radians(-0.5), abs=1e-9)
+    assert s['counter'] == before['counter'] == 15000
+    st = link.get_status()
+    assert st.position == 15000
+    assert abs(st.sensor_angle - (math.pi / 2 - math.radians(0.5))) < math.radians(0.02)
+
+
 def test_cli_help():
     out = subprocess.run([sys.executable, '-m', 'sslfr_sim.runner', '--help'],
                          capture_output=True, text=True, timeout=20)

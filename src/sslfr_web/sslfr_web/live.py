@@ -12,6 +12,12 @@ theta_t / 2 from ``tracker/sun`` (seed 000 eq. 11), absorber temperatures, beam
 irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
 planner's day), so a reload of the page shows the day so far.
 
+Each axis' accuracy alarm (:class:`sslfr_common.accuracy.AccuracyAlarm`, the
+driver's own filter) is fed every ``axes/<axis>/status`` the page receives, with the
+driver's thresholds read from its parameters (``<axis>.accuracy_*`` in ``info``), so
+the page shows the level, the filtered error and the estimated optical loss the
+driver's ``diagnostics`` show, without subscribing to ``diagnostics``.
+
 :func:`clear_hint` says how to clear each safety reason: the hint of the rule that
 gives it (:mod:`sslfr_safety.rules`).
 """
@@ -25,6 +31,7 @@ from typing import Any, Callable
 
 from sslfr_common.contract import JOINTS
 from sslfr_common.timeconv import to_sec
+from sslfr_common import accuracy as accuracy_mod
 from sslfr_safety.rules import hint_for
 
 LEVELS = ('OK', 'WARN', 'STOW', 'ESTOP')
@@ -136,6 +143,7 @@ class LiveState:
         self._arrived: dict[str, float] = {}
         self.version = 0
         self.info: dict[str, Any] = {}          # remote parameters (limits, geometry), static-ish
+        self.accuracy = {a: accuracy_mod.AccuracyAlarm(a) for a in self.axes}
 
     def _set(self, key: str, msg: Any) -> None:
         now = self.wall()
@@ -153,6 +161,11 @@ class LiveState:
     def on_axis(self, m) -> None:
         if m.axis in self.axes:
             self._set(f'axes/{m.axis}', m)
+            with self._lock:
+                phase = self._msgs.get('phase')
+                self.accuracy[m.axis].sample(to_sec(m.header.stamp),
+                                             accuracy_mod.tracking(m.state, None if phase is None else phase.phase),
+                                             m.setpoint, m.measured)
 
     def on_sun(self, m) -> None:
         self._set('sun', m)
@@ -171,6 +184,12 @@ class LiveState:
             if self.info.get(key) != value:
                 self.info[key] = value
                 self.version += 1
+                axis, _, name = key.partition('.')
+                if axis in self.accuracy and name.startswith('accuracy.'):   # the driver's thresholds
+                    p = {spec.name: self.info.get(f'{axis}.{spec.name}', spec.default)
+                         for spec in accuracy_mod.PARAM_SPECS}
+                    if not accuracy_mod.cross_check(p):
+                        self.accuracy[axis].configure(accuracy_mod.AccuracyConfig.from_params(p))
 
     def get(self, key: str, sub: str | None = None) -> Any:
         """The latest message of ``key`` (``sub``: axis or sensor name) as a dict, or None."""
@@ -185,7 +204,9 @@ class LiveState:
             msgs = dict(self._msgs)
             out: dict[str, Any] = {'ages': {k: round(now - t, 3) for k, t in self._arrived.items()},
                                    'info': dict(self.info), 'server_time': now, 'ros_time': ros_time,
-                                   'version': self.version}
+                                   'version': self.version,
+                                   'accuracy': {a: {'message': alarm.text(), **alarm.values()}
+                                                for a, alarm in self.accuracy.items()}}
         for key in self.NESTED:
             out[key] = {}
         for key, msg in msgs.items():

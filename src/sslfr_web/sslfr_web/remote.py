@@ -2,7 +2,8 @@
 
 The page shows the absorber against the safety node's ``temperature.limit``, draws
 the collector with the planner's geometry, bounds a jog by each driver's ``max_jog``
-and soft limits, and lists the bags in the recorder's ``output_dir``. Rather than a
+and soft limits, judges each axis' accuracy with the driver's ``accuracy.*`` thresholds,
+and lists the bags in the recorder's ``output_dir``. Rather than a
 second copy of those values in the web node's configuration, it asks each node over
 its standard ``<node>/get_parameters`` service (the node names of
 config/nodeset.yaml; tested) and keeps the last answer.
@@ -12,6 +13,9 @@ from __future__ import annotations
 from typing import Any
 
 from sslfr_common.contract import JOINTS
+from sslfr_common.accuracy import PARAM_SPECS
+
+ACCURACY_PARAMS = tuple(spec.name for spec in PARAM_SPECS)
 
 #: node -> {parameter: key in LiveState.info}
 REMOTE_PARAMS: dict[str, dict[str, str]] = {
@@ -22,7 +26,8 @@ REMOTE_PARAMS: dict[str, dict[str, str]] = {
                 'collector.central_mirror': 'central_mirror', 'collector.azimuth': 'collector_azimuth'},
     'recorder': {'output_dir': 'bag_dir'},
     **{f'{axis}_driver': {'max_jog': f'{axis}.max_jog', 'lower_limit': f'{axis}.lower_limit',
-                          'upper_limit': f'{axis}.upper_limit', 'jog_speed': f'{axis}.jog_speed'}
+                          'upper_limit': f'{axis}.upper_limit', 'jog_speed': f'{axis}.jog_speed',
+                          **{name: f'{axis}.{name}' for name in ACCURACY_PARAMS}}
        for axis in JOINTS},
 }
 

@@ -290,6 +290,43 @@ def _core():
     return SafetyCore(SafetyConfig(), clock), clock
 
 
+def test_live_state_shows_each_axis_accuracy_alarm_with_the_drivers_thresholds():
+    """The page's accuracy column: the driver's filter on the statuses the page receives,
+    with the driver's thresholds once its parameters are read (remote.REMOTE_PARAMS)."""
+    import json
+    import math
+
+    from sslfr_interfaces.msg import AxisStatus, TrackerPhase
+    s = live.LiveState()
+    assert remote.REMOTE_PARAMS['mirrors_driver']['accuracy.warn_threshold'] == 'mirrors.accuracy.warn_threshold'
+
+    def status(t, err, state='following'):
+        m = AxisStatus(axis='mirrors', state=state, setpoint=0.3, measured=0.3 + math.radians(err))
+        m.header.stamp.sec = t
+        return m
+    s.on_axis(status(990, 0.5))
+    assert s.snapshot()['accuracy']['mirrors']['tracking'] is False     # no phase yet: not judged
+    s.on_phase(TrackerPhase(phase=TrackerPhase.TRACKING))
+    for t in range(1000, 1010):
+        s.on_axis(status(t, 0.01))
+    snap = s.snapshot()
+    assert snap['accuracy']['mirrors']['level'] == 'OK' and snap['accuracy']['mirrors']['tracking'] is True
+    for t in range(1010, 1100):
+        s.on_axis(status(t, 0.1))
+    acc = s.snapshot()['accuracy']['mirrors']
+    assert acc['level'] == 'WARN' and 'estimated optical loss' in acc['estimated_loss'] and '> 0.060 deg' in acc['message']
+    # the driver's own thresholds, read from its parameters: 0.1 deg is now within
+    s.set_info('mirrors.accuracy.warn_threshold', math.radians(0.2))
+    s.on_axis(status(1100, 0.1))
+    assert s.snapshot()['accuracy']['mirrors']['level'] == 'OK'
+    s.set_info('mirrors.accuracy.error_threshold', math.radians(0.1))     # below warn: not applied
+    assert s.accuracy['mirrors'].cfg.error == pytest.approx(math.radians(0.36))
+    s.on_axis(status(1101, 0.1, state='stowing'))
+    acc = s.snapshot()['accuracy']['mirrors']
+    assert acc['tracking'] is False and acc['level'] == 'OK'
+    json.dumps(s.snapshot(), allow_nan=False)
+
+
 def test_every_safety_reason_of_the_real_core_gets_its_own_hint():
     from sslfr_common.contract import JOINTS as AXES
     core, clock = _core()

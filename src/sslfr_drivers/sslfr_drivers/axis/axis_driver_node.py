@@ -4,15 +4,13 @@ One instance per axis (parameter ``axis``; node names ``<axis>_driver``). This f
 only wires ROS to pure code: parameters :mod:`.params`, decisions
 :class:`.supervisor.AxisSupervisor`, trajectory :mod:`.trajectory`, lifecycle policy
 :mod:`.activation` (:mod:`.managed_node`), board I/O :mod:`.board_session`, threads
-:mod:`.control_loop`, messages :mod:`.msgs` (docs/architecture.md). The control step
-(read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in its own thread:
-at ``control_rate`` while something moves, else at the next setpoint step,
-the safety deadline or ``idle_poll_period`` (``AxisSupervisor.next_tick``), at once on a
-trajectory, safety change, mode change, home / jog request or activation. No executor
-callback waits for the board (configure waits at most ``OPEN_WAIT``), so a single-threaded
-executor serves the node, alone or composed. With ``autostart`` it keeps ``active`` by
-itself; every ``change_state`` request gets an answer. One timer publishes
-``axes/<axis>/status`` (every lifecycle state) and ``joint_states``.
+:mod:`.control_loop`, messages :mod:`.msgs`, accuracy alarm ``sslfr_common.accuracy``.
+
+The control step (read STATUS -> ``AxisSupervisor.tick`` -> write one command) runs in
+its own thread (``AxisSupervisor.next_tick``: at ``control_rate`` while something moves,
+at once on any event); no executor callback waits for the board (configure at most
+``OPEN_WAIT``). With ``autostart`` it keeps ``active`` by itself. One timer publishes
+``axes/<axis>/status`` and ``joint_states`` and feeds the accuracy alarm.
 """
 from __future__ import annotations
 
@@ -23,6 +21,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from sensor_msgs.msg import JointState
 from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, AXIS_STATUS, DIAGNOSTICS, JOINT_STATES, SAFETY_STATE,
                                    TRACKER_PHASE, TRACKER_TRAJECTORY, collector_id)
+from sslfr_common.accuracy import AccuracyAlarm, AccuracyConfig
 from sslfr_common.node import ParameterGuard, declare_parameters, qos, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
@@ -69,10 +68,9 @@ class AxisDriver(ManagedNode):
         self.session: AxisBoardSession | None = None
         self.board: BoardState | None = None
         self.active = self.refused = False
-        self._snap = Snapshot()
-        self._pub_n = 0
+        self._snap, self._pub_n = Snapshot(), 0
         self._opening: BackgroundOpen | None = None
-        self.rate = TimeRate()
+        self.rate, self.accuracy = TimeRate(), AccuracyAlarm(self.axis, AccuracyConfig.from_params(p))
 
         self.pub_status = self.create_publisher(AxisStatus, AXIS_STATUS.of(self.axis), qos(AXIS_STATUS))
         self.pub_joint = self.create_publisher(JointState, JOINT_STATES.name, qos(JOINT_STATES))
@@ -104,6 +102,7 @@ class AxisDriver(ManagedNode):
             self.sup.safety.silent_stow_after = p['safety_silent_stow_after']
             self._status_timer.timer_period_ns = int(1e9 * self._publish_period(p))
             self.activation.set_retry(p['retry_period'], p['retry_period_max'])
+            self.accuracy.configure(AccuracyConfig.from_params(p))
 
     # ------------------------------------------------------------ lifecycle
     def on_configure(self, state) -> TransitionCallbackReturn:
@@ -199,7 +198,7 @@ class AxisDriver(ManagedNode):
             self._loop.wake()     # stow / stop / follow again: at once, not at the next poll
 
     def _on_phase(self, msg: TrackerPhase) -> None:
-        mode = operator_mode(msg.phase, msg.mode)
+        mode, self.accuracy.phase = operator_mode(msg.phase, msg.mode), int(msg.phase)   # judged in TRACKING
         with self._lock:
             old = self.sup.mode
             if self.sup.set_mode(mode):
@@ -267,6 +266,7 @@ class AxisDriver(ManagedNode):
         if self._pub_n % max(1, round(fast / p['status_rate'])) == 0:
             self.pub_status.publish(status_msg(self.axis, snap, self.lifecycle_state(), session, self.refused,
                                                self.get_clock().now().to_msg(), self.last_error))
+            self.accuracy.sample_snapshot(snap, self.lifecycle_state(), self.get_logger())   # the status' numbers
 
     def _publish_diagnostics(self) -> None:
         now = steady_now(self.steady)
@@ -283,8 +283,10 @@ class AxisDriver(ManagedNode):
                       'parameter_changes_refused': self.params.refused,
                       'last_refused_parameter': self.params.last_refusal,
                       **(self.session.counters() if self.session is not None else {})}
-        self.pub_diag.publish(diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw,
-                                              values, self.get_clock().now().to_msg()))
+        stamp, acc = self.get_clock().now().to_msg(), self.accuracy       # the alarm: its own status
+        arr = diagnostics_msg(name, level, f'{message}; {pending}' if pending else message, hw, values, stamp)
+        arr.status += diagnostics_msg(f'{self.get_name()}: accuracy', acc.level, acc.text(), hw, acc.values(), stamp).status
+        self.pub_diag.publish(arr)
 
 
 def main(args=None) -> int:

@@ -88,8 +88,11 @@ class AxisBoardSession:
     """
 
     def __init__(self, port: str, baudrate: int = 115200, request_timeout: float = 0.25,
-                 link_timeout: float = 1.0, heartbeat: float = 0.25, key: bytes | None = None):
+                 link_timeout: float = 1.0, heartbeat: float = 0.25, key: bytes | None = None,
+                 board_kind: int = m.BoardKind.AXIS_STEPPER):
         self.port = port
+        self.board_kind = board_kind      # INFO.board_kind of the drive (axis.drive.Drive.board_kind)
+        self.reference = None             # a switchless drive's kept reference (axis.drive.ReferenceKeeper)
         self.request_timeout = request_timeout
         self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
@@ -131,13 +134,14 @@ class AxisBoardSession:
             self.link.stop()
             raise ConnectionError(f'no INFO from the board ({why})')
         info = self.link.info
-        if info.board_kind != m.BoardKind.AXIS_STEPPER:
+        if info.board_kind != self.board_kind:
             self.link.stop()
             try:
                 kind = m.BoardKind(info.board_kind).name
             except ValueError:
                 kind = f'kind {info.board_kind}'
-            raise BoardRefused(f'board {info.name_str!r} on {self.port} is a {kind} board, not an axis board')
+            raise BoardRefused(f'board {info.name_str!r} on {self.port} is a {kind} board, not the '
+                               f'{m.BoardKind(self.board_kind).name} board of this axis\'s drive')
         self.board_info = (f'{info.name_str} fw {info.firmware} protocol {info.protocol} '
                            f'id {info.board_id:08x}')
         self._seen_resets = self.link.resets
@@ -154,7 +158,10 @@ class AxisBoardSession:
         [s]: STATUS with a ``2 * period`` time-out (a lost answer reuses a STATUS up
         to ``3 * period`` old, see :meth:`poll`) and the reset / reconnect events."""
         board = self.poll(now, 2 * period, 3 * period)
-        return BoardReading(board, self.take_reset(), self.take_reconnect())
+        reading = BoardReading(board, self.take_reset(), self.take_reconnect())
+        if self.reference is not None:
+            self.reference.after_read(board, reading.reset, reading.reconnected, self.link.boot_count)
+        return reading
 
     def poll(self, now: float, timeout: float, max_age: float) -> BoardState | None:
         """STATUS now (one try of ``timeout`` [s]).
@@ -228,6 +235,8 @@ class AxisBoardSession:
         c['status_poll_failures'] = self.poll_failures
         c['status_reused'] = self.stale_polls
         c['link_state'] = self.link.state.value
+        if self.reference is not None:
+            c['reference'] = self.reference.state
         return c
 
     def velocity(self, cal: Calibration) -> float:
@@ -261,6 +270,8 @@ class AxisBoardSession:
                 return WriteResult(False, str(exc), True)
         except (LinkError, ProtocolError) as exc:
             return WriteResult(False, str(exc) or type(exc).__name__)
+        if self.reference is not None:
+            self.reference.after_write(act, True, self.link.boot_count, time.time())
         return WriteResult(True)
 
 
@@ -281,7 +292,9 @@ def board_command(act: Action) -> m.Message | None:
 def open_session(port: str, p: dict) -> AxisBoardSession:
     """A session on ``port`` with the driver's parameters ``p``, opened (INFO read);
     the exceptions of :meth:`AxisBoardSession.open`."""
+    from sslfr_drivers.axis.drive import drive_for, reference_keeper
     session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'],
-                               key=link_key(p['key_file']))
+                               key=link_key(p['key_file']), board_kind=drive_for(p['drive']).board_kind)
+    session.reference = reference_keeper(p)
     session.open()
     return session

@@ -16,7 +16,9 @@ import stat as stat_mod
 from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
+from sslfr_common import accuracy
 from sslfr_drivers.axis.commands import HOME_SWITCHES
+from sslfr_common.contract import DRIVE_KINDS, DriveKind
 from sslfr_drivers.axis.stall import StallDetector
 from sslfr_drivers.axis.supervisor import AxisTuning
 from sslfr_drivers.axis.joint import Calibration, SoftLimits
@@ -31,6 +33,13 @@ _M = JOINTS[0]          # the base table carries the mirrors' defaults
 _SPECS = [
     _P('axis', _M, 'axis driven: mirrors | mobile_structure | secondary_reflector (read-only)',
        choices=JOINTS, read_only=True),
+    _P('drive', DRIVE_KINDS[0], 'drive kind of the axis (the collector description\'s movement drive): '
+       'stepper_switches | linear_actuator_inclinometer | stepper_no_switches (read-only)',
+       choices=DRIVE_KINDS, read_only=True),
+    _P('deadband', 0.0, 'position deadband of a linear_actuator_inclinometer drive [rad] (its board '
+       'rests anywhere within it; 0 for steppers)', 'rad', 0.0, 0.1),
+    _P('state_dir', '~/.local/state/sslfr', 'directory of the kept reference of a stepper_no_switches drive '
+       "(reference_<axis>.json); '' = not kept"),
     _P('port', '', "board port: pyserial URL/device (/dev/ttyUSB0, a pty, loop://) or "
        "'xbee:<uart>?addr=<64-bit hex>'; '' = /dev/sslfr/<axis>"),
     _P('baudrate', 115200, 'serial line speed [bit/s]', 'bit/s', 1200, 4_000_000),
@@ -82,6 +91,7 @@ _SPECS = [
        'stall_window [rad]', 'rad', 1e-5, 1.0),
     _P('max_jog', 0.2, 'largest |delta| of a jog [rad]', 'rad', 0.0, math.pi),
     _P('jog_speed', 0.02, 'default jog speed [rad/s]', 'rad/s', *_SPEED),
+    *accuracy.PARAM_SPECS,
 ]
 
 
@@ -101,7 +111,15 @@ def cross_check(p: dict) -> list[str]:
         errors.append(f"stow_position {p['stow_position']:.4f} rad outside the soft limits")
     if p['min_speed'] > p['max_speed']:
         errors.append('min_speed > max_speed')
-    return errors
+    drive = p.get('drive', DRIVE_KINDS[0])
+    if drive == DriveKind.LINEAR_ACTUATOR_INCLINOMETER and not (p['deadband'] > 0 and p['use_sensor']):
+        errors.append('a linear_actuator_inclinometer drive needs deadband > 0 and use_sensor (its inclinometer)')
+    if drive == DriveKind.STEPPER_NO_SWITCHES and (p['auto_home'] or p['use_sensor']):
+        errors.append('a stepper_no_switches drive has no switch or sensor: auto_home and use_sensor must be '
+                      'false (the operator references it with the home service at home_position)')
+    if drive != DriveKind.LINEAR_ACTUATOR_INCLINOMETER and p['deadband'] != 0.0:
+        errors.append(f'deadband is a property of a linear_actuator_inclinometer drive, not of {drive}')
+    return errors + accuracy.cross_check(p)
 
 
 #: The driver's parameters with the mirrors' defaults (:func:`params_for` per axis).
@@ -122,7 +140,7 @@ def tuning_from(p: dict) -> tuple[AxisTuning, StallDetector]:
     tuning = AxisTuning(p['axis'], cal, SoftLimits(p['lower_limit'], p['upper_limit']), p['max_speed'],
                         p['min_speed'], 1.0 / p['control_rate'], p['stow_position'], p['home_switch'],
                         p['home_position'], p['home_speed'], p['use_sensor'], p['auto_home'],
-                        p['reference_samples'])
+                        p['reference_samples'], p['drive'], p['deadband'])
     return tuning, StallDetector(p['lost_step_tolerance'], p['stall_window'], p['stall_min_motion'])
 
 

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 from sslfr_drivers.axis.commands import (BOARD_FAULT_DRIVER, BOARD_FAULT_STALL, NOTHING, STOP, Action,
                                          ActionKind, BoardState)
-from sslfr_drivers.axis.homing import home_action
+from sslfr_drivers.axis.drive import drive_for
 from sslfr_drivers.axis.joint import Calibration, SoftLimits, move_speed
 from sslfr_drivers.axis.operator_input import check_jog
 from sslfr_drivers.axis.rates import setpoint_wait
@@ -62,6 +62,11 @@ class AxisTuning:
         Home by itself when the board lost its position (else wait for the home service).
     ref_samples : int
         Sensor readings (at rest, one per tick) averaged for a SET_ZERO [-].
+    drive : str
+        The drive kind (:mod:`sslfr_drivers.axis.drive`): how the position is
+        re-established and when a target counts as reached.
+    deadband : float
+        Position deadband of a closed-loop drive [rad] (linear actuator), else 0.
     """
 
     axis: str
@@ -77,6 +82,8 @@ class AxisTuning:
     use_sensor: bool = True
     auto_home: bool = True
     ref_samples: int = 5
+    drive: str = 'stepper_switches'
+    deadband: float = 0.0
 
 
 class Snapshot(NamedTuple):
@@ -112,6 +119,7 @@ class AxisSupervisor:
     def __init__(self, cfg: AxisTuning, safety_timeout: float = 1.0,
                  stall: StallDetector | None = None):
         self.cfg = cfg
+        self.drive = drive_for(cfg.drive)
         self.store = TrajectoryStore()
         self.safety = SafetyWatch(cfg.axis, safety_timeout)
         self.stall = stall or StallDetector(tolerance=0.005, window=1.0, min_motion=0.01)
@@ -195,7 +203,8 @@ class AxisSupervisor:
         return NOTHING
 
     def _home_action(self, board: BoardState) -> Action:
-        act, self.reason = home_action(self.cfg, board, self._ref, self.last_known)
+        act, self.reason = self.drive.reference(self.cfg, board, self._ref, self.last_known,
+                                                self.home_requested)
         self.state = 'homing'
         return act
 
@@ -207,7 +216,7 @@ class AxisSupervisor:
         self.commanded = cal.angle(steps)
         speed = move_speed(self.measured(board), target, cfg.lead, cfg.max_speed, cfg.min_speed)
         rate = max(1.0, cal.step_rate(speed))
-        if steps == board.steps and not board.moving:
+        if not board.moving and self.drive.settled(cfg, steps, board.steps):
             self._cmd_steps = None
             return NOTHING
         if (self._cmd_steps == steps and board.target == steps and board.moving):
@@ -256,7 +265,7 @@ class AxisSupervisor:
             return NOTHING
         if not board.homed:
             self._cmd_steps = None
-            if self.cfg.auto_home or self.home_requested or (self.cfg.use_sensor and board.sensor is not None):
+            if self.home_requested or self.drive.references_itself(self.cfg, board):
                 act = self._home_action(board)
                 self.home_requested = self.home_requested and act.kind in (ActionKind.NONE, ActionKind.STOP)
                 return act
@@ -273,7 +282,7 @@ class AxisSupervisor:
                          f'({"stall" if hard & BOARD_FAULT_STALL else ""}'
                          f'{" driver" if hard & BOARD_FAULT_DRIVER else ""})').replace('( ', '('))
             return self.stop(board, 'fault', self.fault)
-        pending = self._cmd_steps is not None and abs(self._cmd_steps - board.steps) > 1
+        pending = self._cmd_steps is not None and not self.drive.reached(self.cfg, self._cmd_steps, board.steps)
         cal = self.cfg.calibration
         problem = self.stall.update(now_steady, cal.angle(board.steps),
                                     board.sensor if self.cfg.use_sensor else None,
@@ -372,8 +381,7 @@ class AxisSupervisor:
             return False, 'driver not active'
         self.clear_fault()
         self.home_requested = True
-        return True, (f'homing toward the {self.cfg.home_switch} switch '
-                      f'(or re-referencing from the sensor); watch axes/{self.cfg.axis}/status')
+        return True, f'{self.drive.home_message(self.cfg)}; watch axes/{self.cfg.axis}/status'
 
     def request_jog(self, delta: float, speed: float, board: BoardState | None, active: bool,
                     max_jog: float) -> tuple[bool, str, float]:

@@ -43,7 +43,8 @@ class BoardKind(IntEnum):
     """INFO.board_kind. 0x10-0x1F are reserved for sensor boards."""
 
     UNKNOWN = 0x00
-    AXIS_STEPPER = 0x01
+    AXIS_STEPPER = 0x01   # stepper, with limit switches or without (seeds 000, 003)
+    AXIS_ACTUATOR = 0x02  # linear actuator closed on an inclinometer (seed 004)
     # sensor boards (models and messages in the sensor module):
     GPS = 0x10
     ABSORBER = 0x11       # MAX6675 thermocouples + five limit switches

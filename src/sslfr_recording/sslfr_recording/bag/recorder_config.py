@@ -4,6 +4,7 @@
 - :func:`make_session`: the recording session a configuration asks for;
 - :func:`needs_new_bag`: which run-time changes only apply from a new bag;
 - :func:`wanted`: whether a topic is recorded (list / exclude / always excluded);
+- :func:`log_line_kept`: whether a ``/rosout`` line delivered on subscribing is kept;
 - :func:`subscription_qos`: what to ask of a topic's publishers (rosbag2's rule);
 - :func:`qos_to_dict`: a publisher's offered QoS as rosbag2 v9 stores it.
 """
@@ -23,8 +24,10 @@ from .qos import duration_dict
 from .session import RecordingSession, probe_output_dir
 from .writer import WriterOptions
 
-#: Never recorded, whatever the lists say.
-ALWAYS_EXCLUDED = ('/rosout', '/parameter_events')
+#: Never recorded, whatever the lists say (every node's parameter changes, which a
+#: parameter service answers; ``ros2 bag record -a`` keeps it, we leave it out).
+ALWAYS_EXCLUDED = ('/parameter_events',)
+#: The nodes' log lines (rcl_interfaces/msg/Log): recorded like any topic.
 
 #: Changes that apply from a new bag (the current one is closed cleanly).
 WRITER_KEYS = frozenset({'output_dir', 'prefix', 'per_day', 'max_file_size', 'max_file_duration',
@@ -49,7 +52,7 @@ TABLE = ParamTable((
     ParamSpec('prefix', 'sslfr', 'bag directory name prefix: <prefix>_YYYY-MM-DD'),
     ParamSpec('topics', [''], 'topics to record (relative names are resolved in the node '
                               'namespace); empty = every topic with a publisher'),
-    ParamSpec('exclude', [CLOCK.name], 'topics never recorded (besides /rosout, /parameter_events)'),
+    ParamSpec('exclude', [CLOCK.name], 'topics never recorded (besides /parameter_events)'),
     ParamSpec('discovery_period', 1.0, 'period of topic discovery [s]', 's', 0.1, 60.0),
     ParamSpec('per_day', True, 'one bag per UTC day of ROS time (else one bag per run)'),
     ParamSpec('max_file_size', 0, 'split the bag into a new .mcap at this size [bytes]; 0 = off',
@@ -98,6 +101,20 @@ def wanted(topic: str, listed: Iterable[str], excluded: Iterable[str]) -> bool:
     ``excluded``; when ``listed`` is not empty, only those (all names resolved)."""
     listed = [t for t in listed if t]
     return topic not in ALWAYS_EXCLUDED and topic not in set(excluded) and (not listed or topic in listed)
+
+
+def log_line_kept(source_ns: int, started_ns: int) -> bool:
+    """Whether a ``/rosout`` line published at ``source_ns`` (the DDS source timestamp,
+    system clock [ns]; 0 = unknown) is recorded by a recorder that started at
+    ``started_ns`` (system clock [ns]).
+
+    Every node offers ``/rosout`` transient local (rcl: keep last 1000, lifespan 10 s),
+    so a subscriber gets each publisher's last 10 s again when it matches: the start-up
+    lines of a node that starts after the recorder are kept, but a restarted recorder
+    would get lines its previous run already wrote (or lost with its last chunk),
+    stamped with the new reception time. Those, older than this recorder, are dropped.
+    """
+    return source_ns <= 0 or source_ns >= started_ns
 
 
 def subscription_qos(offered: list[tuple[bool, bool]]) -> tuple[bool, bool]:

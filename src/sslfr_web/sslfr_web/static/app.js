@@ -107,7 +107,7 @@ function renderAxes(s, age) {
     let row = $('axis-' + axis);
     if (!row) {
       row = document.createElement('tr'); row.id = 'axis-' + axis;
-      for (const k of ['name', 'state', 'commanded', 'setpoint', 'measured', 'error', 'link', 'frames', 'homed']) {
+      for (const k of ['name', 'state', 'commanded', 'setpoint', 'measured', 'error', 'accuracy', 'link', 'frames', 'homed']) {
         const td = document.createElement('td'); td.id = `axis-${axis}-${k}`; row.appendChild(td);
       }
       body.appendChild(row);
@@ -121,6 +121,14 @@ function renderAxes(s, age) {
     setText(`axis-${axis}-setpoint`, deg(a.setpoint), st);
     setText(`axis-${axis}-measured`, deg(a.measured), st);
     setText(`axis-${axis}-error`, deg(a.error), st);
+    // the accuracy alarm: RMS error over the driver's window while tracking, and its optical loss
+    const acc = (s.accuracy || {})[axis] || {};
+    const accText = acc.tracking ? `${acc.level} ${acc.error_rms_deg}\u00b0 RMS` +
+      (acc.level !== 'OK' && acc.estimated_loss ? ` (${acc.estimated_loss})` : '') : 'not tracking';
+    setText(`axis-${axis}-accuracy`, accText, st);
+    $(`axis-${axis}-accuracy`).title = acc.message || '';
+    $(`axis-${axis}-accuracy`).classList.toggle('bad', acc.level === 'ERROR');
+    $(`axis-${axis}-accuracy`).classList.toggle('warn', acc.level === 'WARN');
     setText(`axis-${axis}-link`, a.link, st);
     $(`axis-${axis}-link`).classList.toggle('bad', a.link !== 'LINK_UP');
     setText(`axis-${axis}-frames`, `${a.frames_lost} / ${a.frames_bad}`, st);
