@@ -302,7 +302,8 @@ def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, 
         t_cut_end = time.time()
         print(f'c1 cut off for {CUT_S:.0f} s, heard again {t_again - t_up:.1f} s after its link came back')
         snap = page()['c1']
-        assert snap['phase'] == 'TRACKING' and snap['safety_level'] in ('OK', 'WARN'), snap
+        assert snap['phase'] == 'TRACKING' and snap['safety_level'] in ('OK', 'WARN'), \
+            (snap['phase'], snap['safety_level'], snap['safety_reasons'])
     finally:
         for p in procs.values():
             p.stop(timeout=30)
