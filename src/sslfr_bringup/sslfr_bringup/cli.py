@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import io
 import sys
 
 #: name -> (module, one-line help). The module must define ``main(argv) -> int``; it is
@@ -59,6 +60,11 @@ def usage() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``argv[0]`` to its subcommand module; return the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    for stream in (sys.stdout, sys.stderr):   # a path of undecodable bytes is shown escaped, never a crash
+        try:
+            stream.reconfigure(errors='backslashreplace')
+        except (AttributeError, ValueError, io.UnsupportedOperation):
+            pass
     if not argv or argv[0] in ('-h', '--help', 'help'):
         print(usage())
         return 0

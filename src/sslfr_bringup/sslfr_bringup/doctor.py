@@ -1,10 +1,11 @@
 """``sslfr doctor``: check that the installation can run the node graph."""
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import sys
+
+from sslfr_common.cliargs import CliError, OneLineParser, one_line
 
 from .host import executable_path, find_executable, install_prefix
 
@@ -33,7 +34,7 @@ def check_site_config(config: str | None, nodeset_path: str | None = None) -> in
         path = nodeset.resolve_config(config, default=ns.config)
         problems = nodeset.check_config(ns, nodeset.read_params(path), where=str(path))
     except nodeset.NodeSetError as exc:
-        print(f'sslfr doctor: {exc}', file=sys.stderr)
+        print(f'sslfr doctor: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     for line in problems:
         print(line, file=sys.stderr)
@@ -42,11 +43,15 @@ def check_site_config(config: str | None, nodeset_path: str | None = None) -> in
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog='sslfr doctor', description=__doc__)
+    parser = OneLineParser(prog='sslfr doctor', description=__doc__)
     parser.add_argument('--config', default=None,
                         help='also check this site config (path or name in sslfr_bringup/config) '
                              'against the parameter tables of the nodes')
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except CliError as exc:
+        print(f'sslfr doctor: error: {one_line(exc)}', file=sys.stderr)
+        return 2
     if args.config is not None:
         return check_site_config(args.config)
     ok = True

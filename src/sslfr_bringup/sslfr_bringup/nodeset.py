@@ -182,14 +182,20 @@ def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr
     """Return the params file for ``name``: a path as given when it exists, else a
     file of that name (``.yaml`` optional) in :func:`config_dir`."""
     name = str(name) if name else default
+
+    def is_file(path: Path) -> bool:        # a name too long or with a NUL byte is no file
+        try:
+            return path.is_file()
+        except (OSError, ValueError):
+            return False
     p = Path(name).expanduser()
-    if p.is_file():
+    if is_file(p):
         return p.resolve()
     for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
-        if cand.is_file():
+        if is_file(cand):
             return cand
     known = ', '.join(sorted(f.name for f in config_dir().glob('*.yaml') if f.name != NODESET_FILE))
-    raise NodeSetError(f'config {name!r} not found (as a path or in {config_dir()}; known: {known})')
+    raise NodeSetError(f'config {name[:200]!r} not found (as a path or in {config_dir()}; known: {known})')
 
 
 # ---------------------------------------------------------------------------------
@@ -309,13 +315,19 @@ def _parse_layouts(data: Mapping[str, Any], nodes: Mapping[str, NodeSpec]) -> di
 
 def load(path: str | os.PathLike | None = None) -> NodeSet:
     """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
+    from sslfr_planner.cli_input import CliError, read_text_file
     p = Path(path) if path else config_dir() / NODESET_FILE
     try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise NodeSetError(f'cannot read node set {p}: {exc}') from exc
+        text = read_text_file(p, 'node set')
+    except CliError as exc:
+        raise NodeSetError(str(exc)) from None
+    try:
+        data = yaml.safe_load(text)
+    except RecursionError:
+        raise NodeSetError(f'node set {p}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
-        raise NodeSetError(f'{p}: invalid YAML: {exc}') from exc
+        mark = getattr(exc, 'problem_mark', None)
+        raise NodeSetError(f'node set {p}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None
     return parse(data, p)
 
 
@@ -330,6 +342,8 @@ def read_params(path: str | os.PathLike) -> dict:
         raise NodeSetError(str(exc)) from None
     try:
         data = yaml.safe_load(text) or {}
+    except RecursionError:
+        raise NodeSetError(f'{path}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         raise NodeSetError(f'{path}: invalid YAML{f" at line {mark.line + 1}" if mark else ""}') from None

@@ -174,8 +174,10 @@ def _body(argv: list[str]) -> int:
     try:
         ns = nodeset_mod.load()
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        nodeset_mod.checked_params(ns, config, args.namespace)   # what `sslfr up` will check at start
     except nodeset_mod.NodeSetError as exc:
-        raise CliError(f'argument --config: {exc}') from None
+        why = ' '.join(part.strip() for part in str(exc).splitlines() if part.strip())
+        raise CliError(f'argument --config: {why}') from None
     if args.layout and args.layout not in ns.layouts:
         raise CliError(f'argument --layout: no layout {args.layout!r} (known: {", ".join(ns.layouts)})')
     domain = args.domain_id if args.domain_id is not None else ns.domain_id

@@ -28,7 +28,7 @@ from sslfr_bringup.host import find_executable
 from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_common.sdnotify import Notifier
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ros_namespace
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
@@ -100,13 +100,14 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else the node set\'s, 42)')
-    p.add_argument('--namespace', default=None, help='namespace of the whole tracker, e.g. /sslfr1')
+    p.add_argument('--namespace', type=ros_namespace, default=None,
+                   help='namespace of the whole tracker, e.g. /sslfr1 (the rules install-service checks)')
     p.add_argument('--layout', default=None,
                    help='process layout of the node set (config/nodeset.yaml layouts: composed, separate; '
                         'default: the node set\'s)')
     p.add_argument('--only', default='', help='comma-separated node names to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated node names not to run')
-    p.add_argument('--log-dir', default=None, help='write each node\'s output to DIR/<node>.log '
+    p.add_argument('--log-dir', type=output_dir, default=None, help='write each node\'s output to DIR/<node>.log '
                                                    '(default: inherit stdout, i.e. the journal under systemd)')
     p.add_argument('--print', action='store_true', dest='print_only',
                    help='print the command lines and exit (nothing is started)')
@@ -134,7 +135,7 @@ def main(argv: list[str]) -> int:
         try:
             return _run(parser().parse_args(argv), stop, run_dir)
         except CliError as exc:
-            print(f'sslfr up: error: {exc}', file=sys.stderr)
+            print(f'sslfr up: error: {one_line(exc)}', file=sys.stderr)
             return 2
         except Interrupted:
             return 0
@@ -150,7 +151,7 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
         programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir,
                                            layout=args.layout)
     except (nodeset_mod.NodeSetError, KeyError) as exc:
-        print(f'sslfr up: {exc}', file=sys.stderr)
+        print(f'sslfr up: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     domain = int(env['ROS_DOMAIN_ID'])

@@ -44,6 +44,24 @@ CASES = [
     ('install-service --unit-dir {file} --no-enable', '--unit-dir'),
     ('install-service --unit-dir /proc/x --no-enable', '--unit-dir'),
     ('install-service --dry-run --config {png}', '--config'),
+    ('install-service --dry-run --config {badsite}', 'horizonn'),   # what `up` refuses
+    ('sim --out /proc/x', '--out'),
+    ('sim --out {file}', '--out'),
+    ('sim --record /proc/x', '--record'),
+    ('sim --record {file}/sub', '--record'),
+    ('sim --out {withlogs}', 'did not make'),          # never replaces someone else's logs/
+    ('sim --nodeset {pngfile}', 'not a text file'),
+    ('up --log-dir /proc/x', '--log-dir'),
+    ('up --log-dir {file}', '--log-dir'),
+    ('up --nodeset {pngfile}', 'not a text file'),
+    ('up --print --nodeset {pngfile}', 'not a text file'),
+    ('up --print --namespace /1bad', '--namespace'),
+    ('up --print --namespace relative', '--namespace'),
+    ('plan --lat 37 --lon -2 --collector-azimuth 1e308', '--collector-azimuth'),
+    ('plan --lat 37 --lon -2 --collector-azimuth nan', '--collector-azimuth'),
+    ('plan --lat 37 --lon -2 --delta-t 1e300', '--delta-t'),
+    ('field --positions 1e308 --height 5 --radius 0.1', '--positions'),
+    ('field --positions 1,2 --height 1e308 --radius 0.1', '--height'),
     # -- wrong-kind and missing bags ------------------------------------------------------
     ('bag info {png}', 'metadata.yaml'),
     ('bag info {binary}', 'metadata.yaml'),
@@ -95,6 +113,13 @@ CASES = [
     ('replay {good} --topics bad\\ name!', '--topics'),
     ('replay {good} --topics /nothere', '--topics'),
     ('replay {good} --start noon', '--start'),
+    ('replay {good} --start 100', 'outside the bag'),
+    ('replay {good} --end -100', 'outside the bag'),
+    ('replay {good} --start 1.5 --end 0.5', 'inverted'),
+    ('replay {good} --start 1 --end 1', 'empty'),
+    ('replay {good} --start 9' + '9' * 400, '--start'),
+    ('replay {good} --start 2000-01-01T00:00:00Z --end 2000-01-02T00:00:00Z', 'outside the bag'),
+    ('replay {good} --what-if --start 100', 'outside the bag'),
     ('replay {good} --end 25:99:99x', '--start/--end'),
     ('replay {good} --what-if --domain -1', '--domain'),
     ('replay {good} --what-if --domain 233', '--domain'),
@@ -174,6 +199,9 @@ def corpus(tmp_path_factory):
     paths['nometa'].mkdir()
     for f in (tmp / 'good').glob('*.mcap'):
         (paths['nometa'] / f.name).write_bytes(f.read_bytes())
+    paths['withlogs'] = tmp / 'withlogs'
+    (paths['withlogs'] / 'logs').mkdir(parents=True)
+    (paths['withlogs'] / 'logs' / 'mine.txt').write_text('not the simulation\'s')
     paths['empty'] = tmp / 'empty'
     paths['empty'].mkdir()
     paths['pngfile'] = tmp / 'picture.png'
@@ -228,3 +256,36 @@ def test_bad_input_through_the_sslfr_script(template, corpus):
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and 'Traceback' not in proc.stderr
     assert _snapshot(corpus['tmp']) == before
+
+
+def _schema_bag(path: Path, type_name: str, schema_text: str) -> None:
+    w = BagWriter(path, WriterOptions(fsync=False))
+    w.add_topic('/t', type_name, [profile()], schema_text=schema_text, type_hash='RIHS01_' + '0' * 64)
+    for k in range(5):
+        w.write('/t', bytes(serialize_message(Temperature(temperature=float(k)))), 10**18 + k * 10**8)
+    w.close()
+
+
+@pytest.mark.parametrize('text', ['float64 temperature\nfloat64 variance\nstd_msgs/Header header\n',
+                                  '\0garbage [[['])
+def test_recover_rebuilds_a_damaged_schema_that_info_refuses(tmp_path, capsys, text):
+    bag = tmp_path / 'bag'
+    _schema_bag(bag, 'sensor_msgs/msg/Temperature', text)
+    assert cli.main(['bag', 'info', str(bag)]) == 2
+    assert 'sslfr bag recover' in capsys.readouterr().err
+    assert cli.main(['bag', 'recover', str(bag)]) == 0
+    assert 'rebuilt from the installed message definitions' in capsys.readouterr().out
+    assert cli.main(['bag', 'info', str(bag)]) == 0          # recover and info agree
+    assert 'sensor_msgs/msg/Temperature' in capsys.readouterr().out
+
+
+def test_recover_says_plainly_when_it_cannot_rebuild_a_schema(tmp_path, capsys):
+    bag = tmp_path / 'bag'
+    _schema_bag(bag, 'nowhere_msgs/msg/Thing', 'garbage [[[')
+    assert cli.main(['bag', 'info', str(bag)]) == 2
+    err = capsys.readouterr().err
+    assert 'cannot repair it' in err and 'nowhere_msgs' in err and 'try sslfr bag recover' not in err
+    assert cli.main(['bag', 'recover', str(bag)]) == 1
+    out, err = capsys.readouterr()
+    assert 'cannot repair' in out and ': ok' not in out
+    assert len(err.strip().splitlines()) == 1 and 'would still refuse' in err

@@ -48,6 +48,10 @@ class FieldError(ValueError):
         self.problems = list(problems)
         super().__init__('invalid field description:\n  ' + '\n  '.join(self.problems))
 
+    def one_line(self) -> str:
+        """Every problem on one line (a CLI's exit-2 message)."""
+        return 'invalid field description: ' + '; '.join(p.replace('\n', ' ') for p in self.problems)
+
 
 @dataclass(frozen=True)
 class Station:

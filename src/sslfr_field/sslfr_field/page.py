@@ -24,9 +24,10 @@ from sslfr_common.params import ParamSpec, ParamTable
 from .live import DEFAULT_LOST_AFTER
 
 STATIC = Path(__file__).resolve().parent / 'static'
-#: the collector page's parameters the field page shares (same meaning, same ranges)
-SHARED = ('bind_address', 'open_view', 'password_file', 'session_timeout', 'login_max_failures',
-          'login_window', 'push_period', 'service_timeout', 'max_request_bytes')
+#: the collector page's parameters the field page does not take (its own ``port`` and
+#: ``audit_file``; the day plots, jogs and recorded days are the collector page's); every
+#: other one (login, sessions, connection and request limits) it shares, same meaning and ranges
+NOT_SHARED = ('port', 'audit_file', 'plot_period', 'max_jog', 'bag_dir', 'report_dir')
 #: field commands: each is a collector page command through the collector's planner/set_mode
 FIELD_COMMANDS = ('stow', 'mode')
 
@@ -34,7 +35,7 @@ FIELD_COMMANDS = ('stow', 'mode')
 def field_page_params() -> ParamTable:
     """The ``field_page`` node's parameters: the collectors and the shared page limits."""
     from sslfr_web.params import WEB_PARAMS
-    shared = [s for s in WEB_PARAMS if s.name in SHARED]
+    shared = [s for s in WEB_PARAMS if s.name not in NOT_SHARED]
     return ParamTable((
         ParamSpec('collectors', [''], 'namespaces of the field\'s collectors, e.g. [/c1, /c2]', read_only=True),
         ParamSpec('collector_ids', [''], 'the collectors\' ids, in the order of collectors', read_only=True),

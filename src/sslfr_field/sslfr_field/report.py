@@ -87,14 +87,22 @@ def find_bags(paths: list[str], day: str | None) -> list[Path]:
 
 
 def main(argv: list[str]) -> int:
-    from sslfr_planner.cli_input import OneLineParser
+    from sslfr_common.cliargs import CliError, OneLineParser
     ap = OneLineParser(prog='sslfr field-report', description=__doc__.split('\n\n')[0],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('paths', nargs='+', help='collector bags, or folders holding them (searched recursively)')
     ap.add_argument('--day', default=None, help='only bags of this UTC day YYYY-MM-DD')
     ap.add_argument('--config', default=None, help='site params file (collector geometry for the ideal commands)')
-    ns = ap.parse_args(argv)
-    bags = find_bags(ns.paths, ns.day)
+    try:
+        ns = ap.parse_args(argv)
+    except CliError as exc:
+        print(f'sslfr field-report: error: {exc}', file=sys.stderr)
+        return 2
+    try:
+        bags = find_bags(ns.paths, ns.day)
+    except OSError as exc:
+        print(f'sslfr field-report: {exc.strerror or exc}', file=sys.stderr)
+        return 2
     if not bags:
         print('sslfr field-report: no bag found in ' + ', '.join(ns.paths), file=sys.stderr)
         return 2

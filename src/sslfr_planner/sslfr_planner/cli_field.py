@@ -10,10 +10,13 @@ from __future__ import annotations
 import math
 import sys
 
-from .cli_input import OneLineParser, finite_float, run
+from .cli_input import OneLineParser, finite_float, ranged_float, run
 from .lepten import fit_linear
 
 HEADER = 'x_m,a,b,max_error_deg'
+MAX_POSITION = 1000.0   # [m] |axis position| allowed
+MAX_HEIGHT = 1000.0     # [m] receiver height allowed
+MAX_LINES = 1000        # mirror lines in one call
 
 
 def _positions(text: str) -> list[float]:
@@ -22,8 +25,11 @@ def _positions(text: str) -> list[float]:
         values = [float(v) for v in text.split(',') if v.strip() != '']
     except ValueError:
         raise argparse.ArgumentTypeError(f'positions must be comma-separated numbers [m]: {text!r}') from None
-    if not values or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f'positions must be comma-separated finite numbers [m]: {text!r}')
+    if not values or not all(math.isfinite(v) and abs(v) <= MAX_POSITION for v in values):
+        raise argparse.ArgumentTypeError(f'positions must be comma-separated finite numbers within '
+                                         f'-{MAX_POSITION:g}..{MAX_POSITION:g} m: {text[:80]!r}')
+    if len(values) > MAX_LINES:
+        raise argparse.ArgumentTypeError(f'at most {MAX_LINES} positions, got {len(values)}')
     return values
 
 
@@ -43,10 +49,11 @@ def parser() -> OneLineParser:
     p = OneLineParser(prog='sslfr field', description='LEPTEN mirror lines: exact model (seed 004 '
                       'eqs. 3-4) fitted with the common-drive law theta_m = a theta_T + b (eq. 5).')
     p.add_argument('--positions', type=_positions, required=True,
-                   help='rotation-axis positions X1,X2,... [m], west positive')
-    p.add_argument('--height', type=finite_float, required=True, help='receiver height above the axes [m]')
+                   help=f'rotation-axis positions X1,X2,... [m], west positive, within +-{MAX_POSITION:g}')
+    p.add_argument('--height', type=ranged_float(0.0, MAX_HEIGHT, lo_open=True, unit='m'), required=True,
+                   help=f'receiver height above the axes [m], (0, {MAX_HEIGHT:g}]')
     p.add_argument('--radius', type=finite_float, required=True,
-                   help='distance of the mirror surface from its axis, r [m]')
+                   help='distance of the mirror surface from its axis, r [m], 0 <= r < height/2')
     p.add_argument('--fit', type=_range, default=(-80.0, 80.0),
                    help='transversal range of the fit FROM:TO [deg] (default -80:80)')
     return p

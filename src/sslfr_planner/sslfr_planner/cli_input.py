@@ -2,32 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
+from sslfr_common.cliargs import (CliError, OneLineParser, bounded_int, finite_float,  # noqa: F401 - re-exported
+                                  one_line, ranged_float)
 from sslfr_common.files import atomic_write
-
-
-class CliError(Exception):
-    """A user input error: printed as one line, exit status 2."""
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one clear line on stderr (exit status 2)."""
-
-    def error(self, message):  # noqa: D401 - argparse API
-        raise CliError(message)
-
-
-def finite_float(text: str) -> float:
-    """argparse type: a finite float."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f'not a finite number: {text!r}')
-    return value
 
 
 def run(prog: str, body, argv) -> int:
@@ -38,63 +17,31 @@ def run(prog: str, body, argv) -> int:
         print(f'sslfr {prog}: error: {exc}', file=sys.stderr)
         return 2
     except ValueError as exc:
-        print(f'sslfr {prog}: error: {exc}', file=sys.stderr)
+        print(f'sslfr {prog}: error: {one_line(exc)}', file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': '), file=sys.stderr)
+        print(one_line(f'sslfr {prog}: error: {exc.strerror or exc}: {exc.filename or ""}'.rstrip(': ')),
+              file=sys.stderr)
         return 1
 
 
-# -- reusable argparse validators (one-line refusals, exit 2) -------------------------------
-def ranged_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-                 zero: bool = False, unit: str = ''):
-    """argparse type: a finite float in [lo, hi] ((lo, hi] with ``lo_open``); ``zero`` also allows 0.
+def _path_errors(check):
+    """Decorate an argparse path type: a path the OS refuses outright (a name too long,
+    a NUL byte, a loop of links) is one clear refusal, not a traceback."""
+    import functools
 
-    The refusal names the allowed range, e.g. ``must be in (0.05, 60] s, got 'nan'``.
-    """
-    def fmt(x: float) -> str:
-        return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f'{x:g}'
-
-    def describe() -> str:
-        left = '(' if lo_open else '['
-        rng = f'{left}{fmt(lo)}, {fmt(hi)}]' if lo is not None and hi is not None else \
-            (f'>= {fmt(lo)}' if lo is not None else f'<= {fmt(hi)}')
-        if lo_open and hi is None:
-            rng = f'> {fmt(lo)}'
-        return ('0 or ' if zero else '') + rng + (f' {unit}' if unit else '')
-
-    def parse(text: str) -> float:
+    @functools.wraps(check)
+    def parse(text: str):
         try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}') from None
-        ok = math.isfinite(value)
-        if ok and not (zero and value == 0.0):
-            if lo is not None:
-                ok = value > lo if lo_open else value >= lo
-            if ok and hi is not None:
-                ok = value <= hi
-        if not ok:
-            raise argparse.ArgumentTypeError(f'must be a finite number {describe()}, got {text!r}')
-        return value
-    parse.__name__ = 'number'
+            return check(text)
+        except (OSError, ValueError) as exc:
+            shown = text if len(text) <= 80 else text[:77] + '...'
+            raise argparse.ArgumentTypeError(f'{shown!r} is not a usable path '
+                                             f'({getattr(exc, "strerror", None) or exc})') from None
     return parse
 
 
-def bounded_int(lo: int, hi: int):
-    """argparse type: an integer in [lo, hi]."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text, 10)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}') from None
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f'must be an integer in [{lo}, {hi}], got {text!r}')
-        return value
-    parse.__name__ = 'integer'
-    return parse
-
-
+@_path_errors
 def output_dir(text: str):
     """argparse type: a directory that exists and is writable, or can be created.
 
@@ -146,6 +93,8 @@ def read_text_file(path, what: str = 'file') -> str:
         raise CliError(f'{what} {p} is a directory, not a file') from None
     except OSError as exc:
         raise CliError(f'{what} {p}: {exc.strerror or exc}') from None
+    except ValueError:                         # a NUL byte in the path
+        raise CliError(f'{what} {str(p)!r}: not a usable path (NUL byte)') from None
     if len(data) > MAX_TEXT_BYTES:
         raise CliError(f'{what} {p} is larger than {MAX_TEXT_BYTES >> 20} MiB: not a config or metadata file')
     try:
@@ -181,6 +130,7 @@ def time_step(span: float, max_samples: int, what: str = 'the run'):
     return parse
 
 
+@_path_errors
 def output_file(text: str) -> str:
     """argparse type: a file path that can be created or replaced (checked before any work).
 
@@ -225,6 +175,8 @@ def load_yaml_file(path: str, what: str = 'config'):
     text = read_text_file(path, what)
     try:
         doc = yaml.safe_load(text)
+    except RecursionError:
+        raise CliError(f'{what} {path}: YAML nested too deeply') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark is not None else ''

@@ -18,7 +18,7 @@ import numpy as np
 
 from sslfr_common.contract import JOINTS, PHASE_NAMES
 
-from .cli_input import OneLineParser, finite_float, output_file, run, time_step, write_atomically
+from .cli_input import OneLineParser, finite_float, output_file, ranged_float, run, time_step, write_atomically
 from .collector import LAWS, Collector
 from .tracking_table import tabulate_day
 from .site import Site
@@ -30,11 +30,15 @@ HEADER = ','.join(['utc', 'phase', 'zenith_deg', 'azimuth_deg', 'transversal_deg
 
 
 def _date(text: str) -> datetime.date:
+    import argparse
     try:
-        return datetime.date.fromisoformat(text)
+        day = datetime.date.fromisoformat(text)
     except ValueError:
-        import argparse
         raise argparse.ArgumentTypeError(f'not a valid date YYYY-MM-DD: {text!r}') from None
+    if day.year > 6000:
+        raise argparse.ArgumentTypeError(f'{text}: the solar position algorithm (NREL SPA) holds for '
+                                         'years -2000..6000')
+    return day
 
 
 def parser() -> OneLineParser:
@@ -43,18 +47,20 @@ def parser() -> OneLineParser:
                       '(whole UTC day; angles in degrees).')
     p.add_argument('--lat', type=finite_float, required=True, help='latitude [deg], north positive')
     p.add_argument('--lon', type=finite_float, required=True, help='longitude [deg], east positive')
-    p.add_argument('--elevation', type=finite_float, default=0.0, help='elevation [m] (default 0)')
+    p.add_argument('--elevation', type=ranged_float(-1000.0, 10000.0, unit='m'), default=0.0,
+                   help='elevation [m], -1000..10000 (default 0)')
     p.add_argument('--date', type=_date, default=None, help='UTC date YYYY-MM-DD (default: today, UTC)')
     p.add_argument('--step', type=time_step(86400.0, MAX_ROWS, 'a day'), default=1.0,
                    help=f'time step [s] (default 1; at least {86400.0 / MAX_ROWS:g}: {MAX_ROWS:,} rows a day)')
     p.add_argument('--mode', choices=LAWS, default='continuous',
                    help='longitudinal law of the mobile structure and secondary reflector')
-    p.add_argument('--collector-azimuth', type=finite_float, default=0.0,
-                   help='azimuth of the collector axis, clockwise from north [deg] (default 0: N-S)')
-    p.add_argument('--pressure', type=finite_float, default=1013.25, help='mean air pressure [hPa]')
-    p.add_argument('--temperature', type=finite_float, default=12.0, help='mean air temperature [degC]')
-    p.add_argument('--delta-t', type=finite_float, default=None,
-                   help='TT - UT [s] (default: Espenak-Meeus model)')
+    p.add_argument('--collector-azimuth', type=ranged_float(-360.0, 360.0, unit='deg'), default=0.0,
+                   help='azimuth of the collector axis, clockwise from north [deg], -360..360 (default 0: N-S)')
+    p.add_argument('--pressure', type=finite_float, default=1013.25, help='mean air pressure [hPa], 10..1200')
+    p.add_argument('--temperature', type=ranged_float(-90.0, 70.0, unit='degC'), default=12.0,
+                   help='mean air temperature [degC], -90..70')
+    p.add_argument('--delta-t', type=ranged_float(-8000.0, 8000.0, unit='s'), default=None,
+                   help='TT - UT [s], -8000..8000 (the SPA\'s range; default: Espenak-Meeus model)')
     p.add_argument('--out', type=output_file, default=None,
                    help='output CSV file (default: stdout; written only when complete)')
     return p

@@ -668,6 +668,8 @@ def load(path: str | os.PathLike) -> Description:
     _UniqueKeys.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
     try:
         data = yaml.load(text, Loader=_UniqueKeys)  # noqa: S506 - a SafeLoader subclass
+    except RecursionError:
+        raise DescriptionError([f'{p}: YAML nested too deeply']) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         what = getattr(exc, 'problem', None) or 'invalid YAML'

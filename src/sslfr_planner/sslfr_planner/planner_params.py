@@ -20,6 +20,7 @@ from typing import Any
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 from .collector import LAWS
+from .site_source import ALTITUDE_RANGE
 
 ALMERIA_LAT = 36 + 50 / 60 + 7 / 3600      # 36 deg 50' 07" N (seed 000 section 5.1)
 ALMERIA_LON = -(2 + 24 / 60 + 8 / 3600)    # 2 deg 24' 08" W
@@ -34,7 +35,7 @@ _SPECS = (
               'Site longitude [deg], east positive (WGS-84); used without GPS fix or persisted fix',
               'deg', -180.0, 180.0),
     ParamSpec('site.elevation', 22.0, 'Site altitude [m] above the WGS-84 ellipsoid', 'm',
-              -500.0, 9000.0),
+              *ALTITUDE_RANGE),
     ParamSpec('site.pressure', 101325.0,
               'Annual mean local air pressure [Pa], for refraction (NREL SPA)', 'Pa',
               30000.0, 110000.0),

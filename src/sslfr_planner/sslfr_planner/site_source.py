@@ -71,6 +71,10 @@ def distance_m(a: SiteFix, b: SiteFix) -> float:
     return 2 * EARTH_RADIUS * math.asin(min(1.0, math.sqrt(h)))
 
 
+#: [m] altitudes a fix may carry (the ``site.elevation`` parameter's range).
+ALTITUDE_RANGE = (-500.0, 9000.0)
+
+
 def check_fix(status: int, latitude: float, longitude: float, altitude: float,
               covariance, covariance_type: int, max_horizontal_std: float) -> str | None:
     """Validate the fields of a ``sensor_msgs/NavSatFix``.
@@ -82,8 +86,9 @@ def check_fix(status: int, latitude: float, longitude: float, altitude: float,
     latitude, longitude : float
         [deg].
     altitude : float
-        [m]; NaN is tolerated (the elevation then falls back, see
-        :meth:`SiteSelector.on_fix`).
+        [m]; NaN (NavSatFix: unknown) is tolerated (the elevation then falls back,
+        see :meth:`SiteSelector.on_fix`); else it must lie in :data:`ALTITUDE_RANGE`
+        (the range of the ``site.elevation`` parameter): an infinite one is refused.
     covariance : sequence of 9 float
         ``position_covariance`` [m^2], row-major ENU.
     covariance_type : int
@@ -102,6 +107,9 @@ def check_fix(status: int, latitude: float, longitude: float, altitude: float,
         return 'non-finite position'
     if not (-90.0 <= latitude <= 90.0 and -180.0 <= longitude <= 180.0):
         return f'position out of range ({latitude}, {longitude})'
+    if not math.isnan(altitude) and not ALTITUDE_RANGE[0] <= altitude <= ALTITUDE_RANGE[1]:
+        return (f'altitude {altitude} m outside {ALTITUDE_RANGE[0]:g}..{ALTITUDE_RANGE[1]:g} m '
+                '(NaN means unknown; infinite is refused)')
     if covariance_type != COVARIANCE_TYPE_UNKNOWN:
         try:
             c_ee, c_nn = float(covariance[0]), float(covariance[4])

@@ -77,6 +77,15 @@ def test_check_fix_rules():
     assert 'std' in check_fix(0, 36.8, -2.4, 22.0, [1e6, 0, 0, 0, 1e6, 0, 0, 0, 1], 1, 500.0)
     assert check_fix(0, 36.8, -2.4, 22.0, [1e6] * 9, 0, 500.0) is None       # unknown cov
     assert 'covariance' in check_fix(0, 36.8, -2.4, 22.0, [math.nan] * 9, 2, 500.0)
+    assert check_fix(0, 36.8, -2.4, math.nan, COV_GOOD, 2, 500.0) is None    # NaN: altitude unknown
+    for alt in (math.inf, -math.inf, 1e300, 20000.0):
+        assert 'altitude' in check_fix(0, 36.8, -2.4, alt, COV_GOOD, 2, 500.0)
+
+
+def test_a_fix_with_an_infinite_altitude_is_refused_and_counted_not_the_site(tmp_path):
+    sel = SiteSelector(SiteFix(36.8, -2.4, 22.0, 'parameters'), str(tmp_path), 500.0, 100.0)
+    assert 'altitude' in sel.on_fix(0, 10.0, 10.0, math.inf, COV_GOOD, 2, 1.0)
+    assert sel.rejected == 1 and sel.current().source == 'parameters'
 
 
 def test_distance_reference():

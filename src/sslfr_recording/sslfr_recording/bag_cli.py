@@ -7,9 +7,11 @@ the file, line and key, exit status 2. ``check`` lists every finding of the
 conformance check (:mod:`sslfr_recording.bag.conformance`; ``--rules`` prints the
 rules and their rosbag2 sources), exit status 1 when there is any. ``recover``
 rescues every intact chunk of every file, keeps damaged originals as
-``<file>.damaged`` and rebuilds ``metadata.yaml`` (docs/bags.md).
+``<file>.damaged``, rebuilds damaged schema texts from the installed message
+definitions and ``metadata.yaml`` (docs/bags.md); when ``info`` would still refuse
+the bag it says so (what and why) and exits 1: recover and info always agree.
 
-Exit status: 0 ok, 1 check findings or a failure while writing, 2 bad input.
+Exit status: 0 ok, 1 check findings, a bag recover cannot repair, or a failure while writing, 2 bad input.
 """
 from __future__ import annotations
 
@@ -54,6 +56,11 @@ def _info(path: Path) -> int:
     if blocking:
         more = f' (and {len(blocking) - 1} more: sslfr bag check {path})' if len(blocking) > 1 else ''
         hint = '' if blocking[0].rule.startswith('M') else f'; try sslfr bag recover {path}'
+        if blocking[0].rule in ('F09', 'F10') and path.is_dir():   # a schema: can recover rebuild it here?
+            from .bag.recover import recover_bag
+            cannot = [c for f in recover_bag(path, write=False).files for c in f.cannot]
+            if cannot:
+                hint = f'; sslfr bag recover cannot repair it: {cannot[0]}'
         raise CliError(f'{path}: {blocking[0].text()}{more}{hint}')
     print(BagReader(path).info_text())
     if report.findings:
@@ -78,6 +85,19 @@ def _check(ns) -> int:
     return 1 if report.findings else 0
 
 
+def _still_refused(path: Path) -> int:
+    """After a recovery: 0 when ``bag info`` (rosbag2's rules) accepts the bag, else one
+    line saying plainly what recovery could not repair, exit status 1."""
+    from .bag.conformance import check_bag
+    blocking = check_bag(path).blocking
+    if not blocking:
+        return 0
+    more = f' (and {len(blocking) - 1} more: sslfr bag check {path})' if len(blocking) > 1 else ''
+    print(f'sslfr bag recover: recovery cannot repair everything: rosbag2 would still refuse {path}: '
+          f'{blocking[0].text()}{more}', file=sys.stderr)
+    return 1
+
+
 def _body(argv: list[str]) -> int:
     ns = parser().parse_args(argv)
     try:
@@ -91,7 +111,7 @@ def _body(argv: list[str]) -> int:
         from .bag.recover import recover_bag
         report = recover_bag(path, verify=not ns.no_verify, write=not ns.dry_run)
         print(report.text())
-        return 0
+        return _still_refused(path) if not ns.dry_run else 0
     except BagError as exc:
         raise CliError(str(exc)) from None
 

@@ -90,6 +90,27 @@ def remap_table(pairs: list[tuple[str, str]], recorded: list[str]) -> dict[str, 
     return out
 
 
+def _utc(ns: int) -> str:
+    import datetime as dt
+    try:
+        return dt.datetime.fromtimestamp(ns / 1e9, dt.timezone.utc).isoformat(timespec='seconds').replace('+00:00', 'Z')
+    except (OverflowError, OSError, ValueError):
+        return f'{ns / 1e9:.0f} s since 1970'
+
+
+def check_window(start: int | None, end: int | None, bag_start: int, bag_end: int) -> None:
+    """Refuse a play window [start, end] [ns since the epoch] that is inverted or empty, or
+    that lies wholly outside the bag's [bag_start, bag_end] (CliError, one line)."""
+    lo = bag_start if start is None else start
+    hi = bag_end if end is None else end
+    if start is not None and end is not None and start >= end:
+        raise CliError(f'argument --start/--end: the window {_utc(lo)} .. {_utc(hi)} is '
+                       f'{"empty" if lo == hi else "inverted"} (--end must be after --start)')
+    if hi < bag_start or lo > bag_end:
+        raise CliError(f'argument --start/--end: the window {_utc(lo)} .. {_utc(hi)} lies outside the bag '
+                       f'({_utc(bag_start)} .. {_utc(bag_end)})')
+
+
 def _body(argv: list[str]) -> int:
     ns = parser().parse_args(argv)
     if ns.config is not None:
@@ -105,6 +126,7 @@ def _body(argv: list[str]) -> int:
         end = parse_time_spec(ns.end, reader.start_ns, reader.end_ns) if ns.end else None
     except ValueError as exc:
         raise CliError(f'argument --start/--end: {exc}') from None
+    check_window(start, end, reader.start_ns, reader.end_ns)
     remaps = remap_table(ns.remap, list(reader.topics))
     if ns.what_if:
         return run_whatif(reader, ns, start, end)

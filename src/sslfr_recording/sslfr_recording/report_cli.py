@@ -33,7 +33,7 @@ import sys
 from pathlib import Path
 
 from sslfr_bringup.nodeset import NodeSetError
-from sslfr_planner.cli_input import CliError, OneLineParser, output_dir
+from sslfr_planner.cli_input import CliError, OneLineParser, one_line, output_dir
 
 from .bag.metadata import BagError
 from .bag.reader import BagReader
@@ -57,21 +57,22 @@ def main(argv: list[str]) -> int:
         ns.config = ns.config or str(default_config())
         planner_config(ns.config)           # a bad site config: refused before any work
     except CliError as exc:
-        print(f'sslfr report: error: {exc}', file=sys.stderr)
+        print(f'sslfr report: error: {one_line(exc)}', file=sys.stderr)
         return 2
     except NodeSetError as exc:
-        print(f'sslfr report: error: --config {ns.config}: '
-              + '; '.join(line.strip() for line in str(exc).splitlines()[1:] or [str(exc)]), file=sys.stderr)
+        print(f'sslfr report: error: --config {one_line(ns.config)}: '
+              + one_line('; '.join(line.strip() for line in str(exc).split('\n')[1:] or [str(exc)])),
+              file=sys.stderr)
         return 2
     try:
         reader = BagReader(ns.bag)
     except BagError as exc:  # missing, damaged or wrong-kind bag: bad input
-        print(f'sslfr report: error: bag {ns.bag}: {exc}', file=sys.stderr)
+        print(f'sslfr report: error: bag {one_line(ns.bag)}: {one_line(exc)}', file=sys.stderr)
         return 2
     try:
         rep = analyse(read_day(reader, topics=REPORT_TOPICS), ns.config)
     except (BagError, OSError) as exc:
-        print(f'sslfr report: {exc}', file=sys.stderr)
+        print(f'sslfr report: {one_line(exc)}', file=sys.stderr)
         return 1
     print(render_text(rep))
     if not ns.no_plots:

@@ -77,7 +77,7 @@ def run_field(args, stop, run: Path) -> int:
     try:
         config = nodeset_mod.resolve_config(args.config, default=nodeset_mod.load(args.nodeset).config)
     except nodeset_mod.NodeSetError as exc:
-        print(f'sslfr sim: {exc}', file=sys.stderr)
+        print(f'sslfr sim: ' + ' '.join(str(exc).split()), file=sys.stderr)
         return 2
     primary, backup = free_udp_ports(2)
     doc = field_mod.simulated(args.collectors, config, discovery_port=primary, backup_port=backup,
@@ -90,7 +90,7 @@ def run_field(args, stop, run: Path) -> int:
     try:
         f = station_mod.load_checked(str(fpath))
     except field_mod.FieldError as exc:
-        print(f'sslfr sim: {exc}', file=sys.stderr)
+        print(f'sslfr sim: {exc.one_line()}', file=sys.stderr)
         return 2
     if args.domain_id is None:
         import os
@@ -112,7 +112,11 @@ def run_field(args, stop, run: Path) -> int:
                 return 2
             station_params.setdefault(node, {})[key] = value
     out = Path(args.out or 'out/sim-field').resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f'sslfr sim: --out {out}: {exc.strerror or exc}', file=sys.stderr)
+        return 2
     collectors = [Program(name=f'collector_{c.id}', argv=collector_argv(args, c, f, args.domain_id, out),
                           start=2, stop=0, restart=False) for c in f.collectors]
     station_args = type('A', (), {'out': str(out / 'station'), 'role': 'both', 'domain_id': args.domain_id,

@@ -51,7 +51,7 @@ from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
 from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, ranged_float, ros_namespace
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float, ros_namespace
 
 
 class SimClock:
@@ -82,6 +82,10 @@ class SimClock:
     def wall_until(self, sim_t: float, mono: float | None = None) -> float:
         """Wall seconds from ``mono`` until sim time ``sim_t`` (>= 0)."""
         return max(0.0, (sim_t - self.now(mono)) / self.speed)
+
+
+#: marks a directory ``sslfr sim`` made as its output: only there does a new run replace bags/ and logs/
+SIM_MARK = '.sslfr-sim-output'
 
 
 def parse_hhmm(text: str) -> float:
@@ -149,8 +153,10 @@ def parse_set(text: str, nodes) -> tuple[str, str, object]:
         raise ValueError(f'--set {text!r}: unknown node {node!r} (known: {", ".join(nodes)})')
     try:
         return node, key, yaml.safe_load(value)
+    except RecursionError:
+        raise ValueError(f'--set {text[:80]!r}: bad value: nested too deeply') from None
     except yaml.YAMLError as exc:
-        raise ValueError(f'--set {text!r}: bad value: {exc}') from exc
+        raise ValueError(f'--set {text!r}: bad value: {" ".join(str(exc).split())}') from None
 
 
 def _watch_topics(ns) -> dict:
@@ -191,8 +197,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00)')
     p.add_argument('--speed', type=ranged_float(0.0, 5000.0, lo_open=True), default=None,
                    help='simulated seconds per wall second, (0, 5000] (default 400)')
-    p.add_argument('--record', default=None, help='bag output directory (default OUT/bags)')
-    p.add_argument('--out', default=None, help='output directory: logs, bags, report (default out/sim-DATE)')
+    p.add_argument('--record', type=output_dir, default=None, help='bag output directory (default OUT/bags)')
+    p.add_argument('--out', type=output_dir, default=None,
+                   help='output directory: logs, bags, report (default out/sim-DATE)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC', help='inject a fault (repeatable)')
     p.add_argument('--set', action='append', default=[], metavar='NODE:KEY=VALUE',
                    help='set a node parameter for this run (YAML value, after the site config), '
@@ -264,7 +271,7 @@ def main(argv: list[str]) -> int:
                 return run_field(args, stop, run)
             return _main(args, stop, run)
         except CliError as exc:
-            print(f'sslfr sim: error: {exc}', file=sys.stderr)
+            print(f'sslfr sim: error: {one_line(exc)}', file=sys.stderr)
             return 2
         except Interrupted as exc:
             print(f'sslfr sim: stopped by {exc} during start-up', file=sys.stderr)
@@ -309,7 +316,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                   for s in args.fault]
         sets = [parse_set(s, [n.name for n in ns.nodes]) for s in args.set]
     except (ValueError, KeyError) as exc:   # NodeSetError and FaultSpecError are ValueErrors
-        print(f'sslfr sim: {exc}', file=sys.stderr)
+        print(f'sslfr sim: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     for f in faults:
         if f.board is not None and f.board not in {n.board for n in ns.nodes}:
@@ -319,9 +326,21 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             print(f'sslfr sim: fault {f.spec}: a slipping coupling is simulated by the Python boards only '
                   '(--boards sim), not by the firmware harness', file=sys.stderr)
             return 2
-    out = Path(args.out or f'out/sim-{date}').resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    try:                      # the default output is checked as --out is (a read-only cwd ...)
+        out = (args.out or output_dir(f'out/sim-{date}')).resolve()
+    except argparse.ArgumentTypeError as exc:
+        print(f'sslfr sim: error: output directory: {one_line(exc)}', file=sys.stderr)
+        return 2
     bag_root = Path(args.record).resolve() if args.record else out / 'bags'
+    # a new run replaces the sim's own bags/ and logs/, never someone else's (--out ~)
+    foreign = [d for d in ([] if args.record else [bag_root]) + [out / 'logs']
+               if d.exists() and args.out and not (out / SIM_MARK).exists()]
+    if foreign:
+        print(f'sslfr sim: error: argument --out: {out} already holds {", ".join(d.name for d in foreign)} '
+              'that sslfr sim did not make (it would replace them): choose another directory', file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    (out / SIM_MARK).touch()
     if not args.record and bag_root.exists():   # the sim's own output: a new run replaces it
         shutil.rmtree(bag_root)
     bag_root.mkdir(parents=True, exist_ok=True)

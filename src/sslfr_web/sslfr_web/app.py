@@ -24,8 +24,17 @@ Routes (JSON unless said; *view* = open when ``open_view``, else login needed;
 Security: the session cookie is HttpOnly and SameSite=Strict; a POST must carry the
 session's CSRF token in ``X-CSRF-Token`` and, when the browser sends ``Origin`` or
 ``Sec-Fetch-Site``, come from this same origin; bodies above ``max_request_bytes`` are
-refused (413) before they are read; every command, and every refused one, is logged
-with its origin (client address, session) to the node's log and the audit file.
+refused (413) before they are read, bodies that are not JSON objects nested at most
+``max_json_depth`` deep are refused (400), bodies slower than ``body_timeout`` (408);
+every command, and every refused one, is logged with its origin (client address,
+session) to the node's log and the audit file.
+
+Hostile clients (:mod:`sslfr_common.netguard`, shared with every network face): caps
+of connections per address and in all, header and idle time-outs (:class:`Server`),
+caps of event streams per address and in all, logins counted before the password is
+checked (:class:`~.auth.LoginLimiter`), and every refusal logged as one rate-limited
+line (never a traceback). No request of any shape is answered 500: an unexpected
+error is one logged line and a 500 only for a fault of the page itself.
 """
 from __future__ import annotations
 
@@ -40,6 +49,7 @@ from pathlib import Path
 from typing import Any, Callable, Protocol
 
 from aiohttp import web
+from sslfr_common import netguard
 
 from . import bags as bags_mod
 from . import commands
@@ -51,6 +61,38 @@ COOKIE = 'sslfr_session'
 PUSHER = web.AppKey('pusher', asyncio.Task)
 REPORT_TIMEOUT = 300.0
 POLL = 0.05            # [s] how often the pusher looks for a change (a lone change waits <= this)
+STREAM_WRITE_TIMEOUT = 10.0   # [s] an event stream whose client does not read for this long is closed
+HASH_SLOTS = 2         # password checks (scrypt, ~16 MiB each) run at once at most
+LOG_INTERVAL = 10.0    # [s] at most one line per kind of refusal per this long
+AUDIT_REFUSALS_PER_S, AUDIT_BURST = 5.0, 200.0   # refusals written to the audit file (token bucket)
+
+
+class SlowBody(commands.CommandError):
+    """The request body did not arrive within ``body_timeout`` (HTTP 408)."""
+
+
+def unlock_path(password_file: str | os.PathLike) -> Path:
+    """The file ``./sslfr web-password --unlock`` writes: when it changes, the page
+    ends every login lockout (only someone with a shell on the collector can)."""
+    p = Path(password_file).expanduser()
+    return p.with_name(p.name + '.unlock')
+
+
+def _stamp(path: Path):
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_mtime_ns, st.st_size, st.st_ino)
+
+
+def trusted_networks(cfg: dict) -> list:
+    """Networks the global login limit never refuses (param ``login_trusted_networks``)."""
+    text = str(cfg.get('login_trusted_networks', 'auto')).strip()
+    nets = netguard.local_networks(str(cfg.get('bind_address', '127.0.0.1')))
+    if text != 'auto':
+        nets = nets[:2] + netguard.parse_networks(text)     # loopback always
+    return nets
 
 
 class Backend(Protocol):
@@ -85,12 +127,26 @@ class OperatorApp:
         self.cfg, self.backend, self.clock = cfg, backend, clock
         self.passwords = PasswordFile(cfg['password_file'])
         self.sessions = SessionStore(timeout=float(cfg['session_timeout']), clock=clock)
-        self.limiter = LoginLimiter(int(cfg['login_max_failures']), float(cfg['login_window']), clock)
+        self.trusted = trusted_networks(cfg)
+        self.limiter = LoginLimiter(int(cfg['login_max_failures']), float(cfg['login_window']), clock,
+                                    lockout=float(cfg['login_lockout']), lockout_max=float(cfg['login_lockout_max']),
+                                    trusted=lambda a: netguard.in_networks(a, self.trusted))
         self.audit_path = Path(cfg['audit_file']).expanduser() if cfg.get('audit_file') else None
         self.counters = {'commands': 0, 'commands_refused': 0, 'logins': 0, 'login_failures': 0,
-                         'login_rate_limited': 0, 'events_sent': 0, 'clients': 0}
+                         'login_rate_limited': 0, 'events_sent': 0, 'clients': 0, 'bad_requests': 0,
+                         'streams_evicted': 0, 'errors': 0, 'unlocks': 0}
+        self.oneline = netguard.OneLineLog(lambda level, text: self.backend.log(level, text), LOG_INTERVAL, clock)
+        self.guard = netguard.ConnectionGuard(netguard.Limits(
+            int(cfg['max_connections_per_address']), int(cfg['max_connections']),
+            float(cfg['header_timeout']), float(cfg['idle_timeout'])), self.oneline)
+        self.streams = netguard.StreamSlots(int(cfg['max_streams_per_address']), int(cfg['max_streams']))
         self._clients: set[asyncio.Queue] = set()
         self._report_lock = asyncio.Lock()
+        self._hash_slots: asyncio.Semaphore | None = None
+        self._audit_tokens, self._audit_t, self._audit_dropped = AUDIT_BURST, clock(), 0
+        self._unlock_file = unlock_path(cfg['password_file'])
+        self._unlock_stamp = _stamp(self._unlock_file)
+        self._password_stamp = _stamp(self.passwords.path)
 
     # ------------------------------------------------------------------ helpers
     def origin(self, request: web.Request, session=None) -> str:
@@ -108,16 +164,44 @@ class OperatorApp:
         line = {'time': dt.datetime.now(dt.timezone.utc).isoformat(timespec='milliseconds'),
                 'ros_time': self.backend.ros_time(), 'origin': origin, 'command': what,
                 'request': request, 'success': bool(result.get('success')), 'message': result.get('message', '')}
-        self.backend.log(level, f'command {what} {json.dumps(request)} from {origin}: '
-                                f'{"done" if line["success"] else "refused"}: {line["message"]}')
+        text = (f'command {what} {json.dumps(request)} from {origin}: '
+                f'{"done" if line["success"] else "refused"}: {line["message"]}')
+        if line['success'] or level == 'info':
+            self.backend.log(level, text)
+        else:                    # refusals can come in floods: one line per kind per LOG_INTERVAL
+            self.oneline.report('refused login' if what == 'login' else 'refused command', text, level)
+        self._write_audit(line)
+
+    def _audit_file(self, origin: str, what: str, request: Any, result: dict) -> None:
+        self._write_audit({'time': dt.datetime.now(dt.timezone.utc).isoformat(timespec='milliseconds'),
+                           'ros_time': self.backend.ros_time(), 'origin': origin, 'command': what,
+                           'request': request, 'success': bool(result.get('success')),
+                           'message': result.get('message', '')})
+
+    def _write_audit(self, line: dict) -> None:
+        """Append one line; refusals beyond :data:`AUDIT_REFUSALS_PER_S` (burst
+        :data:`AUDIT_BURST`) are counted and summarised in the next line written, so a
+        flood cannot fill the disk."""
         if self.audit_path is None:
             return
+        now = self.clock()
+        self._audit_tokens = min(AUDIT_BURST, self._audit_tokens + (now - self._audit_t) * AUDIT_REFUSALS_PER_S)
+        self._audit_t = now
+        if not line['success']:
+            if self._audit_tokens < 1.0:
+                self._audit_dropped += 1
+                self.counters['audit_dropped'] = self.counters.get('audit_dropped', 0) + 1
+                return
+            self._audit_tokens -= 1.0
+        if self._audit_dropped:
+            line = {**line, 'refusals_not_written_before': self._audit_dropped}
+            self._audit_dropped = 0
         try:
             self.audit_path.parent.mkdir(parents=True, exist_ok=True)
             with open(self.audit_path, 'a', encoding='utf-8') as fh:
                 fh.write(json.dumps(line, allow_nan=False, default=str) + '\n')
-        except OSError as exc:
-            self.backend.log('error', f'audit file {self.audit_path}: {exc}')
+        except (OSError, ValueError) as exc:
+            self.oneline.report('audit file', f'audit file {self.audit_path}: {exc}', 'error')
 
     def _same_origin(self, request: web.Request) -> bool:
         site = request.headers.get('Sec-Fetch-Site')
@@ -129,22 +213,64 @@ class OperatorApp:
         return origin != 'null'
 
     async def _read_json(self, request: web.Request) -> dict:
-        return commands.parse_body(await request.read())
+        """The body as a JSON object ({} when empty), bounded in size, depth and time;
+        :class:`commands.CommandError` (a 400 for the client) otherwise."""
+        try:
+            raw = await asyncio.wait_for(request.read(), float(self.cfg['body_timeout']))
+        except asyncio.TimeoutError:
+            raise SlowBody(f'the request body did not arrive within {self.cfg["body_timeout"]} s') from None
+        return commands.parse_body(raw, max_bytes=int(self.cfg['max_request_bytes']),
+                                   max_depth=int(self.cfg['max_json_depth']))
+
+    def bad_request(self, request: web.Request, what: str, message: str, status: int = 400) -> web.Response:
+        """Count, audit and answer a malformed request (one rate-limited log line)."""
+        self.counters['bad_requests'] += 1
+        self.oneline.report('bad request', f'{what} from {request.remote or "?"} refused: {message}')
+        self._audit_file(self.origin(request), what, None, {'success': False, 'message': message})
+        return _refuse(status, message)
+
+    def refresh_unlock(self) -> None:
+        """End every lockout when the unlock file or the password file changed."""
+        unlock, pw = _stamp(self._unlock_file), _stamp(self.passwords.path)
+        if unlock != self._unlock_stamp or pw != self._password_stamp:
+            changed = 'unlock file' if unlock != self._unlock_stamp else 'password file'
+            self._unlock_stamp, self._password_stamp = unlock, pw
+            if self.limiter.locked() or changed == 'unlock file':
+                self.limiter.clear()
+                self.counters['unlocks'] += 1
+                self.backend.log('warn', f'login lockouts ended: the {changed} changed')
 
     # ------------------------------------------------------------------ middleware
     @web.middleware
     async def middleware(self, request: web.Request, handler):
+        self.guard.busy(request.transport)          # the head is in: no header/idle time-out now
+        try:
+            return await self._guarded(request, handler)
+        finally:
+            self.guard.idle(request.transport)
+
+    async def _guarded(self, request: web.Request, handler):
         limit = int(self.cfg['max_request_bytes'])
         if request.content_length is not None and request.content_length > limit:
-            return _refuse(413, f'request body too large ({request.content_length} bytes > {limit})')
+            return self.bad_request(request, request.path[:80], f'request body too large '
+                                    f'({request.content_length} bytes > {limit})', 413)
         if request.method == 'POST' and not self._same_origin(request):
-            self.audit(self.origin(request), request.path, None,
+            self.audit(self.origin(request), request.path[:80], None,
                        {'success': False, 'message': 'refused: cross-site request'}, 'warn')
             return _refuse(403, 'refused: the request does not come from this page (cross-site)')
         try:
             resp = await handler(request)
         except web.HTTPRequestEntityTooLarge:
-            resp = _refuse(413, f'request body too large (> {limit} bytes)')
+            resp = self.bad_request(request, request.path[:80], f'request body too large (> {limit} bytes)', 413)
+        except web.HTTPException:
+            raise
+        except (ConnectionError, asyncio.CancelledError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - one line, never a traceback per request
+            self.counters['errors'] += 1
+            self.oneline.report('internal error', f'{request.method} {request.path[:80]} from '
+                                f'{request.remote or "?"}: {exc.__class__.__name__}: {exc}', 'error')
+            resp = _refuse(500, f'internal error ({exc.__class__.__name__}); see the web node\'s log')
         resp.headers.setdefault('X-Content-Type-Options', 'nosniff')
         resp.headers.setdefault('Referrer-Policy', 'no-referrer')
         resp.headers.setdefault('X-Frame-Options', 'DENY')
@@ -185,20 +311,38 @@ class OperatorApp:
                                            'X-Accel-Buffering': 'no'})
         await resp.prepare(request)
         queue: asyncio.Queue = asyncio.Queue(maxsize=4)
+
+        evicted = asyncio.Event()
+
+        def evict():               # a newer stream took this one's slot (netguard.StreamSlots)
+            self.counters['streams_evicted'] += 1
+            evicted.set()
+            while queue.full():
+                queue.get_nowait()
+            queue.put_nowait(None)
+        slot = self.streams.acquire(request.remote or '?', evict)
         self._clients.add(queue)
         self.counters['clients'] = len(self._clients)
+        write_timeout = STREAM_WRITE_TIMEOUT
         try:
-            await resp.write(b'retry: 1000\n\n')
-            await resp.write(self._event('state', self.backend.state.snapshot(self.backend.ros_time())))
+            await asyncio.wait_for(resp.write(b'retry: 1000\n\n'), write_timeout)
+            await asyncio.wait_for(resp.write(self._event('state', self.backend.state.snapshot(
+                self.backend.ros_time()))), write_timeout)
             while True:
                 try:
                     data = await asyncio.wait_for(queue.get(), 15.0)
                 except asyncio.TimeoutError:
                     data = b': keep-alive\n\n'
-                await resp.write(data)
+                if data is None or evicted.is_set():
+                    break
+                await asyncio.wait_for(resp.write(data), write_timeout)
+        except asyncio.TimeoutError:            # the client does not read: drop it
+            if request.transport is not None:
+                request.transport.abort()
         except (ConnectionResetError, asyncio.CancelledError, RuntimeError):
             pass
         finally:
+            self.streams.release(slot)
             self._clients.discard(queue)
             self.counters['clients'] = len(self._clients)
         return resp
@@ -250,32 +394,43 @@ class OperatorApp:
                       'password_set': line is not None, 'problem': self.passwords.problem,
                       'open_view': bool(self.cfg['open_view'])})
 
+    def _rate_limited(self, addr: str, wait: float) -> web.Response:
+        self.counters['login_rate_limited'] += 1
+        self.audit(addr, 'login', None, {'success': False, 'message': f'rate limited ({wait:.0f} s)'}, 'warn')
+        return _refuse(429, f'too many failed logins: try again in {wait:.0f} s', retry_after=round(wait, 1))
+
     async def login(self, request: web.Request) -> web.Response:
         addr = request.remote or '?'
+        self.refresh_unlock()
         wait = self.limiter.retry_after(addr)
         if wait > 0:
-            self.counters['login_rate_limited'] += 1
-            self.audit(addr, 'login', None, {'success': False, 'message': f'rate limited ({wait:.0f} s)'}, 'warn')
-            return _refuse(429, f'too many failed logins: try again in {wait:.0f} s',
-                           retry_after=round(wait, 1))
+            return self._rate_limited(addr, wait)
         try:
             body = await self._read_json(request)
         except commands.CommandError as exc:
-            return _refuse(400, str(exc))
+            return self.bad_request(request, 'login', str(exc), 408 if isinstance(exc, SlowBody) else 400)
         password = body.get('password')
         if set(body) - {'password'} or not isinstance(password, str):
-            return _refuse(400, 'login: expected {"password": "..."}')
+            return self.bad_request(request, 'login', 'login: expected {"password": "..."}')
         line = self.passwords.line()
         if line is None:
             return _refuse(503, self.passwords.problem)
+        wait, ticket = self.limiter.attempt(addr)      # counted before the hash: no await in between
+        if wait > 0:
+            return self._rate_limited(addr, wait)
+        if self._hash_slots is None:
+            self._hash_slots = asyncio.Semaphore(HASH_SLOTS)
         loop = asyncio.get_running_loop()
-        ok = await loop.run_in_executor(None, verify_password, password, line)
+        async with self._hash_slots:
+            try:
+                ok = await loop.run_in_executor(None, verify_password, password, line)
+            except ValueError:          # the password file changed to something unusable meanwhile
+                return _refuse(503, self.passwords.problem or 'password file unusable')
         if not ok:
-            self.limiter.failure(addr)
             self.counters['login_failures'] += 1
             self.audit(addr, 'login', None, {'success': False, 'message': 'wrong password'}, 'warn')
             return _refuse(401, 'wrong password')
-        self.limiter.success(addr)
+        self.limiter.success(addr, ticket)
         s = self.sessions.create(addr)
         self.counters['logins'] += 1
         self.audit(self.origin(request, s), 'login', None, {'success': True, 'message': 'logged in'})
@@ -308,8 +463,8 @@ class OperatorApp:
         s, refused = self._command_session(request)
         if refused:
             self.counters['commands_refused'] += 1
-            self.audit(self.origin(request), name, None, {'success': False, 'message': 'not logged in / bad CSRF'},
-                       'warn')
+            self.audit(self.origin(request), name[:40], None,
+                       {'success': False, 'message': 'not logged in / bad CSRF'}, 'warn')
             return refused
         origin = self.origin(request, s)
         try:
@@ -317,8 +472,9 @@ class OperatorApp:
             cmd = commands.validate(name, body, self.backend.jog_limits())
         except commands.CommandError as exc:
             self.counters['commands_refused'] += 1
-            self.audit(origin, name, None, {'success': False, 'message': str(exc)}, 'warn')
-            return _refuse(400, str(exc))
+            self.counters['bad_requests'] += 1
+            self.audit(origin, name[:40], None, {'success': False, 'message': str(exc)}, 'warn')
+            return _refuse(408 if isinstance(exc, SlowBody) else 400, str(exc))
         try:
             result = await self.backend.call(cmd)
         except Exception as exc:  # noqa: BLE001 - a failed call is an answer for the operator
@@ -360,7 +516,7 @@ class OperatorApp:
             if not bags_mod.report_is_fresh(bag, out):
                 code, text = await self._make_report(bag, out)
                 if code != 0:
-                    return _refuse(500, f'the report failed (exit {code}): {text[-2000:]}')
+                    return _refuse(422, f'the report failed (exit {code}): {text[-2000:]}')
         text = (out / 'report.txt').read_text(encoding='utf-8', errors='replace')
         plots = sorted(p.name for p in out.glob('*.png'))
         base = f'/api/bags/{bag.name}/report/'
@@ -446,12 +602,15 @@ class OperatorApp:
 
 class Server:
     """The app served from its own thread and asyncio loop (the ROS executor keeps
-    the main thread). ``start()`` returns once listening (or raises OSError)."""
+    the main thread), behind the app's :class:`netguard.ConnectionGuard` (connection
+    caps, header and idle time-outs). ``start()`` returns once listening (or raises
+    OSError)."""
 
     def __init__(self, op: OperatorApp, host: str, port: int):
         self.op, self.host, self.port = op, host, int(port)
         self.loop = asyncio.new_event_loop()
         self._runner: web.AppRunner | None = None
+        self._server: asyncio.base_events.Server | None = None
         self._thread = threading.Thread(target=self.loop.run_forever, name='web', daemon=True)
         self.url = ''
 
@@ -462,21 +621,32 @@ class Server:
         return self.url
 
     async def _start(self) -> str:
-        self._runner = web.AppRunner(self.op.application(), access_log=None, shutdown_timeout=1.0)
+        op = self.op
+        self._runner = web.AppRunner(
+            op.application(), access_log=None, shutdown_timeout=1.0,
+            keepalive_timeout=float(op.cfg['idle_timeout']) + float(op.cfg['header_timeout']),  # backstop
+            lingering_time=float(op.cfg['body_timeout']),
+            logger=netguard.OneLineLogger('http', op.oneline))
         await self._runner.setup()
-        site = web.TCPSite(self._runner, self.host, self.port, reuse_address=True)
-        await site.start()
-        sock = site._server.sockets[0]                     # noqa: SLF001 - the bound port (port 0)
+        self._server = await asyncio.get_running_loop().create_server(
+            op.guard.wrap(self._runner.server), self.host, self.port, reuse_address=True, backlog=128)
+        sock = self._server.sockets[0]
         host, port = sock.getsockname()[:2]
         shown = f'[{host}]' if ':' in host else host
         return f'http://{shown}:{port}/'
 
+    async def _stop(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+        self.op.guard.close_all()
+
     def stop(self) -> None:
-        if self._runner is not None and self.loop.is_running():
+        if self.loop.is_running():
             try:
-                asyncio.run_coroutine_threadsafe(self._runner.cleanup(), self.loop).result(5)
+                asyncio.run_coroutine_threadsafe(self._stop(), self.loop).result(5)
             except Exception:  # noqa: BLE001 - stopping anyway
                 pass
-        if self.loop.is_running():
             self.loop.call_soon_threadsafe(self.loop.stop)
         self._thread.join(5)

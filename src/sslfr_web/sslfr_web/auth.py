@@ -10,10 +10,12 @@
 - **CSRF**: every command must carry the session's CSRF token (header
   ``X-CSRF-Token``); a cross-site page can neither read it nor (SameSite=Strict) send
   the cookie.
-- **Login rate limit**: per client address, at most ``max_failures`` failed logins in
-  a sliding ``window``; then refused (without even checking the password) until the
-  oldest failure leaves the window. A global limit of 10x that bounds a distributed
-  guess.
+- **Login rate limit** (:class:`LoginLimiter`): every attempt is counted before its
+  password is checked; an address with ``max_failures`` in a sliding ``window`` is
+  locked out (refused without checking the password) for a lockout that doubles at
+  each repetition. A global limit of 10x bounds a distributed guess from outside the
+  trusted networks (loopback and the collector's own segment), which it never locks
+  out; ``./sslfr web-password --unlock`` ends every lockout.
 
 Times are ``time.monotonic()`` seconds unless a clock is given (tests).
 """
@@ -186,43 +188,115 @@ class SessionStore:
         return len(self._sessions)
 
 
+@dataclass
+class _AddrState:
+    failures: deque = field(default_factory=deque)   # times of counted attempts in the window
+    locked_until: float = 0.0
+    strikes: int = 0                                # lockouts so far (the back-off doubles each)
+    last: float = 0.0                               # last counted attempt
+
+
 class LoginLimiter:
-    """Sliding-window limit of failed logins per client address (and in all)."""
+    """Failed-login limits: per client address with a growing lockout, and in all
+    for addresses outside the trusted networks.
+
+    An attempt is counted *before* its password is checked (:meth:`attempt`), so
+    attempts sent at once cannot pass the check together; a right password takes
+    its own count back (:meth:`success`). When an address reaches ``max_failures``
+    in ``window`` s it is locked out for ``lockout`` s, doubled at each further
+    lockout up to ``lockout_max`` (forgotten after a success, or ``lockout_max`` +
+    ``window`` s without an attempt). The global limit (``global_factor`` x
+    ``max_failures`` in ``window``) counts and refuses only addresses outside
+    ``trusted(addr)``: a flood from elsewhere never locks out the collector's own
+    network segment or its console (loopback). :meth:`clear` (``./sslfr
+    web-password --unlock``) ends every lockout.
+    """
 
     def __init__(self, max_failures: int = 5, window: float = 300.0,
-                 clock: Callable[[], float] = time.monotonic, global_factor: int = 10):
+                 clock: Callable[[], float] = time.monotonic, global_factor: int = 10,
+                 lockout: float | None = None, lockout_max: float | None = None,
+                 trusted: Callable[[str], bool] = lambda addr: False, max_addresses: int = 10000):
         self.max_failures, self.window, self.clock = int(max_failures), float(window), clock
+        self.lockout = float(window if lockout is None else lockout)
+        self.lockout_max = max(self.lockout, float(self.lockout * 64 if lockout_max is None else lockout_max))
         self.global_max = int(max_failures) * global_factor
-        self._by_addr: dict[str, deque] = {}
+        self.trusted, self.max_addresses = trusted, int(max_addresses)
+        self._by_addr: dict[str, _AddrState] = {}
         self._all: deque = deque()
 
     def _prune(self, q: deque, now: float) -> None:
         while q and now - q[0] >= self.window:
             q.popleft()
 
+    def _state(self, addr: str, now: float, create: bool = False) -> _AddrState | None:
+        st = self._by_addr.get(addr)
+        if st is not None:
+            self._prune(st.failures, now)
+            if st.strikes and now - max(st.last, st.locked_until) > self.lockout_max + self.window:
+                st.strikes = 0
+            if not st.failures and not st.strikes and now >= st.locked_until:
+                del self._by_addr[addr]
+                st = None
+        if st is None and create:
+            if len(self._by_addr) >= self.max_addresses:          # bounded memory under a flood
+                free = [a for a, s in self._by_addr.items() if s.locked_until <= now]
+                for a in (free or list(self._by_addr))[:max(1, self.max_addresses // 2)]:
+                    del self._by_addr[a]
+            st = self._by_addr[addr] = _AddrState()
+        return st
+
     def retry_after(self, addr: str) -> float:
         """0 when ``addr`` may try now, else the seconds until it may."""
         now = self.clock()
-        self._prune(self._all, now)
-        waits = []
-        if len(self._all) >= self.global_max:
-            waits.append(self.window - (now - self._all[0]))
-        q = self._by_addr.get(addr)
-        if q is not None:
-            self._prune(q, now)
-            if not q:
-                del self._by_addr[addr]
-            elif len(q) >= self.max_failures:
-                waits.append(self.window - (now - q[0]))
-        return max(waits) if waits else 0.0
+        waits = [0.0]
+        if not self.trusted(addr):
+            self._prune(self._all, now)
+            if len(self._all) >= self.global_max:
+                waits.append(self.window - (now - self._all[0]))
+        st = self._state(addr, now)
+        if st is not None and st.locked_until > now:
+            waits.append(st.locked_until - now)
+        return max(waits)
+
+    def attempt(self, addr: str) -> tuple[float, float | None]:
+        """Check and count one login attempt of ``addr`` at once (no await between):
+        (0, ticket) when it may go on, its ticket for :meth:`success`; (wait, None)
+        when it is refused for ``wait`` s."""
+        wait = self.retry_after(addr)
+        if wait > 0:
+            return wait, None
+        now = self.clock()
+        st = self._state(addr, now, create=True)
+        st.failures.append(now)
+        st.last = now
+        if not self.trusted(addr):
+            self._all.append(now)
+        if len(st.failures) >= self.max_failures:
+            st.locked_until = now + min(self.lockout * 2 ** min(st.strikes, 30), self.lockout_max)
+            st.strikes += 1
+            st.failures.clear()
+        return 0.0, now
 
     def failure(self, addr: str) -> None:
-        now = self.clock()
-        self._by_addr.setdefault(addr, deque()).append(now)
-        self._all.append(now)
-        if len(self._by_addr) > 10000:                       # bounded memory under a flood
-            for a in list(self._by_addr)[:5000]:
-                del self._by_addr[a]
+        """Count a failed attempt that was not counted by :meth:`attempt`."""
+        self.attempt(addr)
 
-    def success(self, addr: str) -> None:
+    def success(self, addr: str, ticket: float | None = None) -> None:
+        """A right password from ``addr``: its failures, lockout and strikes are gone,
+        and its own attempt leaves the global count."""
         self._by_addr.pop(addr, None)
+        if ticket is not None and not self.trusted(addr):
+            try:
+                self._all.remove(ticket)
+            except ValueError:
+                pass
+
+    def clear(self) -> None:
+        """End every lockout and forget every count (a local unlock)."""
+        self._by_addr.clear()
+        self._all.clear()
+
+    def locked(self) -> dict[str, float]:
+        """Address -> seconds left, of every address locked out now."""
+        now = self.clock()
+        return {a: s.locked_until - now for a, s in list(self._by_addr.items()) if s.locked_until > now}

@@ -39,6 +39,7 @@ from typing import Any, Awaitable, Callable, Mapping
 
 from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, JOINTS, MODES, PLANNER_REPLAN, PLANNER_SET_MODE,
                                    SAFETY_ESTOP, SAFETY_RESET)
+from sslfr_common.netguard import BadInput, parse_json
 
 #: service key -> (relative service name, service type). ``{axis}`` is filled per axis.
 SERVICES: dict[str, tuple[str, str]] = {
@@ -96,14 +97,19 @@ def all_service_names(axes: tuple[str, ...] = JOINTS) -> dict[str, tuple[str, st
     return out
 
 
-def parse_body(raw: bytes) -> dict:
-    """Request body -> a JSON object ({} for an empty body); CommandError otherwise."""
-    if not raw or not raw.strip():
+MAX_BODY_BYTES = 16384   # [bytes] default bound of a request body (the node's max_request_bytes)
+MAX_JSON_DEPTH = 8       # [-] default nesting bound (the node's max_json_depth)
+
+
+def parse_body(raw: bytes, *, max_bytes: int = MAX_BODY_BYTES, max_depth: int = MAX_JSON_DEPTH) -> dict:
+    """Request body -> a JSON object ({} for an empty body), bounded in size and
+    nesting depth (:func:`sslfr_common.netguard.parse_json`); CommandError otherwise."""
+    if not raw.strip():
         return {}
     try:
-        value = json.loads(raw.decode('utf-8'))
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise CommandError(f'the request body is not valid JSON ({exc.__class__.__name__})') from None
+        value = parse_json(raw, max_bytes=max_bytes, max_depth=max_depth)
+    except BadInput as exc:
+        raise CommandError(str(exc)) from None
     if not isinstance(value, dict):
         raise CommandError('the request body must be a JSON object')
     return value

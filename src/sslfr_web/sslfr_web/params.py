@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ipaddress
 
+from sslfr_common.netguard import parse_networks
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 #: The password file `./sslfr web-password` writes and the node reads.
@@ -22,6 +23,17 @@ def ip_address_error(addr: str) -> str | None:
         ipaddress.ip_address(addr)
     except ValueError:
         return f'{addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)'
+    return None
+
+
+def networks_error(text: str) -> str | None:
+    """None for 'auto' or a comma-separated list of IP networks, else the reason."""
+    if text.strip() == 'auto':
+        return None
+    try:
+        parse_networks(text)
+    except ValueError as exc:
+        return str(exc)
     return None
 
 
@@ -47,6 +59,42 @@ WEB_PARAMS = ParamTable((
               'refused until the window has passed [-]', '-', 1, 1000, read_only=True),
     ParamSpec('login_window', 300.0, 'Window of the login rate limit [s]', 's', 1.0, 86400.0,
               read_only=True),
+    ParamSpec('login_lockout', 60.0,
+              'An address that reached login_max_failures is refused for this long; each further '
+              'lockout of the same address doubles it, up to login_lockout_max [s]', 's', 1.0, 86400.0,
+              read_only=True),
+    ParamSpec('login_lockout_max', 3600.0, 'Longest lockout of one address [s]', 's', 1.0, 604800.0,
+              read_only=True),
+    ParamSpec('login_trusted_networks', 'auto',
+              "Networks the global login limit (10 x login_max_failures in login_window, all "
+              "addresses together) never refuses: 'auto' = loopback and the subnet(s) of the "
+              "interface bind_address is on; or comma-separated networks, e.g. "
+              "'192.168.1.0/24' (loopback is always trusted). The per-address limit applies to all",
+              read_only=True, validator=networks_error),
+    ParamSpec('max_connections_per_address', 16,
+              'Open connections one client address may hold; more are refused [-]', '-', 1, 1000,
+              read_only=True),
+    ParamSpec('max_connections', 128,
+              'Open connections in all; when full, the oldest idle connection of the address '
+              'holding the most is closed for a new one [-]', '-', 2, 10000, read_only=True),
+    ParamSpec('header_timeout', 10.0,
+              'A request head must be complete within this time of its first byte, else the '
+              'connection is closed (slow clients) [s]', 's', 0.5, 120.0, read_only=True),
+    ParamSpec('idle_timeout', 60.0,
+              'A connection with no request for this long is closed [s]', 's', 1.0, 3600.0,
+              read_only=True),
+    ParamSpec('body_timeout', 10.0,
+              'A request body must arrive within this time, else the request is refused (408) [s]',
+              's', 0.5, 120.0, read_only=True),
+    ParamSpec('max_json_depth', 8,
+              'Request bodies nested deeper than this (JSON arrays/objects) are refused (400) [-]',
+              '-', 2, 64, read_only=True),
+    ParamSpec('max_streams_per_address', 4,
+              'Live-update streams (/api/events) one address may hold; a new one ends its oldest [-]',
+              '-', 1, 100, read_only=True),
+    ParamSpec('max_streams', 32,
+              'Live-update streams in all; a new one ends the oldest stream of the address '
+              'holding the most [-]', '-', 1, 1000, read_only=True),
     ParamSpec('push_period', 0.25,
               'The page is sent the live state at most this often, when it changed [s, wall]',
               's', 0.05, 1.0, read_only=True),
@@ -69,4 +117,6 @@ WEB_PARAMS = ParamTable((
               read_only=True),
     ParamSpec('max_request_bytes', 16384, 'Larger request bodies are refused (HTTP 413) [bytes]',
               'bytes', 256, 1048576, read_only=True),
-), integers_for_floats=True)
+), cross_check=lambda v: [] if v['login_lockout_max'] >= v['login_lockout'] else
+    [f"login_lockout_max ({v['login_lockout_max']} s) must be at least login_lockout ({v['login_lockout']} s)"],
+    integers_for_floats=True)

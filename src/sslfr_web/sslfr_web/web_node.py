@@ -188,7 +188,9 @@ class WebNode(LeanEvents, Node):
                              message=f'serving {self.url}' if self.op.passwords.line()
                              else self.op.passwords.problem)
         s.values = [KeyValue(key=k, value=str(v)) for k, v in
-                    {**c, 'sessions': len(self.op.sessions), 'url': self.url,
+                    {**c, **self.op.guard.counters, 'streams': self.op.streams.count(),
+                     'locked_out_addresses': len(self.op.limiter.locked()),
+                     'sessions': len(self.op.sessions), 'url': self.url,
                      'day_samples': len(self.buffer.t)}.items()]
         arr = DiagnosticArray(status=[s])
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -106,11 +106,51 @@ def test_login_limiter_per_address_sliding_window_and_global_bound():
     now[0] = 30.0
     assert lim.retry_after('a') == pytest.approx(30.0)
     now[0] = 60.0
-    assert lim.retry_after('a') == 0.0                  # the oldest failure left the window
-    for addr in 'cdefgh':                               # 3 more in the window from 'a' + 6 -> global 6 reached
+    assert lim.retry_after('a') == 0.0                  # the lockout (= window by default) is over
+    for addr in 'cdefgh':                               # 6 in the window -> global 6 reached
         lim.failure(addr)
     assert lim.retry_after('zz') > 0.0
     lim.success('a')
+
+
+def test_login_attempts_are_counted_before_the_check_and_lockouts_grow():
+    now = [0.0]
+    lim = auth.LoginLimiter(max_failures=3, window=600.0, clock=lambda: now[0], lockout=10.0, lockout_max=35.0)
+    tickets = [lim.attempt('a') for _ in range(6)]      # six at once, none answered yet
+    assert [w == 0.0 for w, _ in tickets] == [True] * 3 + [False] * 3
+    assert lim.retry_after('a') == pytest.approx(10.0)
+    now[0] = 10.0
+    for _ in range(3):
+        assert lim.attempt('a')[0] == 0.0
+    assert lim.retry_after('a') == pytest.approx(20.0)  # the second lockout is twice as long
+    now[0] = 30.0
+    for _ in range(3):
+        lim.attempt('a')
+    assert lim.retry_after('a') == pytest.approx(35.0)  # capped at lockout_max
+    now[0] = 65.0
+    w, ticket = lim.attempt('a')
+    assert w == 0.0
+    lim.success('a', ticket)                            # the right password: all forgotten
+    assert lim.retry_after('a') == 0.0 and not lim.locked()
+
+
+def test_global_login_limit_never_refuses_trusted_networks_and_clear_unlocks():
+    now = [0.0]
+    lim = auth.LoginLimiter(max_failures=2, window=60.0, clock=lambda: now[0], global_factor=2,
+                            trusted=lambda a: a.startswith('192.168.1.'))
+    for addr in ('10.0.0.1', '10.0.0.2'):
+        lim.attempt(addr)
+    for addr in ('192.168.1.7', '192.168.1.8', '192.168.1.9'):
+        lim.attempt(addr)                               # trusted: not in the global count
+    assert lim.retry_after('10.0.0.3') == 0.0
+    lim.attempt('10.0.0.3')
+    lim.attempt('10.0.0.4')
+    assert lim.retry_after('10.0.0.5') == pytest.approx(60.0)   # untrusted: global limit reached
+    assert lim.retry_after('192.168.1.20') == 0.0               # the segment: only its own count
+    lim.attempt('192.168.1.7')
+    assert lim.retry_after('192.168.1.7') > 0.0                 # per-address limit holds for all
+    lim.clear()
+    assert lim.retry_after('192.168.1.7') == 0.0 and lim.retry_after('10.0.0.5') == 0.0
 
 
 # ------------------------------------------------------------------ commands

@@ -18,6 +18,8 @@ import time
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.keys import KeyFileError, link_key
 from sslfr_drivers.firmware import BOARDS, BOOTLOADER_BAUD, FirmwareError, build, hexfile
+from sslfr_drivers.link.keys_cli import BAUD_RANGE
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
 
 #: --set keys: name -> (ConfigRecord field, parser)
 CONFIG_KEYS = {
@@ -36,22 +38,23 @@ KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'absorber': m.BoardKind.ABSORBER,
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='sslfr flash', description=__doc__.split('\n\n')[0],
+    p = OneLineParser(prog='sslfr flash', description=__doc__.split('\n\n')[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog='configuration keys (--set): ' + ', '.join(CONFIG_KEYS))
     p.add_argument('board', choices=BOARDS, help='which firmware')
     p.add_argument('--port', required=True, help='serial port of the board (USB-serial adapter)')
-    p.add_argument('--baud', type=int, default=BOOTLOADER_BAUD,
+    p.add_argument('--baud', type=bounded_int(*BAUD_RANGE), default=BOOTLOADER_BAUD,
                    help=f'bootloader baud rate (default {BOOTLOADER_BAUD}: the Pro Mini 16 MHz '
                         'bootloader of arduino-core-avr; optiboot: 115200)')
-    p.add_argument('--fw-baud', type=int, default=None,
+    p.add_argument('--fw-baud', type=bounded_int(*BAUD_RANGE), default=None,
                    help='firmware UART baud rate (default: from --set baud, else 115200)')
     p.add_argument('--no-build', action='store_true', help='flash the existing build/BOARD.hex as it is')
     p.add_argument('--config-only', action='store_true', help='do not flash: only read INFO and write --set keys')
     p.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
                    help='write this configuration field to the EEPROM (repeatable); takes effect after a RESET, '
                         'which this command sends')
-    p.add_argument('--timeout', type=float, default=8.0, help='seconds to wait for the board after flashing')
+    p.add_argument('--timeout', type=ranged_float(0.1, 600.0, unit='s'), default=8.0,
+                   help='seconds to wait for the board after flashing, 0.1..600')
     p.add_argument('--avrdude', default='avrdude', help='avrdude executable')
     p.add_argument('--key-file', default=None,
                    help='installation key file of a board already provisioned (re-flashing keeps its key); '
@@ -74,9 +77,10 @@ def parse_sets(items: list[str]) -> dict:
     return out
 
 
-def run_avrdude(avrdude: str, port: str, baud: int, hex_path, out=sys.stdout) -> None:
+def run_avrdude(avrdude: str, port: str, baud: int, hex_path, out=None) -> None:
     """Write ``hex_path`` through the bootloader (STK500v1, ``-c arduino``); the board is
     reset into its bootloader by avrdude's DTR pulse. FirmwareError on failure."""
+    out = out or sys.stdout
     if shutil.which(avrdude) is None:
         raise FirmwareError(f'{avrdude} not found: sudo apt-get install avrdude')
     argv = [avrdude, '-p', 'atmega328p', '-c', 'arduino', '-P', port, '-b', str(baud), '-D',
@@ -103,12 +107,17 @@ def read_board(port: str, baud: int, timeout: float, key: bytes | None = None):
     return link, link.request(m.GetInfo())
 
 
-def main(argv: list[str] | None = None, out=sys.stdout) -> int:
-    args = parser().parse_args(argv)
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout           # the stream of the call, not of the import
+    try:
+        args = parser().parse_args(argv)
+    except CliError as exc:
+        print(f'sslfr flash: error: {exc}', file=sys.stderr)
+        return 2
     try:
         sets = parse_sets(args.set)
     except ValueError as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 2
     fw_baud = args.fw_baud or 115200
     try:
@@ -143,13 +152,13 @@ def main(argv: list[str] | None = None, out=sys.stdout) -> int:
         finally:
             link.stop()
     except KeyFileError as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 2
     except (FirmwareError, subprocess.TimeoutExpired) as exc:
-        print(f'sslfr flash: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {one_line(exc)}', file=sys.stderr)
         return 1
     except Exception as exc:  # noqa: BLE001 - a NACK or link error: say it, no traceback
-        print(f'sslfr flash: {type(exc).__name__}: {exc}', file=sys.stderr)
+        print(f'sslfr flash: {type(exc).__name__}: {one_line(exc)}', file=sys.stderr)
         return 1
     return 0
 

@@ -22,6 +22,7 @@ from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.auth import BOARD_TO_HOST, HOST_TO_BOARD, NULL_KEY, Session, key_id
 from sslfr_drivers.link.keys import KeyFileError, default_key_path, generate, load_key, write_key_file
 from sslfr_drivers.link.protocol import Framer, encode_frame
+from sslfr_common.cliargs import CliError, OneLineParser, bounded_int, one_line, ranged_float
 
 
 class ProvisionError(RuntimeError):
@@ -85,11 +86,14 @@ def _open_serial(port: str, baud: int):
     return s
 
 
+BAUD_RANGE = (300, 2_000_000)     # [bit/s] UART speeds a board may be asked for
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='sslfr keys', description=__doc__.split('\n')[0],
+    p = OneLineParser(prog='sslfr keys', description=__doc__.split('\n')[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog='\n'.join(__doc__.split('\n')[2:]))
-    sub = p.add_subparsers(dest='cmd', required=True)
+    sub = p.add_subparsers(dest='cmd', required=True, parser_class=OneLineParser)
     n = sub.add_parser('new', help='write a fresh installation key file (mode 0600)')
     n.add_argument('path', nargs='?', help=f'key file (default {default_key_path()})')
     n.add_argument('--force', action='store_true',
@@ -99,13 +103,20 @@ def parser() -> argparse.ArgumentParser:
     pr = sub.add_parser('provision', help='give the key to a board over its USB serial port')
     pr.add_argument('--port', required=True, help='the board\'s USB serial port (e.g. /dev/ttyUSB0)')
     pr.add_argument('--key-file', help=f'key file (default {default_key_path()})')
-    pr.add_argument('--baud', type=int, default=115200, help='the board\'s UART speed [bit/s]')
-    pr.add_argument('--timeout', type=float, default=15.0, help='[s] to wait for the board')
+    pr.add_argument('--baud', type=bounded_int(*BAUD_RANGE), default=115200,
+                    help=f'the board\'s UART speed [bit/s], {BAUD_RANGE[0]}..{BAUD_RANGE[1]}')
+    pr.add_argument('--timeout', type=ranged_float(0.1, 600.0, unit='s'), default=15.0,
+                    help='[s] to wait for the board, 0.1..600')
     return p
 
 
-def main(argv: list[str] | None = None, out=sys.stdout) -> int:
-    args = parser().parse_args(argv)
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout           # the stream of the call, not of the import
+    try:
+        args = parser().parse_args(argv)
+    except CliError as exc:
+        print(f'sslfr keys: error: {exc}', file=sys.stderr)
+        return 2
     try:
         if args.cmd == 'new':
             path = write_key_file(args.path or default_key_path(), generate(), force=args.force)
@@ -127,10 +138,11 @@ def main(argv: list[str] | None = None, out=sys.stdout) -> int:
               file=out)
         return 0
     except KeyFileError as exc:
-        print(f'sslfr keys: {exc}', file=sys.stderr)
+        print(f'sslfr keys: {one_line(exc)}', file=sys.stderr)
         return 2
     except (ProvisionError, OSError) as exc:
-        print(f'sslfr keys: {args.port if args.cmd == "provision" else ""}: {exc}', file=sys.stderr)
+        where = f'{args.port}: ' if args.cmd == 'provision' else ''
+        print(f'sslfr keys: {one_line(where)}{one_line(exc)}', file=sys.stderr)
         return 1
 
 

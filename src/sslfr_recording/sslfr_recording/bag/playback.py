@@ -11,6 +11,9 @@ import re
 from sslfr_common.timeconv import NS_PER_S, to_ns, to_sec
 
 
+MAX_OFFSET_S = 1e9      # [s] largest offset from the bag's start or end (~31 years)
+
+
 def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None) -> int:
     """Resolve a ``--start``/``--end`` value to a log time [ns].
 
@@ -27,6 +30,8 @@ def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None)
         On an unparseable value.
     """
     s = spec.strip()
+    if re.fullmatch(r'[+-]?\d+(\.\d*)?', s) and not abs(float(s)) <= MAX_OFFSET_S:
+        raise ValueError(f'{spec!r}: an offset is at most {MAX_OFFSET_S:.0e} s')
     if re.fullmatch(r'[+]?\d+(\.\d*)?', s):
         return bag_start_ns + to_ns(float(s))
     if re.fullmatch(r'-\d+(\.\d*)?', s):
@@ -46,7 +51,10 @@ def parse_time_spec(spec: str, bag_start_ns: int, bag_end_ns: int | None = None)
                          'from the end, HH:MM[:SS] UTC or an ISO date-time') from exc
     if t.tzinfo is None:
         t = t.replace(tzinfo=_dt.timezone.utc)
-    return to_ns(t.timestamp())
+    try:
+        return to_ns(t.timestamp())
+    except (OverflowError, OSError) as exc:
+        raise ValueError(f'cannot use time {spec!r}: {exc}') from None
 
 
 def absolute(name: str) -> str:

@@ -44,7 +44,7 @@ class FileReport:
     """What recovery found and did in one file."""
 
     path: str
-    status: str  # ok | rebuilt | upgraded | unreadable | damaged (dry run) | kept
+    status: str  # ok | rebuilt | upgraded | unreadable | damaged (dry run) | kept | cannot repair
     messages: int = 0          # messages in the file after recovery (or rescuable, dry run)
     readable_before: int = 0   # messages a reader got from the original
     chunks_kept: int = 0
@@ -53,6 +53,7 @@ class FileReport:
     lost: list[str] = field(default_factory=list)  # what could not be rescued
     detail: str = ''
     backup: str = ''
+    cannot: list[str] = field(default_factory=list)   # what rosbag2 would still refuse, and why
 
 
 @dataclass
@@ -124,6 +125,38 @@ def _needs_upgrade(scan: FileScan) -> str:
     except MetadataError:
         return 'its rosbag2 metadata record does not decode as rosbag2 Jazzy reads it'
     return ''
+
+
+def _schema_repairs(scan: FileScan) -> tuple[dict[str, tuple[str, str]], list[str]]:
+    """Schemas of the file that rosbag2 would refuse (rules F09/F10): {type: (the text
+    rebuilt from the installed message definitions, its RIHS01 hash)} for those that can
+    be rebuilt, and one line saying why for each that cannot (its type is not a message
+    type, or its definition is not installed here)."""
+    from .conformance import _check_schema      # local: conformance imports this package's scan
+    from .schema import DefinitionCache, DefinitionNotFoundError, normalize_type
+    used = {ch.schema_id for ch in scan.channels.values()}
+    repairs: dict[str, tuple[str, str]] = {}
+    cannot: list[str] = []
+    cache = None
+    for sid, schema in sorted(scan.schemas.items()):
+        if sid not in used:
+            continue
+        findings = _check_schema('', schema)
+        if not findings:
+            continue
+        why = findings[0].message
+        try:
+            name = normalize_type(schema.name)
+        except ValueError:
+            cannot.append(f'schema {schema.name!r} is damaged ({why}) and its name is not a message type: '
+                          'its definition cannot be rebuilt')
+            continue
+        cache = cache or DefinitionCache()
+        try:
+            repairs[schema.name] = (cache.full_text(name), cache.type_hash(name))
+        except (DefinitionNotFoundError, RecursionError, OSError, ValueError) as exc:
+            cannot.append(f'schema {schema.name} is damaged ({why}) and cannot be rebuilt: {exc}')
+    return repairs, cannot
 
 
 def _lost(scan: FileScan) -> list[str]:
@@ -274,13 +307,26 @@ def recover_bag(directory: str | os.PathLike, *, verify: bool = True,
         span = scan.time_range() if rescued else None
         info = FileInfo(path.name, span[0] if span else 0, (span[1] - span[0]) if span else 0, rescued)
         meta.files.append(info)
+        repairs, cannot = _schema_repairs(scan)
+        for name, (text, hash_) in repairs.items():
+            report.schemas[name] = text
+            for info in file_topics.values():
+                if info.type == name:
+                    info.type_description_hash = topics[info.name].type_description_hash = hash_
         upgrade = '' if not scan.intact else _needs_upgrade(scan)
+        if repairs:
+            upgrade = '; '.join(filter(None, [upgrade, 'damaged schema text of ' + ', '.join(sorted(repairs))
+                                              + ' rebuilt from the installed message definitions']))
         status = 'ok' if scan.intact and not upgrade else ('upgraded' if scan.intact else 'rebuilt')
+        if cannot:
+            upgrade = '; '.join(filter(None, [upgrade, *cannot]))
+            if status == 'ok':
+                status = 'cannot repair'
         rep = FileReport(path.name, status, rescued, chunks_kept=len(scan.good_chunks),
                          chunks_bad=len(scan.bad_chunks), lost=_lost(scan),
                          truncated_bytes=(scan.size - scan.truncated_at)
                          if scan.truncated_at is not None else 0,
-                         detail=upgrade)
+                         detail=upgrade, cannot=cannot)
         if status != 'ok':
             rep.readable_before = reader_count(path)
             if not write:
