@@ -50,7 +50,8 @@ class FieldError(ValueError):
 
     def one_line(self) -> str:
         """Every problem on one line (a CLI's exit-2 message)."""
-        return 'invalid field description: ' + '; '.join(p.replace('\n', ' ') for p in self.problems)
+        from sslfr_common.cliargs import one_line
+        return one_line('invalid field description: ' + '; '.join(self.problems))
 
 
 @dataclass(frozen=True)

@@ -87,7 +87,7 @@ def find_bags(paths: list[str], day: str | None) -> list[Path]:
 
 
 def main(argv: list[str]) -> int:
-    from sslfr_common.cliargs import CliError, OneLineParser
+    from sslfr_common.cliargs import CliError, OneLineParser, one_line
     ap = OneLineParser(prog='sslfr field-report', description=__doc__.split('\n\n')[0],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('paths', nargs='+', help='collector bags, or folders holding them (searched recursively)')
@@ -96,15 +96,15 @@ def main(argv: list[str]) -> int:
     try:
         ns = ap.parse_args(argv)
     except CliError as exc:
-        print(f'sslfr field-report: error: {exc}', file=sys.stderr)
+        print(f'sslfr field-report: error: {one_line(exc)}', file=sys.stderr)
         return 2
     try:
         bags = find_bags(ns.paths, ns.day)
     except OSError as exc:
-        print(f'sslfr field-report: {exc.strerror or exc}', file=sys.stderr)
+        print(f'sslfr field-report: {one_line(exc.strerror or exc)}', file=sys.stderr)
         return 2
     if not bags:
-        print('sslfr field-report: no bag found in ' + ', '.join(ns.paths), file=sys.stderr)
+        print(one_line('sslfr field-report: no bag found in ' + ', '.join(ns.paths)), file=sys.stderr)
         return 2
     from sslfr_recording.bag import BagError, BagReader
     from sslfr_common.contract import TRACKER_PHASE

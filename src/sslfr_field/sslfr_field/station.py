@@ -197,7 +197,7 @@ def main(argv: list[str]) -> int:
     """``sslfr station``: 0 after a stop signal, 1 when it cannot run, 2 for a bad
     field description or arguments."""
     from sslfr_bringup.supervisor import Interrupted, StopSignals
-    from sslfr_common.cliargs import CliError
+    from sslfr_common.cliargs import CliError, one_line
     with StopSignals() as stop:
         run_dir = Path(tempfile.mkdtemp(prefix='sslfr-station-'))
         try:
@@ -209,7 +209,7 @@ def main(argv: list[str]) -> int:
                 return 2
             return run(f, args, stop, run_dir)
         except CliError as exc:
-            print(f'sslfr station: error: {exc}', file=sys.stderr)
+            print(f'sslfr station: error: {one_line(exc)}', file=sys.stderr)
             return 2
         except Interrupted:
             return 0

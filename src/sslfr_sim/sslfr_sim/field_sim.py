@@ -19,6 +19,7 @@ from pathlib import Path
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain
 from sslfr_bringup.supervisor import Program
+from sslfr_common.cliargs import one_line
 from sslfr_field import field as field_mod
 from sslfr_field import station as station_mod
 
@@ -77,7 +78,7 @@ def run_field(args, stop, run: Path) -> int:
     try:
         config = nodeset_mod.resolve_config(args.config, default=nodeset_mod.load(args.nodeset).config)
     except nodeset_mod.NodeSetError as exc:
-        print(f'sslfr sim: ' + ' '.join(str(exc).split()), file=sys.stderr)
+        print(one_line('sslfr sim: ' + ' '.join(str(exc).split())), file=sys.stderr)
         return 2
     primary, backup = free_udp_ports(2)
     doc = field_mod.simulated(args.collectors, config, discovery_port=primary, backup_port=backup,
@@ -115,7 +116,7 @@ def run_field(args, stop, run: Path) -> int:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        print(f'sslfr sim: --out {out}: {exc.strerror or exc}', file=sys.stderr)
+        print(one_line(f'sslfr sim: --out {out}: {exc.strerror or exc}'), file=sys.stderr)
         return 2
     collectors = [Program(name=f'collector_{c.id}', argv=collector_argv(args, c, f, args.domain_id, out),
                           start=2, stop=0, restart=False) for c in f.collectors]
