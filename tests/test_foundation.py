@@ -64,8 +64,11 @@ def test_console_script_installed_where_ros2_run_looks(package, exe, kind, ros_e
         assert out.returncode == 0, out.stderr
         assert 'usage' in out.stdout.lower()
     else:  # a node: starts, then stops cleanly on SIGINT
-        # (the operator page: any free port, not 8080 that a running tracker may hold)
+        # (the operator page and the gateways: any free port, not the default one that a
+        # running tracker or station may hold)
         extra = ['--ros-args', '-p', 'port:=0', '-p', f'audit_file:={tmp_path / "audit"}'] if exe == 'web' else []
+        if exe in ('modbus_gateway', 'foxglove_bridge'):
+            extra = ['--ros-args', '-p', 'port:=0']
         proc = NodeProcess([str(path), *extra], ros_env, tmp_path / f'{exe}.log')
         # up = its node (default name = the executable's) is in the graph; start-up
         # takes longer on a loaded machine, so wait for it instead of a fixed sleep

@@ -16,6 +16,7 @@ EXECUTABLES: dict[str, dict[str, str]] = {
     'sslfr_bringup': {'sslfr': 'cli', 'liveness_watchdog': 'cli'},
     'sslfr_recording': {'recorder': 'node'},
     'sslfr_web': {'web': 'node'},
+    'sslfr_gateway': {'modbus_gateway': 'node', 'foxglove_bridge': 'node'},
     'sslfr_safety': {'safety': 'node'},
     'sslfr_drivers': {'axis_driver': 'node', 'lifecycle_ctl': 'cli', 'xbee_hub': 'cli', 'gps': 'node',
                       'absorber_board': 'node', 'irradiance': 'node'},

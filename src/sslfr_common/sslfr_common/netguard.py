@@ -421,6 +421,16 @@ def _ipv6_networks() -> list[ipaddress.IPv6Interface]:
     return out
 
 
+def ip_address_error(addr: str) -> str | None:
+    """None for a literal IPv4/IPv6 address, else the reason (a host name could
+    resolve to every interface)."""
+    try:
+        ipaddress.ip_address(addr)
+    except ValueError:
+        return f'{addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)'
+    return None
+
+
 def local_networks(bind_address: str) -> list[ipaddress.IPv4Network | ipaddress.IPv6Network]:
     """The subnets of the interface(s) a server bound to ``bind_address`` listens on:
     every interface's for the wildcard (0.0.0.0, ::), else those of the interface

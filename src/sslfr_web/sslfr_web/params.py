@@ -7,23 +7,13 @@ parameter (exit code 2). Floating-point parameters also take integers (YAML ``8`
 """
 from __future__ import annotations
 
-import ipaddress
 
 from sslfr_common.netguard import parse_networks
+from sslfr_common.netguard import ip_address_error
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 #: The password file `./sslfr web-password` writes and the node reads.
 DEFAULT_PASSWORD_FILE = '~/.config/sslfr/web_password'
-
-
-def ip_address_error(addr: str) -> str | None:
-    """None for a literal IPv4/IPv6 address, else the reason (a host name could
-    resolve to every interface)."""
-    try:
-        ipaddress.ip_address(addr)
-    except ValueError:
-        return f'{addr!r} is not an IP address (e.g. 127.0.0.1 or 192.168.1.20)'
-    return None
 
 
 def networks_error(text: str) -> str | None:

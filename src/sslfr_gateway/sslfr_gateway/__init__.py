@@ -1,0 +1,1 @@
+"""The plant gateway: SunSpec over Modbus TCP (models 1, 601, 302) and Foxglove live."""
