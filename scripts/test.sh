@@ -29,7 +29,7 @@ done
 
 HOST=(tests --ignore-glob='tests/test_fw_*'
       src/sslfr_common/test src/sslfr_planner/test src/sslfr_drivers/test src/sslfr_safety/test
-      src/sslfr_bringup/test src/sslfr_recording/test src/sslfr_web/test src/sslfr_gateway/test src/sslfr_sim/test)
+      src/sslfr_bringup/test src/sslfr_recording/test src/sslfr_web/test src/sslfr_gateway/test src/sslfr_field/test src/sslfr_sim/test)
 FIRMWARE=(tests/test_fw_*.py)
 WORKERS="${SSLFR_TEST_WORKERS:-2}"
 

@@ -14,6 +14,7 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/config/collectors', glob('config/collectors/*.yaml')),
+        ('share/' + package_name + '/config/fields', glob('config/fields/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
