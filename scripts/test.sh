@@ -35,13 +35,13 @@ WORKERS="${SSLFR_TEST_WORKERS:-2}"
 
 t0=$SECONDS
 echo "== make test: host tests (tests/ topic-level and src/*/test units), $WORKERS workers"
-python -m pytest -n "$WORKERS" --dist loadfile "${HOST[@]}" "$@"
+python -m pytest -n "$WORKERS" --dist loadfile --durations=25 "${HOST[@]}" "$@"
 host_rc=$?
 t_host=$((SECONDS - t0))
 
 echo
 echo "== make test: firmware-in-the-loop tests (tests/test_fw_*), alone"
-python -m pytest "${FIRMWARE[@]}" "$@"
+python -m pytest --durations=10 "${FIRMWARE[@]}" "$@"
 fw_rc=$?
 t_fw=$((SECONDS - t0 - t_host))
 
