@@ -29,19 +29,19 @@ done
 
 HOST=(tests --ignore-glob='tests/test_fw_*'
       src/sslfr_common/test src/sslfr_planner/test src/sslfr_drivers/test src/sslfr_safety/test
-      src/sslfr_bringup/test src/sslfr_recording/test src/sslfr_web/test src/sslfr_gateway/test src/sslfr_sim/test)
+      src/sslfr_bringup/test src/sslfr_recording/test src/sslfr_web/test src/sslfr_gateway/test src/sslfr_field/test src/sslfr_sim/test)
 FIRMWARE=(tests/test_fw_*.py)
 WORKERS="${SSLFR_TEST_WORKERS:-2}"
 
 t0=$SECONDS
 echo "== make test: host tests (tests/ topic-level and src/*/test units), $WORKERS workers"
-python -m pytest -n "$WORKERS" --dist loadfile "${HOST[@]}" "$@"
+python -m pytest -n "$WORKERS" --dist loadfile --durations=25 "${HOST[@]}" "$@"
 host_rc=$?
 t_host=$((SECONDS - t0))
 
 echo
 echo "== make test: firmware-in-the-loop tests (tests/test_fw_*), alone"
-python -m pytest "${FIRMWARE[@]}" "$@"
+python -m pytest --durations=10 "${FIRMWARE[@]}" "$@"
 fw_rc=$?
 t_fw=$((SECONDS - t0 - t_host))
 

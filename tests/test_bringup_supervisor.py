@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 import time
 
@@ -343,7 +344,9 @@ def test_sslfr_up_speaks_sd_notify_to_its_watcher(tmp_path, ros_env):
     from sslfr_common.sdnotify import NotifyListener
     site = tmp_path / 'site.yaml'
     site.write_text("/**:\n  ros__parameters:\n    site:\n      latitude_deg: 36.835\n")
-    with NotifyListener(str(tmp_path / 'systemd-notify.sock')) as lis:
+    # a short directory: socket paths are <= 107 bytes, and tmp_path may be longer
+    with tempfile.TemporaryDirectory(prefix='sslfr-sd-') as short, \
+            NotifyListener(os.path.join(short, 'systemd-notify.sock')) as lis:
         env = dict(ros_env, NOTIFY_SOCKET=lis.path, WATCHDOG_USEC='4000000')    # beat every 1 s
         proc = subprocess.Popen([str(ROOT / 'sslfr'), 'up', '--config', str(site), '--only', 'safety,gps',
                                  '--log-dir', str(tmp_path / 'logs')],

@@ -29,6 +29,7 @@ import pytest
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
+from sslfr_recording.day import read_day, reference
 from sslfr_sim import scenario
 from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 
@@ -123,7 +124,7 @@ def _run(layout, tmp_path_factory):
     summary = json.loads((out / 'sim.json').read_text())
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     assert bags, text
-    return {'layout': layout, 'text': text, 'summary': summary, 'day': scenario.read_day(bags[-1]), 'bag': bags[-1],
+    return {'layout': layout, 'text': text, 'summary': summary, 'day': read_day(bags[-1]), 'bag': bags[-1],
             'live': live, 'plan': plan, 'procs': procs, 'end': DAY0 + end, 'ns': ns}
 
 
@@ -209,7 +210,7 @@ def test_tracking_resumes_after_each_restart(run):
     hang does not hide it."""
     day = run['day']
     k = np.asarray(day.phase['site_source']) != ''
-    ref = scenario.reference(_config(), float(np.median(day.phase['latitude'][k])),
+    ref = reference(_config(), float(np.median(day.phase['latitude'][k])),
                              float(np.median(day.phase['longitude'][k])), 22.0)
     hangs = _hangs(run)
     starts = sorted({h[2] for h in hangs}) + [run['end']]

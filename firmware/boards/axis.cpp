@@ -13,6 +13,11 @@
  * counter. Host silence for 1 s decelerates to a stop within AXIS_WATCHDOG_STOP_S (fault
  * WATCHDOG), faster than `accel` when needed.
  *
+ * Built with -DAXIS_NO_SWITCHES (build/axis_noswitch.elf, seed 003's rig: no switch
+ * wired): the switch inputs are never read (limit bits 0), HOME is not implemented
+ * (UNKNOWN_TYPE) and SET_ZERO is the only reference (docs/collectors.md "Drives"); a
+ * host-loss stow toward a switch is refused (OUT_OF_RANGE), a step target is allowed.
+ *
  * Host-loss stow (SET_HOST_LOSS_STOW, kept in EEPROM at HL_EEPROM_ADDR): when the host
  * stays silent for `delay_ms` after that stop, the board drives by itself to the stow
  * target (a step position, only when HOMED; or toward a switch until it closes), with the
@@ -59,6 +64,9 @@ static uint8_t g_sensor_ok;
 /* closed switches as LIM_* bits, from the pins (inline: used in the step ISR) */
 static inline uint8_t read_switches(void)
 {
+#ifdef AXIS_NO_SWITCHES
+    return 0;
+#endif
     uint8_t raw = 0;
     if (!(PIND & LOW_BIT)) raw |= LIM_LOW;
     if (!(PINB & HIGH_BIT)) raw |= LIM_HIGH;
@@ -289,7 +297,11 @@ static uint8_t hl_valid(const msg_host_loss_t *h)
         return 0;
     if (h->mode == HL_POSITION)
         return h->steps >= g_config.min_steps && h->steps <= g_config.max_steps;
+#ifdef AXIS_NO_SWITCHES
+    return 0;                       /* no switch to stow toward */
+#else
     return h->sw <= 2;
+#endif
 }
 
 /* The record in EEPROM: HL_SIZE payload bytes + CRC-16; blank, damaged or invalid for
@@ -462,6 +474,7 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
     return session_ack(req, ans);
 }
 
+#ifndef AXIS_NO_SWITCHES
 static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
 {
     msg_home_t m;
@@ -490,6 +503,7 @@ static uint8_t handle_home(const proto_frame_t *req, proto_frame_t *ans)
     }
     return session_ack(req, ans);
 }
+#endif
 
 static uint8_t handle_status(const proto_frame_t *req, proto_frame_t *ans)
 {
@@ -539,8 +553,10 @@ static uint8_t axis_handle(const proto_frame_t *req, proto_frame_t *ans)
         return session_ack(req, ans);
     case MSG_SET_HOST_LOSS_STOW:
         return handle_host_loss(req, ans);
+#ifndef AXIS_NO_SWITCHES
     case MSG_HOME:
         return handle_home(req, ans);
+#endif
     case MSG_SET_ZERO: {
         int32_t p;
         if (msg_parse_i32(req, &p))
@@ -577,6 +593,11 @@ static uint8_t axis_busy(void) { return moving(); }
 static uint8_t axis_may_sleep(void) { return 1; }
 
 const BoardDef BOARD = {
-    KIND_AXIS_STEPPER, "sslfr-axis", axis_setup, axis_poll, axis_handle,
+#ifdef AXIS_NO_SWITCHES
+    KIND_AXIS_STEPPER, "sslfr-axis-nosw",
+#else
+    KIND_AXIS_STEPPER, "sslfr-axis",
+#endif
+    axis_setup, axis_poll, axis_handle,
     axis_host_silent, axis_busy, axis_may_sleep,
 };

@@ -58,6 +58,7 @@ extern "C" {
 
 /* board kinds (INFO, BOOT) */
 #define KIND_AXIS_STEPPER 0x01
+#define KIND_AXIS_ACTUATOR 0x02
 #define KIND_GPS 0x10
 #define KIND_ABSORBER 0x11
 #define KIND_IRRADIANCE 0x12

@@ -8,6 +8,8 @@
  *         [--uart-fd N]                UART on an inherited descriptor (a socketpair)
  *         [--pace X]                   simulated seconds per wall second (0: free run)
  *         [--mech lo,hi,sleep,step_rad,width,overtravel,angle] [--sensor ZERO]
+ *         [--act lever,mount,mount_angle,stroke_lo,stroke_hi,max_speed,min_duty,inc_offset,noise_mv,angle]
+ *         (--board actuator: the actuator + lever + analogue inclinometer model, models.c)
  *         [--seed N]
  *
  * UART bridge (no libsimavrparts uart_pty: it loses bytes under back-pressure): bytes
@@ -488,7 +490,8 @@ int main(int argc, char **argv)
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--board") && v) {
             kind = !strcmp(v, "axis") ? B_AXIS : !strcmp(v, "absorber") ? B_ABSORBER
-                 : !strcmp(v, "irradiance") ? B_IRRADIANCE : !strcmp(v, "gps") ? B_GPS : (usage(), B_AXIS);
+                 : !strcmp(v, "irradiance") ? B_IRRADIANCE : !strcmp(v, "gps") ? B_GPS
+                 : !strcmp(v, "actuator") ? B_ACTUATOR : (usage(), B_AXIS);
             i++;
         } else if (!strcmp(a, "--elf") && v) { elf = v; i++; }
         else if (!strcmp(a, "--symbols") && v) { symbols = v; i++; }
@@ -500,6 +503,13 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--pace") && v) { pace = atof(v); i++; }
         else if (!strcmp(a, "--seed") && v) { seed = (unsigned)atoi(v); i++; }
         else if (!strcmp(a, "--sensor") && v) { mech.has_sensor = 1; mech.sensor_zero = (uint16_t)atoi(v); i++; }
+        else if (!strcmp(a, "--act") && v) {
+            if (sscanf(v, "%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &mech.lever, &mech.mount, &mech.mount_angle,
+                       &mech.stroke_lo, &mech.stroke_hi, &mech.max_speed, &mech.min_duty, &mech.inc_offset,
+                       &mech.noise_mv, &mech.angle) != 10)
+                usage();
+            i++;
+        }
         else if (!strcmp(a, "--mech") && v) {
             if (sscanf(v, "%lf,%lf,%lf,%lf,%lf,%lf,%lf", &mech.lo, &mech.hi, &mech.sleep, &mech.step_rad,
                        &mech.switch_width, &mech.overtravel, &mech.angle) != 7)

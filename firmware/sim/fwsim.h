@@ -10,7 +10,7 @@
 
 #define F_CPU_HZ 16000000u
 
-enum board_kind { B_AXIS, B_ABSORBER, B_IRRADIANCE, B_GPS, B_BOOTLOADER };
+enum board_kind { B_AXIS, B_ABSORBER, B_IRRADIANCE, B_GPS, B_BOOTLOADER, B_ACTUATOR };
 
 /* mechanism of an axis (SI units, radians), as sim/axis.py AxisConfig */
 typedef struct {
@@ -22,6 +22,11 @@ typedef struct {
     int64_t steps;             /* STEP pulses seen by the model (signed) */
     uint64_t last_step_cycle;  /* total cycles at the last pulse */
     uint64_t first_step_after_rx; /* set by the harness: cycle of the first step after a mark */
+    /* actuator + lever + inclinometer (sslfr_common/drives.py LeverGeometry, sim/actuator.py):
+     * lever, mount distance [m], mount angle [rad], stroke [m], speed at duty 1 [m/s],
+     * start duty, inclinometer mounting offset [rad], electrical noise [mV rms] */
+    double lever, mount, mount_angle, stroke_lo, stroke_hi, max_speed, min_duty, inc_offset, noise_mv;
+    double length, duty;       /* actuator length [m] (truth), last PWM duty seen (signed) */
 } mech_t;
 
 typedef struct model model_t;

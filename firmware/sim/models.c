@@ -14,6 +14,12 @@
  *            count = round(lux / resolution(gain, IT)) clipped at 65535, resolution =
  *            0.0036 lx * (2 / gain) * (800 ms / IT) (sslfr_drivers/veml7700.py).
  * gps        NEO-6 TX -> D8: queued NMEA bytes bit-banged 8N1 at 9600 bit/s.
+ * actuator   linear actuator + lever + analogue inclinometer: every 1 ms the PWM duty
+ *            (OCR1A / (ICR1 + 1) while OC1A drives D9, sign from DIR D8) moves the
+ *            actuator at speed_for_duty (0 below the start duty; `stall 1`: powered,
+ *            not moving), clipped to the stroke; line angle = the inverse law of cosines;
+ *            at every ADC conversion A0 gets 2500 mV + 44.44 mV/deg x (angle + mounting
+ *            offset) + Gaussian noise (noise_mv rms), in whole mV (simavr's ADC input).
  */
 #include "fwsim.h"
 
@@ -24,6 +30,7 @@
 #include "avr_ioport.h"
 #include "avr_spi.h"
 #include "avr_twi.h"
+#include "avr_adc.h"
 #include "sim_time.h"
 
 extern uint64_t g_cycle_offset;
@@ -108,6 +115,59 @@ static void pins_reapply(model_t *m)
         for (int b = 0; b < 8; b++)
             if (m->ext[p].mask & (1u << b))
                 pin_drive(m, m->ext[p].port, b, (m->ext[p].value >> b) & 1);
+}
+
+/* ---- actuator ---------------------------------------------------------------------- */
+static double act_angle(const mech_t *k, double length)
+{
+    double d = k->mount, r = k->lever;
+    double c = (d * d + r * r - length * length) / (2.0 * d * r);
+    c = c < -1.0 ? -1.0 : (c > 1.0 ? 1.0 : c);
+    return acos(c) - k->mount_angle;
+}
+
+static double gauss(void)
+{
+    double u = (random() + 1.0) / (RAND_MAX + 2.0), v = (random() + 1.0) / (RAND_MAX + 2.0);
+    return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
+}
+
+static avr_cycle_count_t act_timer(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    model_t *m = (model_t *)param;
+    mech_t *k = m->mech;
+    uint8_t *d = avr->data;
+    double duty = 0.0;
+    if ((d[0x80] & 0x80) && (d[0x24] & 0x02)) {          /* TCCR1A COM1A1, DDRB PB1 (D9) */
+        unsigned top = d[0x86] | (unsigned)d[0x87] << 8, ocr = d[0x88] | (unsigned)d[0x89] << 8;
+        duty = (double)ocr / (top + 1.0);
+        if (duty > 1.0) duty = 1.0;
+        if (!(d[0x25] & 0x01)) duty = -duty;             /* PORTB PB0 (D8) DIR low: shorten */
+    }
+    k->duty = duty;
+    double a = fabs(duty), v = 0.0;
+    if (a >= k->min_duty)
+        v = copysign(k->max_speed * (a - k->min_duty) / (1.0 - k->min_duty), duty);
+    if (!k->stalled && v != 0.0) {
+        k->length += v * 1e-3;
+        if (k->length < k->stroke_lo) k->length = k->stroke_lo;
+        if (k->length > k->stroke_hi) k->length = k->stroke_hi;
+        k->angle = act_angle(k, k->length);
+    }
+    return when + F_CPU_HZ / 1000;
+}
+
+static void adc_trigger_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    model_t *m = (model_t *)param;
+    mech_t *k = m->mech;
+    (void)irq; (void)value;
+    double mv = 2500.0 + 4000.0 / 90.0 * (k->angle + k->inc_offset) * 180.0 / M_PI + k->noise_mv * gauss();
+    mv = mv < 0 ? 0 : (mv > 5000 ? 5000 : mv);
+    /* simavr 1.6 converts mV * 1023 / AVcc; the ATmega328P Vin * 1024 / Vref: feed the
+     * value that gives the chip's count */
+    mv *= 1024.0 / 1023.0;
+    avr_raise_irq(avr_io_getirq(m->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0), (uint32_t)lround(mv));
 }
 
 /* ---- axis -------------------------------------------------------------------------- */
@@ -416,6 +476,12 @@ model_t *model_create(avr_t *avr, enum board_kind kind, mech_t *mech)
         m->veml_conf = 0x0001;                   /* power-on default: shut down */
     } else if (kind == B_GPS) {
         pin_drive(m, 'B', 0, 1);                 /* UART idle high */
+    } else if (kind == B_ACTUATOR) {
+        avr->vcc = avr->avcc = avr->aref = 5000;
+        double d = mech->mount, r = mech->lever, g = mech->mount_angle + mech->angle;
+        mech->length = sqrt(d * d + r * r - 2.0 * d * r * cos(g));
+        avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER), adc_trigger_hook, m);
+        avr_cycle_timer_register(avr, F_CPU_HZ / 1000, act_timer, m);
     }
     return m;
 }
@@ -430,6 +496,8 @@ void model_after_reset(model_t *m)
     }
     if (m->kind == B_ABSORBER && m->sw_i < m->sw_n)
         avr_cycle_timer_register(m->avr, 1, sw_timer, m);
+    if (m->kind == B_ACTUATOR)
+        avr_cycle_timer_register(m->avr, F_CPU_HZ / 1000, act_timer, m);
     if (m->kind == B_ABSORBER && m->pulse_hz > 0)
         avr_cycle_timer_register(m->avr, 1, pulse_timer, m);
 }
@@ -449,7 +517,7 @@ int model_command(model_t *m, const char *line, char *reply, size_t n)
     if (sscanf(line, "%31s %n", word, &used) != 1)
         return -1;
     const char *args = line + used;
-    if (!strcmp(word, "stall") && m->kind == B_AXIS) {
+    if (!strcmp(word, "stall") && (m->kind == B_AXIS || m->kind == B_ACTUATOR)) {
         m->mech->stalled = atoi(args);
         return 0;
     }
@@ -556,6 +624,10 @@ void model_status_json(model_t *m, FILE *out)
     } else if (m->kind == B_IRRADIANCE) {
         fprintf(out, ",\"lux\":%.3f,\"veml_conf\":%u,\"twi_transactions\":%u", m->lux, m->veml_conf,
                 m->twi_transactions);
+    } else if (m->kind == B_ACTUATOR) {
+        mech_t *k = m->mech;
+        fprintf(out, ",\"angle\":%.9f,\"length\":%.9f,\"duty\":%.4f,\"stalled\":%s", k->angle, k->length,
+                k->duty, k->stalled ? "true" : "false");
     } else if (m->kind == B_GPS) {
         fprintf(out, ",\"nmea_sent\":%llu,\"nmea_queued\":%zu", (unsigned long long)m->nmea_sent,
                 m->nmea_len - m->nmea_pos);

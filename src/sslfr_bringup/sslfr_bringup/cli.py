@@ -22,6 +22,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'analyse': ('sslfr_planner.analysis.cli', 'optical power with tracking error, annual energy, EAR, LCOE, tilts'),
     'up': ('sslfr_bringup.up', 'start the whole node set (real boards) as supervised processes'),
     'sim': ('sslfr_sim.sim_cli', 'run the node set against simulated boards over a simulated day'),
+    'station': ('sslfr_field.station', 'the operations station of a field: discovery servers, field recorder, gateway'),
+    'field-report': ('sslfr_field.report', 'the field\'s day summed from its collectors\' bags'),
     'record': ('sslfr_recording.record_cli', 'record tracker topics to an MCAP bag (rosbag2 layout)'),
     'bag': ('sslfr_recording.bag_cli', 'bag utilities: info, check (rosbag2 rules), recover'),
     'replay': ('sslfr_recording.replay', 'replay a recorded bag with /clock'),

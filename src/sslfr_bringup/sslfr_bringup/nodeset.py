@@ -737,13 +737,16 @@ def sim_board_argv(board: BoardSpec, exe_path: str | os.PathLike, values: Mappin
 def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
                     domain_id: int | None = None) -> dict[str, str]:
     """Environment for the node processes: the node set's domain and discovery range
-    unless the caller's environment (or ``domain_id``) sets them."""
+    unless the caller's environment (or ``domain_id``) sets them. With
+    ``ROS_DISCOVERY_SERVER`` (a collector of a field, docs/field.md) no discovery range
+    is added: the discovery servers decide who is found."""
     env = dict(os.environ if base is None else base)
     if domain_id is not None:
         env['ROS_DOMAIN_ID'] = str(domain_id)
     else:
         env.setdefault('ROS_DOMAIN_ID', str(ns.domain_id))
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', ns.discovery_range)
+    if not env.get('ROS_DISCOVERY_SERVER'):
+        env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', ns.discovery_range)
     env.setdefault('PYTHONUNBUFFERED', '1')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
     return env

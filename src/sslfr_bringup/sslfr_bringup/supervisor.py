@@ -708,6 +708,7 @@ class RosSide(threading.Thread):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         from lifecycle_msgs.msg import Transition
+        from sslfr_common.contract import collector_id
         from lifecycle_msgs.srv import ChangeState
         from rclpy.clock import Clock, ClockType
         from rclpy.executors import SingleThreadedExecutor
@@ -752,7 +753,7 @@ class RosSide(threading.Thread):
                 if s['restarts'] and s['critical']:
                     msg = f"CRITICAL process restarted {s['restarts']}x; last: {msg}"
                 arr.status.append(DiagnosticStatus(
-                    level=level, name=f'sslfr_supervisor: {name}', message=msg, hardware_id='process',
+                    level=level, name=f'sslfr_supervisor: {name}', message=msg, hardware_id=collector_id(self.namespace),
                     values=[KeyValue(key='restarts', value=str(s['restarts'])),
                             KeyValue(key='critical', value=str(s['critical']).lower())]))
             diag_pub.publish(arr)

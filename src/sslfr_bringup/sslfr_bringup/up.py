@@ -54,6 +54,15 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     run_dir.mkdir(parents=True, exist_ok=True)
     namespace = ns.namespace if namespace is None else namespace
     config, params = nodeset_mod.site_config(config, namespace, run_dir, ns, params)
+    if namespace.strip('/') and any(n.name == 'recorder' for n in ns.nodes):
+        # each collector's bag names its collector: <id>_YYYY-MM-DD (a field, docs/field.md)
+        from sslfr_common.contract import CLOCK, DIAGNOSTICS, collector_id
+        extra = {k: dict(v) for k, v in (extra or {}).items()}
+        rec = extra.setdefault('recorder', {})
+        rec.setdefault('prefix', collector_id(namespace))
+        # the absolute /diagnostics carries every collector's statuses: subscribing to it
+        # would connect each collector to all the others; the station records it
+        rec.setdefault('exclude', [CLOCK.name, DIAGNOSTICS.name])
     programs, missing = [], []
 
     def node_args(node):
@@ -147,7 +156,8 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     domain = int(env['ROS_DOMAIN_ID'])
     print(f'sslfr up: config {config}, ROS_DOMAIN_ID={domain}, '
-          f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}', file=sys.stderr)
+          + (f'ROS_DISCOVERY_SERVER={env["ROS_DISCOVERY_SERVER"]}' if env.get('ROS_DISCOVERY_SERVER') else
+             f'ROS_AUTOMATIC_DISCOVERY_RANGE={env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}'), file=sys.stderr)
     for m in missing:
         print(f'sslfr up: MISSING executable, node not started: {m} (run make setup?)', file=sys.stderr)
     if args.print_only:

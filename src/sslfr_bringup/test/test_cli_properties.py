@@ -16,6 +16,7 @@ import collections
 import io
 import math
 import os
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -26,6 +27,7 @@ from sensor_msgs.msg import Temperature
 from sslfr_bringup import cli
 from sslfr_recording.bag import BagWriter, WriterOptions, profile
 
+FIELD = Path(__file__).resolve().parents[1] / 'config' / 'fields' / 'example_field.yaml'
 PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))
 
 
@@ -44,7 +46,9 @@ WORK = {
     'analyse': ['sslfr_planner.analysis.performance.error_table',
                 'sslfr_planner.analysis.cli.YearSky.compute'],
     'up': ['sslfr_bringup.up.RosSide'],
-    'sim': ['sslfr_sim.sim_cli.SimClock'],
+    'sim': ['sslfr_sim.sim_cli.SimClock', 'sslfr_field.station.run'],
+    'station': ['sslfr_field.station.run'],
+    'field-report': ['sslfr_recording.report.analyse'],
     'record': ['sslfr_recording.recorder_node.main'],
     'bag': [],
     'replay': ['sslfr_recording.replay.run_player', 'sslfr_recording.replay.run_whatif'],
@@ -125,7 +129,9 @@ BASES = {
     'field': [['--positions', '1,2', '--height', '5', '--radius', '0.1']],
     'analyse': [['error'], ['year'], ['tilts']],
     'up': [['--print'], []],
-    'sim': [[]],
+    'sim': [[], ['--collectors', '2']],
+    'station': [['--field', str(FIELD), '--print'], ['--field', str(FIELD)]],
+    'field-report': [['{tmp}/bag'], ['{tmp}']],
     'record': [['-o', '{tmp}/rec']],
     'bag': [['info', '{tmp}/bag'], ['check', '{tmp}/bag'], ['recover', '--dry-run', '{tmp}/bag']],
     'replay': [['{tmp}/bag'], ['{tmp}/bag', '--what-if']],

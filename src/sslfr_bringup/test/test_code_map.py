@@ -20,8 +20,10 @@ LAYERS = {
     'sslfr_recording': {'sslfr_common', 'sslfr_planner', 'sslfr_bringup'},
     'sslfr_web': {'sslfr_common', 'sslfr_safety', 'sslfr_recording'},
     'sslfr_gateway': {'sslfr_common', 'sslfr_recording'},
+    'sslfr_field': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety', 'sslfr_bringup',
+                    'sslfr_recording', 'sslfr_web'},
     'sslfr_sim': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety', 'sslfr_bringup',
-                  'sslfr_recording', 'sslfr_web', 'sslfr_gateway'},
+                  'sslfr_recording', 'sslfr_web', 'sslfr_gateway', 'sslfr_field'},
 }
 #: the simulation package: imported by no product module
 SIM = 'sslfr_sim'

@@ -208,7 +208,7 @@ WIND = Topic('wind', 'sslfr_interfaces/msg/Wind')
 IRRADIANCE_ILLUMINANCE = Topic('irradiance/illuminance', 'sensor_msgs/msg/Illuminance')
 IRRADIANCE_BEAM = Topic('irradiance/beam', 'sslfr_interfaces/msg/Irradiance')
 SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
-DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')
+DIAGNOSTICS = Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray')   # absolute: see collector_id
 CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos.BE)
 
 #: rcl's log topic: every node's logger publishes it (rcl's QoS), the recorder keeps it.
@@ -242,3 +242,22 @@ def topic_names() -> dict[str, Topic]:
         for name in ([t.of(m) for m in FAMILY_MEMBERS[t.name]] if '{' in t.name else [t.name]):
             out[name] = t
     return out
+
+
+# --------------------------------------------------------------------------- diagnostics
+#: Every node's diagnostics go to the ABSOLUTE ``/diagnostics`` (the ROS convention that
+#: ``diagnostic_aggregator`` and rqt_robot_monitor read), also under a collector's
+#: namespace; the collector is named by each status' ``hardware_id``
+#: (:func:`collector_id`) and the status' ``name`` is ``"<node>: <task>"`` (the topic:
+#: :data:`DIAGNOSTICS`).
+
+#: ``hardware_id`` of a collector run in the root namespace (a single collector)
+ROOT_COLLECTOR_ID = 'sslfr'
+
+
+def collector_id(namespace: str) -> str:
+    """The collector's id for a node in ``namespace``: the namespace's last name
+    (``/field/c2`` -> ``c2``), :data:`ROOT_COLLECTOR_ID` in the root namespace. A field
+    description makes each collector's namespace end in its id (sslfr_field.field)."""
+    last = (namespace or '').rstrip('/').rsplit('/', 1)[-1]
+    return last or ROOT_COLLECTOR_ID

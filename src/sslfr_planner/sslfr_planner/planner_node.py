@@ -31,7 +31,7 @@ from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from sslfr_common.contract import (DIAGNOSTICS, GPS_FIX, PHASE_NAMES, PLANNER_REPLAN, PLANNER_SET_MODE,
-                                   SAFETY_STATE, TRACKER_PHASE, TRACKER_SUN, TRACKER_TRAJECTORY)
+                                   SAFETY_STATE, TRACKER_PHASE, TRACKER_SUN, TRACKER_TRAJECTORY, collector_id)
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, to_ns, to_sec
 
 from sslfr_planner.day_cycle import DayCycle
@@ -280,7 +280,7 @@ class PlannerNode(LeanEvents, Node):
                   'last_error': self._last_error}
         values.update({k: str(v) for k, v in self.counters.items()})
         st = DiagnosticStatus(level=DIAG_LEVELS[level], name=f'{self.get_name()}: day cycle',
-                              message=text, hardware_id='sslfr_planner',
+                              message=text, hardware_id=collector_id(self.get_namespace()),
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         arr = DiagnosticArray(status=[st])
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -26,7 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from sslfr_common.contract import DIAGNOSTICS, ROSOUT
+from sslfr_common.contract import DIAGNOSTICS, ROSOUT, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, message_class, qos, run_node
 
 from .bag import recorder_config as rc
@@ -189,7 +189,7 @@ class Recorder(LeanEvents, Node):
 
     def _publish_diagnostics(self) -> None:
         s = self.session
-        st = DiagnosticStatus(name=f'{self.get_name()}: recording', hardware_id='recorder')
+        st = DiagnosticStatus(name=f'{self.get_name()}: recording', hardware_id=collector_id(self.get_namespace()))
         if not s.recording:
             st.level = DiagnosticStatus.ERROR
             st.message = s.disk.message if s.disk else 'recording stopped by the disk guard'

@@ -40,7 +40,8 @@ from sslfr_interfaces.msg import AxisStatus, Irradiance, LimitSwitches, SafetySt
 
 from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
                                    LIMIT_SWITCHES, SAFETY_ESTOP, SAFETY_RESET, SAFETY_STATE, SWITCHES,
-                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY, WIND, Level, Qos)
+                                   THERMOCOUPLES, TRACKER_PHASE, TRACKER_TRAJECTORY, WIND, Level, Qos,
+                                   collector_id)
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, stamp, steady_now, to_sec
 from sslfr_safety.core import SafetyCore
 from sslfr_safety.params import TABLE, config_from
@@ -255,7 +256,7 @@ class SafetyNode(LeanEvents, Node):
         state = self.core.state
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: safety supervisor'
-        status.hardware_id = 'sslfr'
+        status.hardware_id = collector_id(self.get_namespace())
         status.level = _DIAG_LEVEL[state.level]
         status.message = state.level.name + (': ' + state.reasons[0] if state.reasons else '')
         kv = self.core.snapshot()

@@ -190,7 +190,7 @@ class ActuatorSim(SimBoard):
         if isinstance(msg, m.SetZero):
             self.zero = int(msg.position) - int(round(self.measured / c.step_rad))
             self.homed = True
-            self.target = None
+            self._stop()              # PWM off: a re-referenced board holds still (as the firmware)
             self.faults &= ~m.FaultBits.RESET
             return m.Ack(msg.TYPE)
         return super().handle(msg, frame)

@@ -17,6 +17,7 @@ import subprocess
 import tempfile
 import threading
 import time
+from pathlib import Path
 
 from sslfr_drivers.firmware import FirmwareError, build, elf, harness_path
 
@@ -27,7 +28,8 @@ class Harness:
     Parameters
     ----------
     board : str
-        'axis', 'absorber', 'irradiance' or 'gps' (selects the ELF and the models).
+        'axis', 'absorber', 'irradiance', 'gps' or 'actuator' (selects the ELF and the
+        models; the switchless stepper runs as 'axis' with ``elf_path`` its ELF).
     eeprom : bytes, optional
         EEPROM image loaded at power-up (the configuration record, messages.ConfigRecord).
     link, path_file : str, optional
@@ -39,6 +41,8 @@ class Harness:
         host's steady clock; 0: free run).
     mech : tuple, optional
         Axis mechanism (lo, hi, sleep, step_rad, switch_width, overtravel, angle) [rad].
+    act : tuple, optional
+        Actuator board's drive (:func:`actuator_mech`).
     sensor_zero : int, optional
         Fit the optional AS5048A encoder (count at joint angle 0).
     bootloader : str, optional
@@ -48,11 +52,12 @@ class Harness:
 
     def __init__(self, board: str, *, eeprom: bytes | None = None, link: str | None = None,
                  path_file: str | None = None, uart_fd: int | None = None, pace: float = 1.0,
-                 mech: tuple | None = None, sensor_zero: int | None = None, seed: int = 1,
+                 mech: tuple | None = None, act: tuple | None = None, sensor_zero: int | None = None, seed: int = 1,
                  bootloader: str | None = None, app: bool = True, elf_path: str | None = None, log=None):
         self.board = board
         self.eeprom = eeprom
         self.link, self.path_file, self.uart_fd = link, path_file, uart_fd
+        self.act = act
         self.pace, self.mech, self.sensor_zero, self.seed = pace, mech, sensor_zero, seed
         self.bootloader = bootloader
         self.app = app
@@ -89,13 +94,15 @@ class Harness:
                 argv += ['--path-file', self.path_file]
         if self.mech is not None:
             argv += ['--mech', ','.join(f'{v:.12g}' for v in self.mech)]
+        if self.act is not None:
+            argv += ['--act', ','.join(f'{v:.12g}' for v in self.act)]
         if self.sensor_zero is not None:
             argv += ['--sensor', str(int(self.sensor_zero))]
         return argv
 
     def start(self, timeout: float = 20.0) -> 'Harness':
         """Start the process (building the firmware if needed); wait for its pty."""
-        if not harness_path().exists() or not elf(self.board).exists():
+        if not harness_path().exists() or not Path(self.elf_path or elf(self.board)).exists():
             build()
         pass_fds = (self.uart_fd,) if self.uart_fd is not None else ()
         # its own session: a signal to the caller's process group (Ctrl-C, the supervisor's
@@ -201,3 +208,14 @@ def axis_mech(axis: str, initial_angle: float | None = None) -> tuple:
 def sensor_zero_for(offset: float = 0.0) -> int:
     """AS5048A count [0, 16384) at joint angle 0 for an encoder mounted ``offset`` [rad]."""
     return int(round(offset / (2 * math.pi) * 16384)) % 16384
+
+
+def actuator_mech(config, initial_angle: float | None = None, noise_mv: float = 3.0) -> tuple:
+    """The actuator board's drive for ``fwsim --act`` from a :class:`sslfr_sim.actuator.ActuatorConfig`
+    (lever geometry, stroke, speed at full duty, start duty, the TRUE inclinometer mounting
+    offset) with ``noise_mv`` [mV rms] of electrical noise on every ADC conversion and the
+    line at ``initial_angle`` [rad] (default the stow angle)."""
+    g = config.geometry
+    angle = config.stow if initial_angle is None else initial_angle
+    return (g.lever, g.mount_distance, g.mount_angle, g.stroke[0], g.stroke[1], config.max_speed,
+            config.min_duty, config.inclinometer.offset, noise_mv, angle)

@@ -33,6 +33,7 @@ to exceed the drivers' steady-clock link timeout (1 s wall).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as dt
 import json
 import os
@@ -50,7 +51,7 @@ from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
 from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float
+from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float, ros_namespace
 
 
 class SimClock:
@@ -207,6 +208,11 @@ def parser() -> argparse.ArgumentParser:
                         'e.g. mirrors_driver:status_rate=20 (repeatable)')
     p.add_argument('--layout', default=None,
                    help='process layout (config/nodeset.yaml layouts: composed, separate; default: the node set\'s)')
+    p.add_argument('--namespace', type=ros_namespace, default=None,
+                   help='namespace of the whole tracker, e.g. /c1 (default: the node set\'s)')
+    p.add_argument('--collectors', type=bounded_int(1, 64), default=None, metavar='N',
+                   help='a field: N simulated collectors /c1../cN (composed layout, on the system clock) '
+                        'and their station (discovery servers, field recorder) on this machine (docs/field.md)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,
@@ -261,7 +267,11 @@ def main(argv: list[str]) -> int:
     with StopSignals() as stop:
         run = Path(tempfile.mkdtemp(prefix='sslfr-sim-'))   # short paths: UNIX sockets <= 107 bytes
         try:
-            return _main(parser().parse_args(argv), stop, run)
+            args = parser().parse_args(argv)
+            if args.collectors is not None:
+                from sslfr_sim.field_sim import run_field
+                return run_field(args, stop, run)
+            return _main(args, stop, run)
         except CliError as exc:
             print(f'sslfr sim: error: {one_line(exc)}', file=sys.stderr)
             return 2
@@ -276,6 +286,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
     t_wall0 = time.monotonic()
     try:
         ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
+        if args.namespace is not None:
+            ns = dataclasses.replace(ns, namespace=args.namespace)
         ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
         params = nodeset_mod.checked_params(ns, config)

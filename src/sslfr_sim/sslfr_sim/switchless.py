@@ -55,3 +55,8 @@ class SwitchlessAxisSim(AxisSim):
     def limit_bits(self) -> int:
         """No switches wired: always 0."""
         return 0
+
+    def _host_loss_valid(self, h: m.SetHostLossStow) -> bool:
+        """As the switchless firmware (hl_valid with AXIS_NO_SWITCHES): no switch to stow
+        toward, so only OFF and a step position are accepted."""
+        return h.mode != m.HostLossMode.SWITCH and super()._host_loss_valid(h)

@@ -71,6 +71,13 @@ def test_actuator_out_of_range_stop_and_no_home():
     b.handle(m.Stop(), None)
     _run(b, 1.0, 2.0)
     assert b.duty == 0.0 and b.angle == pytest.approx(moving_angle, abs=1e-12)   # PWM off: stops at once
+    # SET_ZERO while driving ends the move with the PWM off (as the firmware board)
+    b.handle(m.MoveTo(0, 1000.0), None)
+    _run(b, 2.0, 3.0)
+    assert b.duty != 0.0
+    b.handle(m.SetZero(0), None)
+    _run(b, 3.0, 4.0)
+    assert b.duty == 0.0 and not b.status().flags & m.StatusFlags.MOVING
 
 
 def test_actuator_stall_and_timeout_faults():

@@ -21,7 +21,7 @@ from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase, Wind
 from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
                                    SAFETY_ESTOP, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE, TRACKER_SUN,
-                                   WIND)
+                                   WIND, collector_id)
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
 
 from . import commands, remote
@@ -185,7 +185,7 @@ class WebNode(LeanEvents, Node):
 
     def _publish_diagnostics(self) -> None:
         c = self.op.counters
-        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id='web',
+        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id=collector_id(self.get_namespace()),
                              level=DiagnosticStatus.OK if self.op.passwords.line() else DiagnosticStatus.WARN,
                              message=f'serving {self.url}' if self.op.passwords.line()
                              else self.op.passwords.problem)

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import TransitionCallbackReturn
 from sensor_msgs.msg import JointState
 from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, AXIS_STATUS, DIAGNOSTICS, JOINT_STATES, SAFETY_STATE,
-                                   TRACKER_PHASE, TRACKER_TRAJECTORY)
+                                   TRACKER_PHASE, TRACKER_TRAJECTORY, collector_id)
 from sslfr_common.accuracy import AccuracyAlarm, AccuracyConfig
 from sslfr_common.node import ParameterGuard, declare_parameters, qos, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
@@ -275,9 +275,9 @@ class AxisDriver(ManagedNode):
             last_error = self.last_error or self.sup.last_error
             level, message = diagnostic_verdict(life, self.sup, self.session is not None, last_error)
             pending = self.activation.pending(life, now)
-            name, hw = f'{self.get_name()}: axis {self.axis}', self.session.board_info if self.session else board_port(self.p)
+            name, hw = f'{self.get_name()}: axis {self.axis}', collector_id(self.get_namespace())
             values = {'lifecycle': life, 'state': self.sup.state, 'reason': self.sup.reason,
-                      'port': board_port(self.p), 'mode': self.sup.mode,
+                      'port': board_port(self.p), 'board': self.session.board_info if self.session else '', 'mode': self.sup.mode,
                       'last_rejected_trajectory': self.sup.store.last_reason, 'last_error': last_error,
                       **self.sup.counts(), **self.activation.values(now),
                       'parameter_changes_refused': self.params.refused,

@@ -15,7 +15,9 @@ import shutil
 import subprocess
 from pathlib import Path
 
-BOARDS = ('axis', 'absorber', 'irradiance', 'gps')
+#: the firmware images: axis_noswitch is axis.cpp built without switches (seed 003),
+#: actuator the linear actuator closed on an inclinometer (seed 004)
+BOARDS = ('axis', 'absorber', 'irradiance', 'gps', 'axis_noswitch', 'actuator')
 #: board kind name of the simulators (sim.KINDS) -> firmware board
 KIND_TO_BOARD = {'axis': 'axis', 'absorber': 'absorber', 'irradiance': 'irradiance', 'gps': 'gps'}
 ARDUINO = Path('/usr/share/arduino/hardware/arduino/avr')

@@ -34,7 +34,8 @@ CONFIG_KEYS = {
     'sensor_zero': ('sensor_zero', int),
 }
 KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'absorber': m.BoardKind.ABSORBER,
-         'irradiance': m.BoardKind.IRRADIANCE, 'gps': m.BoardKind.GPS}
+         'irradiance': m.BoardKind.IRRADIANCE, 'gps': m.BoardKind.GPS,
+         'axis_noswitch': m.BoardKind.AXIS_STEPPER, 'actuator': m.BoardKind.AXIS_ACTUATOR}
 
 
 def parser() -> argparse.ArgumentParser:

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from sslfr_common.contract import DIAGNOSTICS
+from sslfr_common.contract import DIAGNOSTICS, collector_id
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos
 from sslfr_common.params import ParamTable
 from sslfr_drivers.sensors.health import RateMeter, Report, board_report
@@ -113,10 +113,11 @@ class SensorBoardNode(LeanEvents, Node):
                    *more]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        hw = self._values['port'] or '(none)'
+        hw = collector_id(self.get_namespace())
         arr.status = [DiagnosticStatus(name=name, hardware_id=hw, level=getattr(DiagnosticStatus, r.level),
                                        message=r.message,
-                                       values=[KeyValue(key=k, value=v) for k, v in r.values.items()])
+                                       values=[KeyValue(key='port', value=self._values['port'] or '(none)'),
+                                               *(KeyValue(key=k, value=v) for k, v in r.values.items())])
                       for name, r in reports]
         self._diag_pub.publish(arr)
 

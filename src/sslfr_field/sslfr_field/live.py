@@ -1,0 +1,108 @@
+"""The field page's live state: every collector at a glance (pure, no rclpy).
+
+The field page node feeds plain facts decoded from each collector's topics
+(``tracker/phase``, ``safety/state``, ``axes/<axis>/status``, the absorber
+temperatures, ``irradiance/beam``) with the steady time they arrived; :meth:`FieldState.snapshot`
+gives the page its JSON: per collector phase and mode, safety level and reasons,
+axis states and errors [rad], temperatures [degC], beam irradiance [W/m^2], and the
+link health: ``ok`` while something arrived within ``lost_after`` seconds (steady
+clock), ``lost`` after that, ``never`` before the first message. NaN (unknown) is sent
+as null.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from sslfr_common.contract import JOINTS
+
+#: [s, steady] a collector silent this long is shown lost (its safety heartbeat is >= 10 Hz)
+DEFAULT_LOST_AFTER = 5.0
+
+
+def _num(x) -> float | None:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+@dataclass
+class CollectorView:
+    """What the page knows of one collector."""
+
+    id: str
+    namespace: str
+    page: str = ''                     # the collector's own operator page (URL), '' if unknown
+    phase: str = ''
+    mode: str = ''
+    phase_reason: str = ''
+    safety_level: str = ''
+    safety_reasons: list = field(default_factory=list)
+    axes: dict = field(default_factory=dict)          # axis -> {'state', 'error', 'measured'}
+    temperatures: dict = field(default_factory=dict)  # 'inlet'/'outlet' -> degC
+    beam: float | None = None                         # W/m^2
+    last_heard: float | None = None                   # steady time [s]
+    messages: int = 0
+
+
+class FieldState:
+    """The live state of every collector of a field (called from one thread)."""
+
+    def __init__(self, collectors, lost_after: float = DEFAULT_LOST_AFTER):
+        """``collectors``: (id, namespace, page URL) triples."""
+        self.views = {cid: CollectorView(cid, nsp, page) for cid, nsp, page in collectors}
+        self.lost_after = float(lost_after)
+        self.version = 0
+
+    def _heard(self, cid: str, now: float) -> CollectorView:
+        v = self.views[cid]
+        v.last_heard = now
+        v.messages += 1
+        self.version += 1
+        return v
+
+    def on_phase(self, cid: str, now: float, phase: str, mode: str, reason: str) -> None:
+        v = self._heard(cid, now)
+        v.phase, v.mode, v.phase_reason = phase, mode, reason
+
+    def on_safety(self, cid: str, now: float, level: str, reasons) -> None:
+        v = self._heard(cid, now)
+        v.safety_level, v.safety_reasons = level, [str(r) for r in reasons]
+
+    def on_axis(self, cid: str, now: float, axis: str, state: str, error: float, measured: float) -> None:
+        if axis not in JOINTS:
+            return
+        v = self._heard(cid, now)
+        v.axes[axis] = {'state': state, 'error': _num(error), 'measured': _num(measured)}
+
+    def on_temperature(self, cid: str, now: float, which: str, degc: float) -> None:
+        v = self._heard(cid, now)
+        v.temperatures[which] = _num(degc)
+
+    def on_beam(self, cid: str, now: float, beam: float) -> None:
+        v = self._heard(cid, now)
+        v.beam = _num(beam)
+
+    def link(self, cid: str, now: float) -> str:
+        """'ok', 'lost' (silent for more than ``lost_after`` s) or 'never'."""
+        v = self.views[cid]
+        if v.last_heard is None:
+            return 'never'
+        return 'ok' if now - v.last_heard <= self.lost_after else 'lost'
+
+    def snapshot(self, now: float) -> dict:
+        """The page's JSON (plain types; unknown numbers are None)."""
+        out = []
+        for cid, v in self.views.items():
+            out.append({'id': cid, 'namespace': v.namespace, 'page': v.page, 'phase': v.phase, 'mode': v.mode,
+                        'phase_reason': v.phase_reason, 'safety_level': v.safety_level,
+                        'safety_reasons': list(v.safety_reasons), 'axes': {k: dict(v.axes[k]) for k in JOINTS if k in v.axes},
+                        'temperatures': dict(v.temperatures), 'beam': v.beam, 'link': self.link(cid, now),
+                        'last_heard_s': None if v.last_heard is None else round(now - v.last_heard, 2),
+                        'messages': v.messages})
+        counts = {}
+        for c in out:
+            counts[c['link']] = counts.get(c['link'], 0) + 1
+        return {'collectors': out, 'links': counts}

