@@ -117,7 +117,8 @@ def test_actuator_board_tracks_a_ramp_within_the_deadband(drive_rig, ros):
     mv = shipped_description('florianopolis_lepten').movement('mirrors')
     r = drive_rig(kind='actuator', sim_opts={'initial_angle_deg': -20.0},
                   params={'drive': mv.drive, 'deadband': mv.deadband, 'lower_limit': mv.range[0],
-                          'upper_limit': mv.range[1], 'stow_position': mv.stow, 'home_position': mv.stow,
+                          'upper_limit': mv.range[1], 'stow_position': mv.stow, 'host_loss_stow_position': mv.stow,
+                          'home_position': mv.stow,
                           'max_speed': 0.03})
     assert r.wait_state(('holding',), 20), r.driver.output()        # referenced from the inclinometer
     assert r.board()['homed'] and r.board()['kind'] == 'AXIS_ACTUATOR'
@@ -145,7 +146,8 @@ def test_switchless_board_waits_for_the_operator_reference(drive_rig, ros, tmp_p
     mv = load(shipped_description('bucaramanga_single_axis').path).movement('mirrors')
     r = drive_rig(kind='axis_noswitch', sim_opts={'initial_angle_deg': 0.0, 'max_speed': 2000, 'accel': 8000},
                   params={'drive': mv.drive, 'step_angle': mv.step, 'lower_limit': R(-45.0),
-                          'upper_limit': mv.range[1], 'stow_position': mv.stow, 'home_position': mv.reference,
+                          'upper_limit': mv.range[1], 'stow_position': mv.stow, 'host_loss_stow_position': mv.stow,
+                          'home_position': mv.reference,
                           'use_sensor': False, 'auto_home': False, 'max_speed': 0.2,
                           'state_dir': str(tmp_path / 'state')})
     store = ReferenceStore(tmp_path / 'state', 'mirrors')
