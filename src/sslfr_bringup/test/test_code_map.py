@@ -177,3 +177,11 @@ def test_node_files_are_thin():
     fat = {str(p.relative_to(SRC)): n for p in SRC.glob('*/*/**/*_node.py')
            if (n := len(p.read_text().splitlines())) >= NODE_FILE_MAX_LINES}      # under 300
     assert fat == {}
+
+
+def test_one_conftest_at_the_root():
+    """Tests import the harness as ``from conftest import ...``: a second conftest.py
+    anywhere under the test paths would be that module for some xdist workers."""
+    others = sorted(str(p.relative_to(SRC.parent)) for p in (*SRC.rglob('conftest.py'),
+                                                               *(SRC.parent / 'tests').rglob('conftest.py')))
+    assert others == [], others

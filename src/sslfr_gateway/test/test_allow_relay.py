@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from gateway_fixtures import extra_loopbacks  # noqa: F401 - a fixture
 from sslfr_gateway.allow_relay import AllowRelay, client_ip
 
 

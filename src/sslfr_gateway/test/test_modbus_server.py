@@ -17,6 +17,7 @@ from pymodbus.client import ModbusTcpClient
 from sunspec2.modbus.client import SunSpecModbusClientDeviceTCP
 
 from sslfr_gateway import sunspec
+from gateway_fixtures import extra_loopbacks  # noqa: F401 - a fixture
 from sslfr_gateway.modbus_server import ModbusGateway
 from sslfr_gateway.sunspec import Tracker, Unit
 

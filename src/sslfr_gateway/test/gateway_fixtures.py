@@ -1,4 +1,5 @@
-"""Fixtures shared by the gateway's tests."""
+"""Fixtures shared by the gateway's tests (imported by name: a second conftest.py would
+shadow the root one's `from conftest import ...` under pytest-xdist)."""
 from __future__ import annotations
 
 import socket
