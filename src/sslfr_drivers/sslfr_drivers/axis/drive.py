@@ -145,7 +145,9 @@ class ReferenceKeeper:
                    boot_count: int | None) -> str | None:
         """Check the stored reference on the first read and after a reset or a
         reconnection; returns the line logged when it is found lost or unreadable."""
-        if board is None or (self._checked and not (reset or reconnected)):
+        if reset or reconnected:
+            self._checked = False            # checked at the next read with a board state
+        if board is None or self._checked:
             return None
         self._checked = boot_count is not None
         try:
