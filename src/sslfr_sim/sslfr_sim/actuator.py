@@ -88,6 +88,24 @@ def shipped_description(name: str = 'florianopolis_lepten'):
     return load(config_dir() / 'collectors' / f'{name}.yaml')
 
 
+def config_from_options(options: dict) -> ActuatorConfig:
+    """The actuator axis of runner options (``sim_board`` / ``fw_board --opt``):
+    ``description`` (a collector description file; default the shipped seed-004 one),
+    ``axis``, ``initial_angle_deg``, ``inclinometer_offset_deg`` (the true mounting
+    offset; the board keeps the description's as its calibration)."""
+    from sslfr_planner.description import load
+    opts = dict(options)
+    desc = load(opts['description']) if opts.get('description') else shipped_description()
+    kw = {}
+    if 'initial_angle_deg' in opts:
+        kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
+    cfg = ActuatorConfig.from_description(desc, opts.get('axis', MIRRORS), **kw)
+    if 'inclinometer_offset_deg' in opts:
+        cfg.inclinometer = dataclasses.replace(cfg.inclinometer,
+                                               offset=math.radians(float(opts['inclinometer_offset_deg'])))
+    return cfg
+
+
 class ActuatorSim(SimBoard):
     """Linear actuator axis board (see module docstring)."""
 
@@ -107,21 +125,8 @@ class ActuatorSim(SimBoard):
 
     @classmethod
     def from_options(cls, options: dict, rng: random.Random, board_id: int = 1) -> 'ActuatorSim':
-        """Build from runner options: ``description`` (a collector description file;
-        default the shipped seed-004 one), ``axis``, ``initial_angle_deg``,
-        ``inclinometer_offset_deg`` (the true mounting offset; the board keeps the
-        description's as its calibration)."""
-        from sslfr_planner.description import load
-        opts = dict(options)
-        desc = load(opts['description']) if opts.get('description') else shipped_description()
-        kw = {}
-        if 'initial_angle_deg' in opts:
-            kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
-        cfg = ActuatorConfig.from_description(desc, opts.get('axis', MIRRORS), **kw)
-        if 'inclinometer_offset_deg' in opts:
-            cfg.inclinometer = dataclasses.replace(cfg.inclinometer,
-                                                   offset=math.radians(float(opts['inclinometer_offset_deg'])))
-        return cls(cfg, board_id=board_id, rng=rng)
+        """Build from runner options (:func:`config_from_options`)."""
+        return cls(config_from_options(options), board_id=board_id, rng=rng)
 
     @property
     def angle(self) -> float:
