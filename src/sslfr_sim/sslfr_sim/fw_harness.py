@@ -272,11 +272,12 @@ def compiled_actuator_params(text: str | None = None) -> dict[str, float]:
         text = (firmware_dir() / 'boards' / 'actuator_params.h').read_text()
     out = {}
     for name, unit in ACTUATOR_PARAMS.items():
-        mo = re.search(rf'#define {name} \(?(-?[0-9.]+)(f|u|ul)?( \* DEG\))?', text)
+        mo = re.search(rf'#define {name} \(?(-?[0-9.]+(?:e[-+]?[0-9]+)?)(f|u|ul)?( \* DEG\))?', text)
         if mo is None:
             raise FirmwareError(f'boards/actuator_params.h: no {name}')
         v = float(mo.group(1))
-        out[name] = math.radians(v) if unit == 'deg' else v / 1000.0 if unit == 'ms' else v
+        # as C reads it: `* DEG` converts degrees, the generated headers give radians
+        out[name] = math.radians(v) if mo.group(3) else v / 1000.0 if unit == 'ms' else v
     return out
 
 
@@ -293,9 +294,10 @@ def actuator_params_header(params: dict[str, float]) -> str:
 def actuator_elf(config) -> Path:
     """The actuator firmware for ``config``'s drive: build/actuator.elf when its
     parameters are boards/actuator_params.h's (the shipped seed-004 description), else
-    an image built for them (build/variants/actuator-HASH.elf, made on first use, as an
-    installer would build the board for another collector). FirmwareError when it
-    cannot be built."""
+    an image built for them (build/variants/actuator-HASH.elf, made by ``make`` on use,
+    as an installer would build the board for another collector; the parameters are
+    constants: its flash is the shipped build's, its RAM grows by 4 B per 100 ms of
+    stall window, at most 5 s). FirmwareError when it cannot be built."""
     import hashlib
     from sslfr_drivers.firmware import build, build_dir
     want = actuator_params(config)
@@ -305,12 +307,11 @@ def actuator_elf(config) -> Path:
     text = actuator_params_header(want)
     tag = hashlib.sha1(text.encode()).hexdigest()[:12]
     out = build_dir() / 'variants' / f'actuator-{tag}.elf'
-    if not out.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-        header = out.with_suffix('.h')
-        if not header.exists() or header.read_text() != text:
-            tmp = header.with_suffix(f'.h.{os.getpid()}')
-            tmp.write_text(text)
-            os.replace(tmp, header)
-        build(f'build/variants/{out.name}')
+    out.parent.mkdir(parents=True, exist_ok=True)
+    header = out.with_suffix('.h')
+    if not header.exists() or header.read_text() != text:
+        tmp = header.with_suffix(f'.h.{os.getpid()}')
+        tmp.write_text(text)
+        os.replace(tmp, header)
+    build(f'build/variants/{out.name}')      # make: rebuilt when the sources changed
     return out
