@@ -75,3 +75,27 @@ def test_a_variant_header_carries_another_drive():
     for window in (0.3, 6.0, 2.05):
         with pytest.raises(ValueError, match='stall_window_s'):
             actuator_params(dataclasses.replace(cfg, stall_window=window))
+
+
+def test_fw_board_takes_the_node_sets_drive_simulators():
+    """The command lines config/nodeset.yaml gives each drive kind's simulated board
+    (``./sslfr sim``; ``--boards firmware`` runs fw_board with the same arguments) parse in
+    fw_board and give a firmware configuration for the shipped collectors (a simulated
+    actuator faster than the description's: an image built for it)."""
+    from sslfr_bringup.nodeset import load
+    from sslfr_sim.fw_board import parser
+    collectors = {'stepper_no_switches': SEED003, 'linear_actuator_inclinometer': SEED004}
+    sims = load().drive_sims
+    for drive, desc in collectors.items():
+        values = {'axis': 'mirrors', 'pty': '/tmp/p', 'control': '/tmp/c', 'seed': 1, 'key_file': '/tmp/k',
+                  'description': desc.path, 'sleep_deg': math.degrees(desc.movement('mirrors').stow)}
+        argv = [a.format(**values) for a in sims[drive]['args']]
+        args = parser().parse_args(argv)
+        opts = dict(o.split('=', 1) for o in args.opt)
+        opts.setdefault('axis', args.axis)
+        cfg = axis_config(args.kind, opts)
+        rec = config_record(args.kind, opts, 1, cfg)          # ValueError if the firmware refused it
+        assert rec.axis == 0 and rec.check(rec.kind) == 0
+        assert cfg.initial_angle == pytest.approx(desc.movement('mirrors').stow)
+        if args.kind == 'actuator':
+            assert actuator_params(cfg)['ACT_MAX_SPEED'] == cfg.max_speed
