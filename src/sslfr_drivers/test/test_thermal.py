@@ -101,3 +101,24 @@ def test_thermal_output_unknowns_are_nan_never_numbers():
     assert math.isnan(thermal.thermal_output(q, 40.0, 41.0, 800.0, 0.0).efficiency)    # no aperture
     r = thermal.thermal_output(0.0, 40.0, 41.0, 800.0, 1.0)                            # pump stopped
     assert r.power == 0.0 and r.efficiency == 0.0
+
+
+def test_tracker_from_board_samples_to_efficiency():
+    """The node's pure core: samples at 4 Hz of a 150 L/h flow, the temperatures and a
+    beam; the first sample and a board reset give nothing; a stale beam gives NaN."""
+    tr = thermal.ThermalTracker(450.0, window=5.0, aperture=1.0, beam_max_age=5.0)
+    tr.set_temperature('inlet', 30.0)
+    tr.set_temperature('outlet', 31.0)
+    tr.set_beam(800.0, steady=0.0)
+    out = [tr.add(int(250 * i), int(18.75 * 0.25 * i), steady=0.25 * i) for i in range(21)]
+    assert out[0] is None and all(o is not None for o in out[1:])
+    f, r = out[-1]
+    assert thermal.litres_per_hour(f.volume_flow) == pytest.approx(150.0, rel=0.015)
+    # 0.04153 kg/s x 4180 J/(kg K) x 1 K = 173.6 W; / (800 W/m^2 x 1 m^2)
+    assert r.power == pytest.approx(173.6, rel=0.02)
+    assert r.efficiency == pytest.approx(r.power / 800.0)
+    assert tr.add(100, 2, steady=5.5) is None                     # board reset
+    assert tr.counts == {'samples': 22, 'restarts': 2}
+    tr.add(350, 7, steady=5.75)
+    _, r = tr.add(600, 12, steady=6.0)                           # beam heard 6 s ago
+    assert math.isfinite(r.power) and math.isnan(r.beam) and math.isnan(r.efficiency)

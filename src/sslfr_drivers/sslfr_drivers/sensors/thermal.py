@@ -6,9 +6,11 @@ reports the running count at 4 Hz (``PulseSample``). Here, in pure Python:
 
 * :func:`volume_flow` - the meter's calibration: ``Q = f / K`` with the K-factor ``K``
   [pulses per litre] of its data sheet (a turbine / Hall meter is linear in its range).
-* :class:`FlowStats` - the mean flow over a window of ROS time (a 2.5 L/min flow on a
-  450 pulse/L meter is 19 pulses per second: one 0.25 s sample counts 4 or 5, a 5 s
-  window averages that quantisation down to about 1 %).
+* :class:`FlowStats` - the mean flow over a window of the board's clock (a 2.5 L/min
+  flow on a 450 pulse/L meter is 19 pulses per second: one 0.25 s sample counts 4 or
+  5, a 5 s window averages that quantisation down to about 1 %). The window runs on
+  the pulses' own time base, as their frequency is measured: a simulation at 400x
+  measures its flow over the same 5 real seconds as the board does.
 * :func:`water_density`, :func:`water_cp` - liquid water at saturation, 0-150 degC
   (IAPWS-95 as tabulated by the NIST Chemistry WebBook; linear between 10 K points,
   within 0.1 % of the formulation), NaN outside: ice or steam is not this model.
@@ -153,10 +155,9 @@ class FlowReading:
 
 
 class FlowStats:
-    """Mean flow over the last ``window`` [s] of ROS time from pulse intervals
-    (``dt`` [s of the board's clock], ``pulses``), as
-    :class:`sslfr_drivers.sensors.anemometer.WindStats` does for the wind; a gap (the
-    caller calls :meth:`restart`) or ROS time going back empties the window."""
+    """Mean flow over the last ``window`` [s] from pulse intervals (``dt`` [s of the
+    board's clock], ``pulses``); a gap (the caller calls :meth:`restart`) or time going
+    back empties the window."""
 
     def __init__(self, k_factor: float = K_FACTOR, window: float = FLOW_WINDOW):
         check_k_factor(k_factor)
@@ -173,8 +174,8 @@ class FlowStats:
         self._sum = [0.0, 0]                                 # sum dt, sum pulses
 
     def add(self, dt: float, pulses: int, t: float | None = None) -> FlowReading:
-        """One interval of ``dt`` [s] with ``pulses`` counted, ending at ``t`` [s, ROS
-        time; None: the previous end + ``dt``]; the reading after it."""
+        """One interval of ``dt`` [s] with ``pulses`` counted, ending at ``t`` [s; None:
+        the previous end + ``dt``, the board's clock]; the reading after it."""
         if t is None:
             t = dt if self._t is None else self._t + dt
         elif self._t is not None and t < self._t:
@@ -191,3 +192,51 @@ class FlowStats:
             self._sum[1] -= on
         rate = self._sum[1] / self._sum[0] if self._sum[0] > 0.0 else 0.0
         return FlowReading(volume_flow(rate, self.k_factor), min(t - self._origin, self.window), rate)
+
+
+class ThermalTracker:
+    """The absorber board node's flow meter and thermal output, without rclpy: the
+    board's pulse samples -> :class:`FlowReading` and :class:`ThermalReading` with the
+    last inlet and outlet temperatures [degC] and the last beam irradiance [W/m^2]
+    (older than ``beam_max_age`` [s of the caller's steady clock]: unknown)."""
+
+    def __init__(self, k_factor: float = K_FACTOR, window: float = FLOW_WINDOW, aperture: float = 0.0,
+                 min_beam: float = MIN_BEAM, beam_max_age: float = 5.0):
+        from sslfr_drivers.sensors.anemometer import PulseCounter
+        self.flow = FlowStats(k_factor, window)
+        self.pulses = PulseCounter()
+        self.aperture, self.min_beam, self.beam_max_age = aperture, min_beam, beam_max_age
+        self.temperatures = {'inlet': math.nan, 'outlet': math.nan}
+        self._beam = (math.nan, -math.inf)          # (W/m^2, steady time)
+        self.counts = {'samples': 0, 'restarts': 0}
+        self.last: tuple[FlowReading, ThermalReading] | None = None
+
+    def set_temperature(self, which: str, value: float) -> None:
+        """The last reading of thermocouple ``which`` (NaN: unknown)."""
+        self.temperatures[which] = value
+
+    def set_beam(self, beam: float, steady: float) -> None:
+        """The last beam irradiance [W/m^2], heard at ``steady`` [s]."""
+        self._beam = (beam, steady)
+
+    def beam(self, steady: float) -> float:
+        """The beam irradiance to use at ``steady`` [s] (NaN: none recent)."""
+        value, at = self._beam
+        return value if steady - at <= self.beam_max_age else math.nan
+
+    def add(self, board_ms: int, count: int, steady: float):
+        """One pulse sample (board tick [ms], running count; the flow window runs on
+        the board's clock) received at steady time ``steady`` [s] -> (flow, thermal)
+        readings, or None for
+        the first sample after a start, a board reset or a gap (the window restarts)."""
+        self.counts['samples'] += 1
+        interval = self.pulses.add(board_ms, count)
+        if interval is None:
+            self.counts['restarts'] += 1
+            self.flow.restart()
+            return None
+        f = self.flow.add(*interval)            # the window on the board's clock
+        r = thermal_output(f.volume_flow, self.temperatures['inlet'], self.temperatures['outlet'],
+                           self.beam(steady), self.aperture, self.min_beam)
+        self.last = (f, r)
+        return self.last
