@@ -515,7 +515,7 @@ def thermal_problems(desc, absorber: Mapping[str, Any], where: str, path) -> lis
     """A flow meter counted (``absorber_board`` ``flow_meter_pin`` >= 0) on a collector
     whose description lists no ``flow_meter`` sensor, and an ``aperture_area`` that is
     not the description's lines x line_width x line_length."""
-    from sslfr_drivers.sensors.thermal import aperture_area
+    from sslfr_planner.analysis.ideal import aperture_area
     errors = []
     pin = absorber.get('flow_meter_pin', -1)
     if isinstance(pin, int) and not isinstance(pin, bool) and pin >= 0 and \
@@ -523,8 +523,7 @@ def thermal_problems(desc, absorber: Mapping[str, Any], where: str, path) -> lis
         errors.append(f'{where}: absorber_board: flow_meter_pin: {pin} but the collector description '
                       f'{path} lists no flow meter (sensors: kind flow_meter)')
     area = absorber.get('aperture_area')
-    o = desc.optics
-    expected = aperture_area(o.lines, o.line_width, o.line_length)
+    expected = aperture_area(desc)
     if isinstance(area, (int, float)) and not isinstance(area, bool) and area != 0 and \
             abs(float(area) - expected) > 1e-6 * expected:
         errors.append(f'{where}: absorber_board: aperture_area: {area!r} contradicts the collector description '

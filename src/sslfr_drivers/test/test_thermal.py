@@ -54,11 +54,6 @@ def test_flow_stats_average_the_quantised_counts():
     assert r.window == pytest.approx(0.25) and r.pulse_rate == pytest.approx(20.0)
 
 
-def test_aperture_of_seed_003():
-    """Seed 003 Table 1: 10 mirrors of 10 cm x 100 cm: A_a = 1 m^2 (the seed's A_a = 1)."""
-    assert thermal.aperture_area(10, 0.10, 1.0) == pytest.approx(1.0)
-
-
 def test_seed_003_worked_example_as_printed():
     """Seed 003 section 3.2 prints eta = 0.032 * 4206 * (77.48 - 45.43) / (1 * 774.6 *
     0.77) = 7.16 % (tracking) and with (58.81 - 44.33) 3.26 % (manual). The same

@@ -49,6 +49,7 @@ Fault injection (:meth:`control` of each class, the runner's control channel):
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import fcntl
 import json
@@ -303,7 +304,9 @@ class AbsorberSim(_SensorSim):
     (a pulse flow meter on the pulse input instead of the anemometer, the fluid pumped
     at this constant flow: the heat balance's m_dot c_p follows it, and ``flow`` with
     it), ``flow_k_factor`` [pulses/L] (its calibration, default
-    :data:`sslfr_drivers.sensors.thermal.K_FACTOR`).
+    :data:`sslfr_drivers.sensors.thermal.K_FACTOR`), ``description`` (a collector
+    description's path: its field and receiver focus the sun on the tube, instead of
+    seed 000's prototype).
     """
 
     kind = m.BoardKind.ABSORBER
@@ -318,7 +321,14 @@ class AbsorberSim(_SensorSim):
                               loss_coefficient=float(o.get('loss', 8.0)),
                               flow_capacity=float(o.get('flow', 20.0)),
                               ambient=float(o.get('ambient', 25.0)))
-        self.thermal = AbsorberThermal(p)
+        optics = None
+        if o.get('description'):
+            from sslfr_planner import description as desc_mod
+            from sslfr_planner.analysis.ideal import optical_parameters
+            desc = desc_mod.load(o['description'])
+            optics = optical_parameters(desc)
+            p = dataclasses.replace(p, cavity_half_aperture=desc.optics.receiver_width / 2.0)
+        self.thermal = AbsorberThermal(p, optics)
         flow = o.get('flow_lph')
         self.flow_lph = None if flow in (None, '') else float(flow)
         self.flow_k_factor = float(o.get('flow_k_factor', thermal.K_FACTOR))

@@ -651,13 +651,17 @@ class MemoryCensus(threading.Thread):
 
 def _flow_options(board: str, params, namespace: str, lph: float) -> list[str]:
     """The absorber simulator's flow meter options when the site config counts one
-    (``absorber_board`` ``flow_meter_pin`` >= 0): ``lph`` [L/h] at the config's K-factor."""
+    (``absorber_board`` ``flow_meter_pin`` >= 0): ``lph`` [L/h] at the config's K-factor,
+    and the collector description (its optics focus the sun: the thermal output is
+    measured against its aperture)."""
     from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
     node = nodeset_mod.node_params(params, 'absorber_board', namespace or '')
     if board != 'absorber' or node.get('flow_meter_pin', -1) < 0:
         return []
     k = node.get('flow_meter_k_factor', ABSORBER_BOARD.defaults()['flow_meter_k_factor'])
-    return ['--opt', f'flow_lph={lph:g}', '--opt', f'flow_k_factor={float(k):g}']
+    out = ['--opt', f'flow_lph={lph:g}', '--opt', f'flow_k_factor={float(k):g}']
+    desc = nodeset_mod.node_params(params, 'planner', namespace or '').get(nodeset_mod.DESCRIPTION_KEY)
+    return out + (['--opt', f'description={desc}'] if desc else [])
 
 
 def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None, use_sim_time=True):

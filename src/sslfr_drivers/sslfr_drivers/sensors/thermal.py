@@ -18,7 +18,8 @@ reports the running count at 4 Hz (``PulseSample``). Here, in pure Python:
 * :func:`efficiency` - seed 003 section 3.2 (the efficiency "equation 6" of its
   section 2.3.4): useful power over the beam irradiance on the aperture,
   ``eta = P / (G_b A_a)``; ``A_a`` = lines x line width x line length of the
-  collector description (:func:`aperture_area`; seed 003: 10 x 0.1 m x 1 m = 1 m^2).
+  collector description (``sslfr_planner.analysis.ideal.aperture_area``, the node's
+  ``aperture_area`` parameter; seed 003: 10 x 0.1 m x 1 m = 1 m^2).
   The seed's printed fraction also divides by a factor 0.77 (``Hdp eta_0``, not
   defined in the paper) and its two results are the bare ratios written as percent
   (docs/collectors.md, "Thermal output"); this module keeps the definition the text
@@ -94,12 +95,6 @@ def pulse_rate(flow: float, k_factor: float = K_FACTOR) -> float:
 def litres_per_hour(flow: float) -> float:
     """[m^3/s] -> [L/h] (for people: the seeds give flows in L/h)."""
     return flow * 3.6e6
-
-
-def aperture_area(lines: int, line_width: float, line_length: float) -> float:
-    """Aperture of the primary mirrors [m^2]: ``lines`` mirror lines of ``line_width``
-    by ``line_length`` [m] (seed 003 Table 1: 10 x 0.10 x 1.0 = 1.0 m^2, its A_a)."""
-    return lines * line_width * line_length
 
 
 def useful_power(mass_flow: float, cp: float, t_in: float, t_out: float) -> float:
