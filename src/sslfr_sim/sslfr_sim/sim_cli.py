@@ -655,12 +655,15 @@ def _flow_options(board: str, params, namespace: str, lph: float) -> list[str]:
     and the collector description (its optics focus the sun: the thermal output is
     measured against its aperture)."""
     from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
-    node = nodeset_mod.node_params(params, 'absorber_board', namespace or '')
+    namespace = namespace or ''
+    if namespace.strip('/'):             # the config as its nodes get it (sslfr_bringup.nodeset.site_config)
+        params = nodeset_mod.for_namespace(params, namespace)
+    node = nodeset_mod.node_params(params, 'absorber_board', namespace)
     if board != 'absorber' or node.get('flow_meter_pin', -1) < 0:
         return []
     k = node.get('flow_meter_k_factor', ABSORBER_BOARD.defaults()['flow_meter_k_factor'])
     out = ['--opt', f'flow_lph={lph:g}', '--opt', f'flow_k_factor={float(k):g}']
-    desc = nodeset_mod.node_params(params, 'planner', namespace or '').get(nodeset_mod.DESCRIPTION_KEY)
+    desc = nodeset_mod.node_params(params, 'planner', namespace).get(nodeset_mod.DESCRIPTION_KEY)
     return out + (['--opt', f'description={desc}'] if desc else [])
 
 
