@@ -23,15 +23,12 @@ Publishes
     mean) and the 10 min mean [m/s] from the pulse counts
     (:mod:`sslfr_drivers.sensors.anemometer`); the board is told the pin
     (SetPulseInput) every time its link comes up.
-    ``absorber/flow`` (sslfr_interfaces/Flow, R10, 4 Hz) and ``absorber/thermal_power``
-    (sslfr_interfaces/ThermalPower, R10, 4 Hz) when ``flow_meter_pin`` names the pin of
-    a pulse flow meter instead (one pulse input per board): the mean flow over
-    ``flow_window`` [m^3/s], the useful power m_dot c_p (T_out - T_in) [W] and seed
-    003's efficiency against ``irradiance/beam`` on ``aperture_area``
-    (:mod:`sslfr_drivers.sensors.thermal`).
+    ``absorber/flow`` (Flow) and ``absorber/thermal_power`` (ThermalPower), R10, 4 Hz,
+    when ``flow_meter_pin`` names the pin of a pulse flow meter instead (one pulse input
+    per board): the mean flow over ``flow_window`` [m^3/s], the useful power m_dot c_p
+    (T_out - T_in) [W] and seed 003's efficiency against ``irradiance/beam`` (then
+    subscribed) on ``aperture_area`` (:mod:`sslfr_drivers.sensors.thermal`).
     ``diagnostics``.
-
-Subscribes ``irradiance/beam`` (with a flow meter only).
 """
 from __future__ import annotations
 
@@ -82,8 +79,7 @@ class AbsorberBoardNode(SensorBoardNode):
         self._wind = anemometer.WindStats(self._values['anemometer_slope'], self._values['anemometer_offset'])
         self._wind_last: anemometer.WindReading | None = None
         self._wind_counts = {'samples': 0, 'restarts': 0, 'pin_refused': 0}
-        self._pub_flow = self.create_publisher(Flow, ABSORBER_FLOW.name, qos(ABSORBER_FLOW))
-        self._pub_thermal = self.create_publisher(ThermalPower, THERMAL_POWER.name, qos(THERMAL_POWER))
+        self._pubs_thermal = None              # (flow, thermal) publishers: made with the first flow sample
         self._thermal = self._thermal_tracker(self._values)
         self._beam_sub = None
         self._subscribe_beam(self._values)
@@ -229,17 +225,20 @@ class AbsorberBoardNode(SensorBoardNode):
         if out is None:
             return
         f, r = out
+        if self._pubs_thermal is None:         # a collector without a flow meter has no such topics
+            self._pubs_thermal = (self.create_publisher(Flow, ABSORBER_FLOW.name, qos(ABSORBER_FLOW)),
+                                  self.create_publisher(ThermalPower, THERMAL_POWER.name, qos(THERMAL_POWER)))
         msg = Flow()
         msg.header.stamp = received.to_msg()
         msg.header.frame_id = 'flow_meter'
         msg.volume_flow, msg.window, msg.pulse_rate = f.volume_flow, f.window, f.pulse_rate
-        self._pub_flow.publish(msg)
+        self._pubs_thermal[0].publish(msg)
         tp = ThermalPower()
         tp.header = msg.header
         tp.volume_flow, tp.mass_flow, tp.specific_heat, tp.power = r.volume_flow, r.mass_flow, r.cp, r.power
         tp.inlet_temperature, tp.outlet_temperature = r.inlet, r.outlet
         tp.beam, tp.aperture, tp.efficiency = r.beam, r.aperture, r.efficiency
-        self._pub_thermal.publish(tp)
+        self._pubs_thermal[1].publish(tp)
 
     def _publish_switches(self) -> None:
         with self._sw_lock:
