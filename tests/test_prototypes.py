@@ -102,7 +102,7 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
     # on its setpoint to the microstep between steps (a status during a 24 s move aside)
     assert np.percentile(err, 90) <= (m.step or 0.0) + 1e-6, math.degrees(np.percentile(err, 90))
     print(f'\nseed 003 day: {len(jumps)} steps, every {np.median(gaps):.0f} s; drive rate {math.degrees(rate):.2f} '
-          f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; p99 |measured - '
+          f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - '
           f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg')
 
 
