@@ -21,6 +21,7 @@ from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, TRACKER_TRAJ
 
 from .day import TOPICS, Day, read_day, reference
 from .report_energy import energy_estimate
+from .report_thermal import thermal_of
 
 MAX_GAP_S = 120.0
 #: rcl_interfaces/msg/Log levels: the timeline lists WARN and above
@@ -76,6 +77,7 @@ class DayReport:
     irradiance: dict = field(default_factory=dict)
     links: dict = field(default_factory=dict)             # axis -> dict
     energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'achieved_kwh', 'note'
+    thermal: dict = field(default_factory=dict)           # report_thermal.thermal_of (a flow meter only)
     accuracy: dict = field(default_factory=dict)          # axis -> accuracy_of() dict
     timeline: list = field(default_factory=list)          # (t, kind, text, repeats, last_t), time order
     log_counts: dict = field(default_factory=dict)        # (level name, node) -> lines
@@ -366,6 +368,7 @@ def analyse(source, config: str | None = None) -> DayReport:
             if int(lvl) >= LOG_WARN] if len(lg) else []
     rep.timeline, rep.log_counts = timeline(pt, pv, st, sv, logs)
     rep.has_rosout = day.has_rosout
+    rep.thermal = thermal_of(day, gap_limit(day.thermal.t)) if len(day.thermal) else {}
     if len(bt) > 1:
         rep.energy = energy_estimate(rep.site, bt, day.beam['g'].astype(float),
                                      {a: (s.t, s.cols) for a, s in day.axes.items() if len(s)}, config)
