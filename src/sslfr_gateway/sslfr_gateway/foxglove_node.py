@@ -4,8 +4,10 @@ Every topic with a publisher (or the ``topics`` listed) is advertised as a chann
 with the ``ros2msg`` schema rosbag2 would store (sslfr_recording.bag.schema) and
 ``cdr`` message encoding; a ROS subscription (raw: the serialized CDR bytes, never
 decoded) exists only while a Foxglove client is subscribed to that channel. The SDK
-server listens on a free loopback port behind :class:`AllowRelay`, which admits the
-``allow`` client addresses on ``bind_address:port``. Off by default in the node set.
+server listens on a free loopback port behind its relay on ``bind_address:port``
+(:class:`~.foxglove_front.FoxgloveFront`: allow-list, connection caps, message size and
+rate limits; the SDK's own log lines counted and rate-limited). Every refusal is a count
+in ``diagnostics`` (1 Hz). Off by default in the node set.
 """
 from __future__ import annotations
 
@@ -13,15 +15,18 @@ import sys
 import threading
 
 import foxglove
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, message_class, run_node
+from sslfr_common.contract import DIAGNOSTICS
+from sslfr_common.netguard import OneLineLog
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, message_class, qos, run_node
 from sslfr_recording.bag import recorder_config as rc
 from sslfr_recording.bag.schema import DefinitionCache, DefinitionNotFoundError
 
 from . import params as gp
-from .allow_relay import AllowRelay
+from .foxglove_front import FoxgloveFront
 
 
 class _Listener(foxglove.ServerListener):
@@ -50,15 +55,8 @@ class FoxgloveBridge(LeanEvents, Node):
         cfg = declare_parameters(self, gp.FOXGLOVE_PARAMS)
         self.cfg = cfg
         self.listener = _Listener()
-        self.server = foxglove.start_server(name=f'sslfr {self.get_namespace()}', host='127.0.0.1', port=0,
-                                            server_listener=self.listener)
-        self.relay = AllowRelay(cfg['bind_address'], cfg['port'], self.server.port, gp.allowed(cfg['allow']),
-                                cfg['max_connections'], log=lambda s: self.get_logger().warn(s))
-        try:
-            port = self.relay.start()
-        except OSError:
-            self.server.stop()
-            raise
+        self.front = FoxgloveFront(cfg, self.listener, OneLineLog(self._log_line), f'sslfr {self.get_namespace()}')
+        port = self.front.start()
         self.defs = DefinitionCache()
         self.channels: dict[str, tuple[foxglove.Channel, str]] = {}
         self.subs: dict[str, object] = {}
@@ -67,9 +65,24 @@ class FoxgloveBridge(LeanEvents, Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(float(cfg['discovery_period']), self._discover, clock=steady)
         self.create_timer(0.2, self._apply_subscriptions, clock=steady)
+        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
+        self.create_timer(1.0, self._diagnostics, clock=steady)
         self._discover()
         self.get_logger().info(f"Foxglove WebSocket at ws://{cfg['bind_address']}:{port} "
                                f"(clients from: {', '.join(gp.allowed(cfg['allow'])) or 'none'})")
+
+    def _log_line(self, level: str, text: str) -> None:
+        (self.get_logger().error if level == 'error' else self.get_logger().warn)(text)
+
+    def _diagnostics(self) -> None:
+        """Clients and every refusal as counts (relay, connection guard, SDK)."""
+        counts = {'channels': len(self.channels), 'forwarded': self.forwarded, **self.front.counters()}
+        st = DiagnosticStatus(name=f'{self.get_name()}: foxglove', hardware_id='foxglove_bridge',
+                              level=DiagnosticStatus.OK, message='serving')
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in counts.items()]
+        arr = DiagnosticArray(status=[st])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self._diag.publish(arr)
 
     def _topics_wanted(self, topic: str) -> bool:
         listed = [self.resolve_topic_name(t) for t in self.cfg['topics'] if t]
@@ -120,8 +133,7 @@ class FoxgloveBridge(LeanEvents, Node):
         return forward
 
     def on_exit(self) -> None:
-        self.relay.stop()
-        self.server.stop()
+        self.front.stop()
 
 
 def main(args=None) -> int:

@@ -113,6 +113,22 @@ FOXGLOVE_PARAMS = ParamTable((
               read_only=True),
     ParamSpec('discovery_period', 2.0, 'Topic discovery period [s, wall]', 's', 0.2, 60.0,
               read_only=True),
-    ParamSpec('max_connections', 16, 'Most simultaneous client connections [-]', '-', 1, 1024,
+    ParamSpec('max_connections', 16,
+              'Most simultaneous client connections; when all are taken a new client closes the '
+              'oldest one of the address holding the most [-]', '-', 1, 1024, read_only=True),
+    ParamSpec('max_connections_per_address', 4,
+              'Most simultaneous connections from one IP address (more are refused) [-]', '-', 1, 1024,
               read_only=True),
+    ParamSpec('header_timeout', 10.0,
+              'A connection whose WebSocket upgrade request is not complete this long after it '
+              'opened is closed [s, monotonic]', 's', 0.5, 300.0, read_only=True),
+    ParamSpec('max_message_bytes', 65536,
+              'Largest client message (a subscribe list); a larger one closes the connection '
+              '(WebSocket close 1009) [bytes]', 'bytes', 1024, 16777216, read_only=True),
+    ParamSpec('max_messages_per_s', 50.0,
+              'Client messages per second sustained (bursts of twice this); more close the '
+              'connection (WebSocket close 1008) [1/s]', '1/s', 1.0, 10000.0, read_only=True),
+    ParamSpec('message_backlog', 256,
+              'Messages queued per client by the server; a client that does not read loses the '
+              'oldest [-]', '-', 16, 4096, read_only=True),
 ), integers_for_floats=True)
