@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import foxglove
 
-from sslfr_common.netguard import Limits, OneLineLog
+from sslfr_common.netguard import OneLineLog, limits_from
 
 from . import params as gp
 from .allow_relay import AllowRelay
@@ -29,11 +29,8 @@ class FoxgloveFront:
         self.server = foxglove.start_server(name=self.name, host='127.0.0.1', port=0,
                                             server_listener=self.listener,
                                             message_backlog_size=int(cfg['message_backlog']))
-        limits = Limits(max_connections_per_address=int(cfg['max_connections_per_address']),
-                        max_connections=int(cfg['max_connections']),
-                        header_timeout=float(cfg['header_timeout']), idle_timeout=float(cfg['header_timeout']))
         self.relay = AllowRelay(cfg['bind_address'], cfg['port'], self.server.port, gp.allowed(cfg['allow']),
-                                limits, self.log, int(cfg['max_message_bytes']), float(cfg['max_messages_per_s']))
+                                limits_from(cfg), self.log, int(cfg['max_message_bytes']), float(cfg['max_messages_per_s']))
         try:
             return self.relay.start()
         except OSError:

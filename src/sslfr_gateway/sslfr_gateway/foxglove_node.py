@@ -59,11 +59,11 @@ class FoxgloveBridge(LeanEvents, Node):
         port = self.front.start()
         self.defs = DefinitionCache()
         self.channels: dict[str, tuple[foxglove.Channel, str]] = {}
-        self.subs: dict[str, object] = {}
+        self.subs: dict[str, tuple[object, tuple[bool, bool]]] = {}   # topic -> (subscription, its QoS)
         self.bad: set[str] = set()
         self.forwarded = 0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(float(cfg['discovery_period']), self._discover, clock=steady)
+        self.create_timer(float(cfg['discovery_period']), self._discover_and_recheck, clock=steady)
         self.create_timer(0.2, self._apply_subscriptions, clock=steady)
         self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
         self.create_timer(1.0, self._diagnostics, clock=steady)
@@ -88,6 +88,10 @@ class FoxgloveBridge(LeanEvents, Node):
         listed = [self.resolve_topic_name(t) for t in self.cfg['topics'] if t]
         return not listed or topic in listed
 
+    def _discover_and_recheck(self) -> None:
+        self._discover()
+        self._apply_subscriptions(recheck=True)
+
     def _discover(self) -> None:
         for topic, types in self.get_topic_names_and_types():
             if topic in self.channels or len(types) != 1 or types[0] in self.bad or not self._topics_wanted(topic):
@@ -104,24 +108,38 @@ class FoxgloveBridge(LeanEvents, Node):
             schema = foxglove.Schema(name=types[0], encoding='ros2msg', data=text.encode())
             self.channels[topic] = (foxglove.Channel(topic, schema=schema, message_encoding='cdr'), types[0])
 
-    def _apply_subscriptions(self) -> None:
+    def _offered(self, topic: str) -> tuple[bool, bool] | None:
+        """``(reliable, transient_local)`` that matches every publisher of ``topic`` now
+        (the recorder's rule); None while it has none."""
+        pubs = self.get_publishers_info_by_topic(topic)
+        if not pubs:
+            return None
+        return rc.subscription_qos([(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE,
+                                     p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL) for p in pubs])
+
+    def _apply_subscriptions(self, recheck: bool = False) -> None:
+        """A raw subscription per topic a client wants, made when it has a publisher and
+        made again when its publishers' QoS changes (``recheck``, every discovery: a
+        publisher restarted or joined with a weaker QoS would not match the old one)."""
         wanted = self.listener.wanted()
         for topic in list(self.subs):
             if topic not in wanted:
-                self.destroy_subscription(self.subs.pop(topic))
-        for topic in wanted - set(self.subs):
-            if topic not in self.channels:
+                self.destroy_subscription(self.subs.pop(topic)[0])
+        for topic in wanted:
+            if topic not in self.channels or (topic in self.subs and not recheck):
                 continue
+            offered = self._offered(topic)
+            if offered is None or (topic in self.subs and self.subs[topic][1] == offered):
+                continue
+            if topic in self.subs:
+                self.destroy_subscription(self.subs.pop(topic)[0])
             channel, type_name = self.channels[topic]
-            pubs = self.get_publishers_info_by_topic(topic)
-            reliable, latched = rc.subscription_qos(
-                [(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE,
-                  p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL) for p in pubs])
+            reliable, latched = offered
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-            self.subs[topic] = self.create_subscription(
-                message_class(type_name), topic, self._forwarder(channel), qos, raw=True)
+            self.subs[topic] = (self.create_subscription(
+                message_class(type_name), topic, self._forwarder(channel), qos, raw=True), offered)
 
     def _forwarder(self, channel):
         clock = self.get_clock()

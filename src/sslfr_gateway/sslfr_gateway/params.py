@@ -8,7 +8,7 @@ from __future__ import annotations
 import ipaddress
 import re
 
-from sslfr_common.netguard import ip_address_error
+from sslfr_common.netguard import Limits, ip_address_error, limit_params
 from sslfr_common.params import ParamSpec, ParamTable
 
 _NAMESPACE = re.compile(r'^(/[A-Za-z][A-Za-z0-9_]*)+$')
@@ -113,15 +113,8 @@ FOXGLOVE_PARAMS = ParamTable((
               read_only=True),
     ParamSpec('discovery_period', 2.0, 'Topic discovery period [s, wall]', 's', 0.2, 60.0,
               read_only=True),
-    ParamSpec('max_connections', 16,
-              'Most simultaneous client connections; when all are taken a new client closes the '
-              'oldest one of the address holding the most [-]', '-', 1, 1024, read_only=True),
-    ParamSpec('max_connections_per_address', 4,
-              'Most simultaneous connections from one IP address (more are refused) [-]', '-', 1, 1024,
-              read_only=True),
-    ParamSpec('header_timeout', 10.0,
-              'A connection whose WebSocket upgrade request is not complete this long after it '
-              'opened is closed [s, monotonic]', 's', 0.5, 300.0, read_only=True),
+    *limit_params(Limits(max_connections_per_address=4, max_connections=16, header_timeout=10.0,
+                         idle_timeout=10.0)),
     ParamSpec('max_message_bytes', 65536,
               'Largest client message (a subscribe list); a larger one closes the connection '
               '(WebSocket close 1009) [bytes]', 'bytes', 1024, 16777216, read_only=True),
