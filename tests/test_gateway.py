@@ -248,7 +248,12 @@ def test_foxglove_client_keeps_receiving_when_the_publisher_returns_with_another
                     body = json.loads((await asyncio.wait_for(ws.receive(), 30)).data)
                     if body.get('op') == 'advertise':
                         channel = next((c['id'] for c in body['channels'] if c['topic'] == '/probe_states'), None)
+                # the publisher leaves before the client subscribes: the bridge waits for one
+                ros.node.destroy_publisher(pub)
                 await ws.send_str(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': 7, 'channelId': channel}]}))
+                assert not ros.spin_until(lambda: ros.node.count_subscribers('probe_states') > 0, 2.0), \
+                    ros.node.get_subscriptions_info_by_topic('probe_states')
+                pub = ros.node.create_publisher(JointState, 'probe_states', QoSProfile(depth=10))
                 assert await received(ws, 'first', pub, 30), 'no message from the first publisher'
                 ros.node.destroy_publisher(pub)
                 pub = ros.node.create_publisher(
