@@ -15,13 +15,14 @@ import sys
 import threading
 
 import foxglove
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sslfr_common.contract import DIAGNOSTICS
 from sslfr_common.netguard import OneLineLog
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, message_class, qos, run_node
+from sslfr_common.node import (CONFIG_ERRORS, LeanEvents, declare_parameters, diagnostics_msg, message_class, qos,
+                               run_node)
 from sslfr_recording.bag import recorder_config as rc
 from sslfr_recording.bag.schema import DefinitionCache, DefinitionNotFoundError
 
@@ -77,12 +78,8 @@ class FoxgloveBridge(LeanEvents, Node):
     def _diagnostics(self) -> None:
         """Clients and every refusal as counts (relay, connection guard, SDK)."""
         counts = {'channels': len(self.channels), 'forwarded': self.forwarded, **self.front.counters()}
-        st = DiagnosticStatus(name=f'{self.get_name()}: foxglove', hardware_id='foxglove_bridge',
-                              level=DiagnosticStatus.OK, message='serving')
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in counts.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self._diag.publish(arr)
+        self._diag.publish(diagnostics_msg(f'{self.get_name()}: foxglove', 0, 'serving', 'foxglove_bridge',
+                                           counts, self.get_clock().now().to_msg()))
 
     def _topics_wanted(self, topic: str) -> bool:
         listed = [self.resolve_topic_name(t) for t in self.cfg['topics'] if t]
