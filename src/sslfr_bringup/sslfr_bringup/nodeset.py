@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
+from sslfr_common.files import user_path
 from sslfr_common.contract import MIRRORS
 from sslfr_common.params import flatten as flatten_params
 
@@ -194,7 +195,7 @@ def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr
             return path.is_file()
         except (OSError, ValueError):
             return False
-    p = Path(name).expanduser()
+    p = user_path(name)
     if is_file(p):
         return p.resolve()
     for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
@@ -615,7 +616,7 @@ def absolute_description(params: Mapping[str, Any], config: str | os.PathLike) -
     for key, section in params.items():
         values = section.get('ros__parameters') if isinstance(section, Mapping) else None
         name = values.get(DESCRIPTION_KEY) if isinstance(values, Mapping) else None
-        if isinstance(name, str) and name and not Path(name).expanduser().is_absolute():
+        if isinstance(name, str) and name and not user_path(name).is_absolute():
             section = {**section, 'ros__parameters': {**values, DESCRIPTION_KEY: str(
                 (Path(config).resolve().parent / name).resolve())}}
         out[key] = section

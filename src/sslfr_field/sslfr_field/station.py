@@ -25,6 +25,7 @@ import shutil
 import socket
 import sys
 from pathlib import Path
+from sslfr_common.files import user_path
 
 from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
 from sslfr_field import field as field_mod
@@ -183,7 +184,7 @@ def parser() -> argparse.ArgumentParser:
 
 def resolve_field(name: str) -> Path:
     """A field file: a path as given, else a name in sslfr_bringup's config/fields."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if p.is_file():
         return p
     from sslfr_bringup.nodeset import config_dir

@@ -46,6 +46,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from sslfr_common.files import user_path
 from typing import Any, Callable, Protocol
 
 from aiohttp import web
@@ -74,7 +75,7 @@ class SlowBody(commands.CommandError):
 def unlock_path(password_file: str | os.PathLike) -> Path:
     """The file ``./sslfr web-password --unlock`` writes: when it changes, the page
     ends every login lockout (only someone with a shell on the collector can)."""
-    p = Path(password_file).expanduser()
+    p = user_path(password_file)
     return p.with_name(p.name + '.unlock')
 
 
@@ -131,7 +132,7 @@ class OperatorApp:
         self.limiter = LoginLimiter(int(cfg['login_max_failures']), float(cfg['login_window']), clock,
                                     lockout=float(cfg['login_lockout']), lockout_max=float(cfg['login_lockout_max']),
                                     trusted=lambda a: netguard.in_networks(a, self.trusted))
-        self.audit_path = Path(cfg['audit_file']).expanduser() if cfg.get('audit_file') else None
+        self.audit_path = user_path(cfg['audit_file']) if cfg.get('audit_file') else None
         self.counters = {'commands': 0, 'commands_refused': 0, 'logins': 0, 'login_failures': 0,
                          'login_rate_limited': 0, 'events_sent': 0, 'clients': 0, 'bad_requests': 0,
                          'streams_evicted': 0, 'errors': 0, 'unlocks': 0}
@@ -502,7 +503,7 @@ class OperatorApp:
         return _json({'bag_dir': str(root), 'bags': [e.to_json() for e in entries]})
 
     def _report_dir(self, bag: Path) -> Path:
-        return Path(self.cfg['report_dir']).expanduser() / bag.name
+        return user_path(self.cfg['report_dir']) / bag.name
 
     async def report(self, request: web.Request) -> web.Response:
         refused = self._view_refused(request)
