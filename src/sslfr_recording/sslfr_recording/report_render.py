@@ -89,8 +89,11 @@ def render_text(rep: DayReport) -> str:
     if 'ideal_kwh' in en:
         def share(x):
             return f'{100.0 * x / en["ideal_kwh"]:.1f} %' if en['ideal_kwh'] > 0 else 'no ideal energy'
-        law = (f'; {en["law_kwh"]:.3f} kWh under the collector\'s law ({share(en["law_kwh"])} of ideal)'
-               if 'law_kwh' in en else '')
+        law = ''
+        if 'law_kwh' in en:
+            law = (f'; the collector\'s law gives {en["law_kwh"]:.3f} kWh ({share(en["law_kwh"])} of ideal), '
+                   'achieved ' + (f'{100.0 * en["achieved_kwh"] / en["law_kwh"]:.1f} %' if en['law_kwh'] > 0
+                                  else '-') + ' of it')
         lines.append(f'absorbed energy {en["achieved_kwh"]:.3f} kWh achieved vs {en["ideal_kwh"]:.3f} kWh with ideal '
                      f'angles ({share(en["achieved_kwh"])}){law} ({en["note"]})')
     elif en:
