@@ -24,7 +24,7 @@ from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTIC
                                    WIND, collector_id)
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
 
-from . import commands, remote
+from . import collector, commands, remote
 from .app import OperatorApp, Server
 from .live import DayBuffer, LiveState
 from .params import WEB_PARAMS
@@ -68,6 +68,7 @@ class WebNode(LeanEvents, Node):
         self._param_clients: dict = {}
         self._remote_asked: dict = {}
         self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
+        self._description = None              # the planner's collector.description loaded (or refused)
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
@@ -149,10 +150,11 @@ class WebNode(LeanEvents, Node):
 
     def _steady_tick(self) -> None:
         now = steady_now(self._steady)
+        joints = (self.state.info.get('collector') or {}).get('joints')
         for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
             client = self._param_clients.get(node)
-            if now < due:
-                continue
+            if now < due or (joints is not None and node.endswith('_driver') and node[:-7] not in joints):
+                continue                              # (a driver of a movement the collector lacks)
             if client is None:
                 self._param_clients[node] = self.create_client(GetParameters, f'{node}/get_parameters')
                 continue
@@ -182,6 +184,23 @@ class WebNode(LeanEvents, Node):
         for key, value in remote.apply(node, names, values).items():
             self.state.set_info(key, value)
         self._remote_due[node] = asked + REMOTE_REFRESH
+        if node == 'planner':
+            self._load_collector(self.state.info.get('collector_description') or '')
+
+    def _load_collector(self, name: str) -> None:
+        """The collector description the planner names, once per name: the page draws it."""
+        if name == self._description:
+            return
+        self._description = name
+        try:
+            desc = collector.load(name, sys.argv)
+        except ValueError as exc:          # DescriptionError: the planner refused it too
+            self.get_logger().warning(f'collector description {name!r}: {exc}; the page draws the '
+                                      "planner's geometry")
+            return
+        if desc is not None:
+            self.buffer.ideal = collector.ideal_drive(desc)
+            self.state.set_info('collector', collector.page_collector(desc))
 
     def _publish_diagnostics(self) -> None:
         c = self.op.counters
