@@ -134,7 +134,10 @@ def axis_moves(t: np.ndarray, setpoint: np.ndarray, measured: np.ndarray) -> lis
 
     A move starts where the setpoint changes faster than :data:`MOVE_RATE` (a jump of
     the setpoint: PRE_DAWN's slew from the sleeping position, a stow, a law's
-    repositioning; sun tracking moves the setpoints at most ~0.004 deg/s) and ends at
+    repositioning; sun tracking moves the setpoints at most ~0.004 deg/s), or at the
+    first sample when the axis is not within :data:`SETTLE` of its setpoint there (a
+    recording that starts with the axis elsewhere: a run started in daytime from the
+    sleeping position), and ends at
     the first sample, after the setpoint has stopped jumping, where the axis is within
     :data:`SETTLE` of it, or :data:`MOVE_CAP` seconds after it started (an axis that
     never arrives is then judged as tracking, so a fault is never hidden). Returns
@@ -153,6 +156,8 @@ def axis_moves(t: np.ndarray, setpoint: np.ndarray, measured: np.ndarray) -> lis
     moves = []
     k = 0
     starts = np.flatnonzero(jump) + 1    # sample i is the first at the new setpoint
+    if off[0] and (starts.size == 0 or starts[0] != 1):
+        starts = np.concatenate([[1], starts])   # the recording starts mid-move
     while k < starts.size:
         i0 = int(starts[k]) - 1
         i = i0 + 1
