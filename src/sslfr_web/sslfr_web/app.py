@@ -107,6 +107,8 @@ class Backend(Protocol):
 
     def bag_dir(self) -> str | None: ...
 
+    def site_config(self) -> str | None: ...
+
     async def call(self, cmd: commands.Command) -> dict: ...
 
     def log(self, level: str, text: str) -> None: ...
@@ -524,8 +526,11 @@ class OperatorApp:
 
     async def _make_report(self, bag: Path, out: Path) -> tuple[int, str]:
         out.mkdir(parents=True, exist_ok=True)
+        # the run's site config: the report's collector (its description) and site parameters
+        config = getattr(self.backend, 'site_config', lambda: None)()
         proc = await asyncio.create_subprocess_exec(
             sys.executable, '-m', 'sslfr_bringup.cli', 'report', str(bag), '--out', str(out),
+            *(['--config', str(config)] if config else []),
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
             env={**os.environ, 'MPLBACKEND': 'Agg'})
         try:

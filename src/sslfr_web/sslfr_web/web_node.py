@@ -44,6 +44,7 @@ class WebNode(LeanEvents, Node):
 
     def __init__(self, **kwargs):
         super().__init__('web', **kwargs)
+        self._ros_args = list(kwargs.get('cli_args') or sys.argv)     # composed: the node's own arguments
         self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
@@ -88,6 +89,13 @@ class WebNode(LeanEvents, Node):
 
     def bag_dir(self) -> str | None:
         return self.cfg['bag_dir'] or self.state.info.get('bag_dir')
+
+    def site_config(self) -> str | None:
+        """The site config this node set runs with (the first ``--params-file`` of the
+        node's arguments, as ``sslfr up`` and the launch file pass it), for the day
+        reports of the recorded days: their collector and site parameters."""
+        files = collector.description_mod.params_files(self._ros_args)
+        return files[0] if files else None
 
     def jog_limits(self) -> dict[str, commands.JogLimits]:
         info = self.state.info
@@ -193,7 +201,7 @@ class WebNode(LeanEvents, Node):
             return
         self._description = name
         try:
-            desc = collector.load(name, sys.argv)
+            desc = collector.load(name, self._ros_args)
         except ValueError as exc:          # DescriptionError: the planner refused it too
             self.get_logger().warning(f'collector description {name!r}: {exc}; the page draws the '
                                       "planner's geometry")
