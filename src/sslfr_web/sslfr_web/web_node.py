@@ -161,8 +161,12 @@ class WebNode(LeanEvents, Node):
         joints = (self.state.info.get('collector') or {}).get('joints')
         for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
             client = self._param_clients.get(node)
-            if now < due or (joints is not None and node.endswith('_driver') and node[:-7] not in joints):
-                continue                              # (a driver of a movement the collector lacks)
+            if joints is not None and node.endswith('_driver') and node[:-len('_driver')] not in joints:
+                if client is not None:                # a driver of a movement the collector lacks
+                    self._drop_param_client(node)
+                continue
+            if now < due:
+                continue
             if client is None:
                 self._param_clients[node] = self.create_client(GetParameters, f'{node}/get_parameters')
                 continue
