@@ -105,6 +105,11 @@ class NodeSet:
     #: a site config is judged against all of them, not the selection
     all_nodes: tuple[NodeSpec, ...] = ()
     path: Path | None = None
+    #: the simulated axis board of each drive kind: {kind: {package, executable, args}}
+    drive_sims: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    #: the collector description of a config that names none (relative to config_dir());
+    #: after :func:`for_config`: the description the set was narrowed to (absolute)
+    collector: str = 'collectors/almeria_three_movement.yaml'
 
     def node(self, name: str) -> NodeSpec:
         """Return the node called ``name`` (KeyError with the known names)."""
@@ -267,7 +272,15 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
     problems = check_bounds(*watchdog)
     if problems:
         raise NodeSetError('defaults.' + '; defaults.'.join(problems))
+    drive_sims = {}
+    for kind, sim in (data.get('drive_sims') or {}).items():
+        if not isinstance(sim, Mapping) or not sim.get('package') or not sim.get('executable'):
+            raise NodeSetError(f'drive_sims.{kind}: needs package, executable and args')
+        drive_sims[str(kind)] = {'package': str(sim['package']), 'executable': str(sim['executable']),
+                                 'args': _as_tuple_str(sim.get('args'), f'drive_sims.{kind}.args')}
     return NodeSet(nodes=tuple(nodes), boards=boards, config=str(d.get('config', 'almeria_sslfr.yaml')),
+                   drive_sims=drive_sims,
+                   collector=str(d.get('collector', 'collectors/almeria_three_movement.yaml')),
                    domain_id=domain_id, discovery_range=str(d.get('discovery_range', 'LOCALHOST')),
                    namespace=str(d.get('namespace') or ''), restart_backoff=backoff,
                    stable_after=float(d.get('stable_after', 60.0)),
@@ -317,6 +330,25 @@ def load(path: str | os.PathLike | None = None) -> NodeSet:
     """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
     p = Path(path) if path else config_dir() / NODESET_FILE
     return parse(_yaml_document(p, 'node set', f'node set {p}'), p)
+
+
+def for_config(ns: NodeSet, config: str | os.PathLike, namespace: str | None = None) -> NodeSet:
+    """``ns`` narrowed to the collector the site config ``config`` names (its
+    description: :mod:`sslfr_bringup.collector_set`); NodeSetError when the config is
+    unreadable or the description invalid (nothing started)."""
+    from sslfr_planner import description as desc_mod
+
+    from sslfr_bringup import collector_set
+    nsp = ns.namespace if namespace is None else namespace
+    name = node_params(for_namespace(read_params(config), nsp), 'planner', nsp).get(DESCRIPTION_KEY)
+    path = desc_mod.resolve(name, Path(config).parent) if isinstance(name, str) and name \
+        else desc_mod.resolve(ns.collector, config_dir())
+    try:
+        return collector_set.for_collector(ns, desc_mod.load(path))
+    except desc_mod.DescriptionError as exc:
+        raise NodeSetError(f'{config}: {DESCRIPTION_KEY} {str(path)!r}:\n  ' + '\n  '.join(exc.problems)) from None
+    except ValueError as exc:
+        raise NodeSetError(str(exc)) from None
 
 
 def _yaml_document(path, what: str, label: str):
@@ -467,6 +499,8 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
                 errors.append(line)
                 seen.add(err)
     errors.extend(collector_problems(doc, nsp, where))
+    from sslfr_bringup.collector_set import contradictions
+    errors.extend(contradictions(ns, lambda name: node_params(doc, name, nsp), where))
     return errors
 
 

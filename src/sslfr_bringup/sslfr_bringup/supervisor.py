@@ -665,6 +665,14 @@ class RosSide(threading.Thread):
     def note(self, name: str, event: str, detail: str, critical: bool) -> None:
         self._notes.put((name, event, detail, critical))
 
+    def trigger(self, service: str, timeout: float) -> tuple[bool, str]:
+        """Call the std_srvs/Trigger ``service`` (waiting for it within ``timeout`` [s]):
+        (success, message); (False, why) when it was not answered in time."""
+        done, answer = threading.Event(), []
+        self._jobs.put(('trigger', (service, timeout, answer, done)))
+        done.wait(timeout + 0.5)
+        return tuple(answer[0]) if answer else (False, f'{service}: no answer within {timeout:g} s')
+
     def deactivate(self, names: list[str], timeout: float) -> None:
         done = threading.Event()
         self._jobs.put(('deactivate', (names, timeout, done)))
@@ -790,6 +798,20 @@ class RosSide(threading.Thread):
                     kind, arg = self._jobs.get_nowait()
                 except queue.Empty:
                     executor.spin_once(timeout_sec=0.02)
+                    continue
+                if kind == 'trigger':
+                    from std_srvs.srv import Trigger
+                    service, timeout, answer, done = arg
+                    deadline = time.monotonic() + timeout
+                    client, future = node.create_client(Trigger, service), None
+                    while time.monotonic() < deadline and not (future and future.done()):
+                        if future is None and client.service_is_ready():
+                            future = client.call_async(Trigger.Request())
+                        executor.spin_once(timeout_sec=0.02)
+                    if future is not None and future.done() and future.result() is not None:
+                        answer.append((bool(future.result().success), str(future.result().message)))
+                    node.destroy_client(client)
+                    done.set()
                     continue
                 if kind == 'active':
                     if arg not in clients:  # kept for a quick deactivate at stop

@@ -146,8 +146,8 @@ def main(argv: list[str]) -> int:
 def _run(args, stop: StopSignals, run_dir: Path) -> int:
     try:
         ns = nodeset_mod.load(args.nodeset)
-        ns = select(ns, args.only, args.skip)
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        ns = select(nodeset_mod.for_config(ns, config, args.namespace), args.only, args.skip)
         programs, missing = build_programs(ns, config, namespace=args.namespace, run_dir=run_dir,
                                            layout=args.layout)
     except (nodeset_mod.NodeSetError, KeyError) as exc:

@@ -38,6 +38,16 @@ JOINT_RANGE: dict[str, tuple[float, float]] = {
     SECONDARY_REFLECTOR: (-math.pi / 2, math.pi / 2),
 }
 
+#: Kinematic limits of each joint [rad], whatever the collector: a mirror line turns at
+#: most half a turn either way, the structure and the reflector tilt at most to the
+#: vertical. A collector description's mechanical range lies within them; the rules on
+#: a range (a driver's soft limits, a planner pose) are judged against the collector's.
+JOINT_LIMITS: dict[str, tuple[float, float]] = {
+    MIRRORS: (-math.pi, math.pi),
+    MOBILE_STRUCTURE: (-math.pi / 2, math.pi / 2),
+    SECONDARY_REFLECTOR: (-math.pi / 2, math.pi / 2),
+}
+
 #: Stow (defocus) position per joint [rad], also where the SLEEP switch (the home
 #: reference) closes: mirrors go to the sleeping position +pi/2 (seed 000 section
 #: 3.5.2, "no dust is deposited on the mirrors"); the longitudinal axes go back to

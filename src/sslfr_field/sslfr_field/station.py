@@ -161,7 +161,8 @@ def load_checked(path: str) -> field_mod.Field:
 
     def check(cfg, nsp):
         try:
-            return nodeset.check_config(ns, nodeset.read_params(cfg), nsp, where=str(cfg))
+            return nodeset.check_config(nodeset.for_config(ns, cfg, nsp), nodeset.read_params(cfg), nsp,
+                                        where=str(cfg))
         except nodeset.NodeSetError as exc:
             return [str(exc)]
     return field_mod.load(path, check_config=check)

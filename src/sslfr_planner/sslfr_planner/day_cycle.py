@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sslfr_common.contract import JOINT_RANGE, JOINTS, Phase
+from sslfr_common.contract import JOINT_LIMITS, JOINTS, Phase
 
 from . import tracking_table, spa
 from .collector import Collector, FieldGeometry
@@ -70,8 +70,8 @@ def make_collector(cfg: dict, description=None) -> Collector:
     extra = {}
     if description is not None:
         m = description.movements[JOINTS[0]]
-        lo = max(m.range[0], JOINT_RANGE[JOINTS[0]][0])
-        hi = min(m.range[1], JOINT_RANGE[JOINTS[0]][1])
+        lo = max(m.range[0], JOINT_LIMITS[JOINTS[0]][0])
+        hi = min(m.range[1], JOINT_LIMITS[JOINTS[0]][1])
         extra = dict(description=description, mirror_min=lo, mirror_max=hi, sleeping=min(max(m.sleep, lo), hi))
     return Collector(geometry=geometry, **extra,
                      azimuth=float(cfg['collector.azimuth']),

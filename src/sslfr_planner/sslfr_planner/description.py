@@ -24,7 +24,7 @@ from typing import Any, Mapping
 
 import yaml
 
-from sslfr_common.contract import DRIVE_KINDS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
+from sslfr_common.contract import DRIVE_KINDS, JOINT_LIMITS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
 from sslfr_common.drives import LeverGeometry
 
 #: drive kinds (issue 34 item 3): (a) stepper with limit switches, optional encoder or
@@ -47,9 +47,8 @@ LAW_MOVEMENTS: dict[str, tuple[str, ...]] = {
     'seed003_linkage': (JOINTS[0],),
     **{law: LONGITUDINAL_JOINTS for law in ('continuous', 'eq16', 'optimum_fixed', 'daily')},
 }
-#: kinematic limits of each movement [deg]: a mirror line turns at most half a turn
-#: either way; the structure and reflector tilt at most to the vertical (seed 000 section 4)
-MOVEMENT_LIMITS_DEG = {JOINTS[0]: (-180.0, 180.0), **{j: (-90.0, 90.0) for j in LONGITUDINAL_JOINTS}}
+#: kinematic limits of each movement [deg] (contract JOINT_LIMITS)
+MOVEMENT_LIMITS_DEG = {j: (math.degrees(lo), math.degrees(hi)) for j, (lo, hi) in JOINT_LIMITS.items()}
 #: board kinds the node set knows (sslfr_bringup/config/nodeset.yaml ``boards``)
 BOARD_KINDS = ('axis', 'gps', 'absorber', 'irradiance')
 #: sensor kinds

@@ -110,13 +110,17 @@ class ActuatorSim(SimBoard):
         """Build from runner options: ``description`` (a collector description file;
         default the shipped seed-004 one), ``axis``, ``initial_angle_deg``,
         ``inclinometer_offset_deg`` (the true mounting offset; the board keeps the
-        description's as its calibration)."""
+        description's as its calibration), ``max_speed_m_s`` (the actuator at full
+        duty: ``./sslfr sim`` runs the board on the wall clock, so a day at --speed X
+        needs an actuator about X times faster than the description's)."""
         from sslfr_planner.description import load
         opts = dict(options)
         desc = load(opts['description']) if opts.get('description') else shipped_description()
         kw = {}
         if 'initial_angle_deg' in opts:
             kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
+        if 'max_speed_m_s' in opts:
+            kw['max_speed'] = float(opts['max_speed_m_s'])
         cfg = ActuatorConfig.from_description(desc, opts.get('axis', MIRRORS), **kw)
         if 'inclinometer_offset_deg' in opts:
             cfg.inclinometer = dataclasses.replace(cfg.inclinometer,

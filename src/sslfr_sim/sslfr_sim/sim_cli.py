@@ -50,7 +50,7 @@ from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
-from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_HOME, GPS_FIX, IRRADIANCE_BEAM, DriveKind
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float, ros_namespace
 
 
@@ -282,14 +282,30 @@ def main(argv: list[str]) -> int:
             shutil.rmtree(run, ignore_errors=True)
 
 
+def operator_references(ns, ros, say) -> None:
+    """The simulated operator references each drive without switches (seed 003) once its
+    driver is active, as the installer does on site: the simulated board starts at the
+    description's sleeping position, which is its reference angle (``home`` service:
+    "the axis is now at home_position"). RuntimeError when a driver refuses."""
+    for node in ns.nodes:
+        if node.parameters.get('drive') != DriveKind.STEPPER_NO_SWITCHES.value:
+            continue
+        axis = node.parameters['axis']
+        ok, message = ros.trigger(AXIS_HOME.of(axis).lstrip('/'), 20.0)
+        if not ok:
+            raise RuntimeError(f'the operator reference of {axis} was refused: {message}')
+        say(f'sslfr sim: simulated operator referenced {axis}: {message}')
+
+
 def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequence of a simulated day
     t_wall0 = time.monotonic()
     try:
-        ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
+        ns = nodeset_mod.load(args.nodeset)
         if args.namespace is not None:
             ns = dataclasses.replace(ns, namespace=args.namespace)
-        ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        ns = select(nodeset_mod.for_config(ns, config), args.only, args.skip)
+        ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         params = nodeset_mod.checked_params(ns, config)
         simcfg = ns.sim
         mono0 = time.monotonic()
@@ -509,6 +525,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                            ', '.join(p.name for p in lifecycle if p.lifecycle_state != 'active') or 'all',
                            ', '.join(t for t in watch if not ros.seen.get(t)) or 'all'))
             sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
+            operator_references(ns, ros, say)
         except RuntimeError as exc:
             print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
             return 1
