@@ -103,7 +103,7 @@ class Backend(Protocol):
 
     def ros_time(self) -> float | None: ...
 
-    def jog_limits(self) -> dict[str, commands.JogLimits]: ...
+    def jog_limits(self) -> dict[str, commands.JogLimits]: ...   # the collector's movements only
 
     def bag_dir(self) -> str | None: ...
 
@@ -471,7 +471,8 @@ class OperatorApp:
         origin = self.origin(request, s)
         try:
             body = await self._read_json(request)
-            cmd = commands.validate(name, body, self.backend.jog_limits())
+            limits = self.backend.jog_limits()          # one per movement of the collector
+            cmd = commands.validate(name, body, limits, axes=tuple(limits))
         except commands.CommandError as exc:
             self.counters['commands_refused'] += 1
             self.counters['bad_requests'] += 1

@@ -98,9 +98,11 @@ class WebNode(LeanEvents, Node):
         return files[0] if files else None
 
     def jog_limits(self) -> dict[str, commands.JogLimits]:
+        """The jog bounds of each movement of the collector (its description's, once
+        known; the page's commands name no other axis)."""
         info = self.state.info
         out = {}
-        for axis in JOINTS:
+        for axis in (info.get('collector') or {}).get('joints') or JOINTS:
             measured = (self.state.get('axes', axis) or {}).get('measured')
             out[axis] = commands.JogLimits(float(self.cfg['max_jog']), info.get(f'{axis}.max_jog'),
                                            info.get(f'{axis}.lower_limit'), info.get(f'{axis}.upper_limit'),

@@ -114,6 +114,9 @@ def test_commands_need_login_and_csrf_and_refusals_call_nothing(tmp_path, pwfile
             ('mode', b'[1]', 400, 'JSON object'),
             ('jog', b'{"axis": "mirrors", "delta": 0.5}', 400, 'beyond the jog limit'),
             ('jog', b'{"axis": "mirrors", "delta": 1e400}', 400, 'finite'),
+            # a movement the collector lacks (the backend's jog limits: mirrors only)
+            ('jog', b'{"axis": "mobile_structure", "delta": 0.01}', 400, "unknown axis 'mobile_structure'"),
+            ('home', b'{"axis": "secondary_reflector"}', 400, 'expected one of mirrors'),
             ('selfdestruct', b'{}', 400, 'unknown command'),
             ('mode', b'{"mode": "' + b'a' * 20000 + b'"}', 413, 'too large'),
         ]:
