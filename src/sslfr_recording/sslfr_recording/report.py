@@ -447,7 +447,10 @@ def _lines(ref, t: np.ndarray, measured: np.ndarray, commanded: np.ndarray) -> d
     if desc.longitudinal_law != 'horizontal':
         return {'note': 'the rows tilt (longitudinal movements): seed 004 eqs. 3-4 hold for horizontal rows; '
                         'the mirrors\' error is the drive\'s (vs ideal above)'}
-    table = ref(t) if len(t) else None
-    if table is None:
+    if not len(t):
         return {'note': 'no tracking samples'}
-    return line_tracking(desc, t, table.zenith, table.azimuth, measured, commanded)
+    try:
+        table = ref(t)
+        return line_tracking(desc, t, table.zenith, table.azimuth, measured, commanded)
+    except Exception as exc:  # noqa: BLE001 - an optional figure: its failure is reported, not fatal
+        return {'note': f'unavailable ({type(exc).__name__}: {exc})'}
