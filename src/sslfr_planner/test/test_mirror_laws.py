@@ -191,8 +191,23 @@ def test_planner_commands_the_seed004_table1_drive():
     assert track.sum() > 30
     assert tab.mirrors[track] == pytest.approx(0.4962 * tab.transversal[track], abs=1e-12)
     ref, _ = _table('florianopolis_lepten.yaml', None)               # without a description: theta_T / 2
-    assert ref.mirrors[track] == pytest.approx(tab.transversal[track] / 2, abs=1e-12)
+    assert ref.mirrors[track] == pytest.approx(ref.transversal[track] / 2, abs=1e-12)
     assert c.sleeping == pytest.approx(DEG(40.0)) and c.mirror_max == pytest.approx(DEG(40.0))
+    # the description's collector, whatever the parameters left out: its azimuth (the
+    # config's 0.0802851 rad is it to 7 digits), 12 m rows, no longitudinal law
+    assert c.azimuth == DEG(4.6) and c.geometry.mirror_length == 12.0 and c.law == 'horizontal'
+
+
+def test_a_description_wins_over_parameters_left_at_seed_000_defaults():
+    """A site config naming a description and no collector.* values (the planner's
+    defaults are seed 000's: 25 lines, the 'continuous' law): the planner tracks the
+    described collector, seed 003's rows flat and its 15-minute steps."""
+    from sslfr_planner.day_cycle import make_collector
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    c = make_collector(PLANNER_PARAMS.defaults(), S003)
+    assert c.law == 'horizontal' and c.geometry.n_mirrors == 10 and not c.geometry.central_mirror
+    assert c.geometry.aim_height == pytest.approx(0.75) and c.tracking_step == 900.0
+    assert make_collector(PLANNER_PARAMS.defaults()).law == 'continuous'
 
 
 def test_planner_commands_the_seed003_linkage_in_steps():
