@@ -274,3 +274,4 @@ def test_held_lines_ride_on_the_drive_at_the_laws_offsets():
 def test_positioning_budget_is_seed004_section3():
     b = np.degrees(ml.positioning_budget(np.radians([-80.0, -45.0, 0.0, 45.0, 45.01, 80.0])))
     assert b == pytest.approx([0.12, 0.085, 0.085, 0.085, 0.12, 0.12])
+    assert np.all(np.isnan(ml.positioning_budget(np.radians([-85.0, 80.01]))))    # beyond the seed's range

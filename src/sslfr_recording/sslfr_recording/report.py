@@ -232,9 +232,11 @@ def line_tracking(desc, t: np.ndarray, zenith, azimuth, measured, commanded) -> 
     drive [rad]. Each line rides on the drive at the law's offset
     (:func:`sslfr_planner.prototype.held_lines`). Returns 'lines': per line (1-based,
     east to west) 'x' [m], 'held' (:class:`ErrorStats` of held - exact), 'law_max' (the
-    law's own largest error [rad]) and 'within' (share of samples within seed 004's
-    positioning budget at that instant's theta_T, :func:`sslfr_planner.mirror_laws.positioning_budget`);
-    'budget' (the two budgets [rad]); 'samples'; 't' and 'errors' (samples x lines [rad]).
+    law's own largest error [rad]) and 'within' (share of the samples with |theta_T| <=
+    80 deg within seed 004's positioning budget at that instant's theta_T,
+    :func:`sslfr_planner.mirror_laws.positioning_budget`; NaN when none); 'budget' (the
+    two budgets [rad]); 'samples'; 'judged' (the samples with a budget); 't' and 'errors'
+    (samples x lines [rad]).
     """
     from sslfr_planner import mirror_laws, raytrace
     from sslfr_planner.prototype import line_errors, line_positions
@@ -242,13 +244,15 @@ def line_tracking(desc, t: np.ndarray, zenith, azimuth, measured, commanded) -> 
     theta_t = raytrace.transversal_angle(raytrace.sun_vector(zenith, azimuth, desc.optics.azimuth))
     held = line_errors(desc, theta_t, measured)
     law = line_errors(desc, theta_t, commanded)
-    budget = mirror_laws.positioning_budget(theta_t)[:, None]
-    within = np.mean(np.abs(held) <= budget, axis=0) if len(t) else np.full(held.shape[-1], np.nan)
+    budget = mirror_laws.positioning_budget(theta_t)
+    judged = np.isfinite(budget)                 # |theta_T| <= 80 deg: where the seed states one
+    within = (np.mean(np.abs(held[judged]) <= budget[judged][:, None], axis=0) if judged.any()
+              else np.full(held.shape[-1], np.nan))
     lines = [{'line': i + 1, 'x': float(x), 'held': ErrorStats.of(held[:, i]),
               'law_max': float(np.max(np.abs(law[:, i]))) if len(t) else float('nan'), 'within': float(within[i])}
              for i, x in enumerate(line_positions(desc))]
     return {'lines': lines, 'budget': mirror_laws.POSITIONING_BUDGET, 'samples': int(len(t)),
-            't': np.asarray(t, dtype=float), 'errors': held}
+            'judged': int(judged.sum()), 't': np.asarray(t, dtype=float), 'errors': held}
 
 
 def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfig:

@@ -125,12 +125,13 @@ def render_lines(rep: DayReport) -> list[str]:
     lo, hi = (math.degrees(b) for b in ln['budget'])
     out = ['line errors     each mirror line on the measured drive vs its exact angle (seed 004 eqs. 3-4), '
            f'while tracking ({ln["samples"]} samples); budget {lo:.3f} deg for |theta_T| <= 45 deg, '
-           f'{hi:.2f} deg beyond (seed 004 section 3)',
+           f'{hi:.2f} deg up to 80 deg (seed 004 section 3; {ln["judged"]} samples there)',
            '  line   x [m]  RMS [deg]  max [deg]  law max [deg]  within budget']
     for r in ln['lines']:
         h = r['held']
+        within = f'{100.0 * r["within"]:11.1f} %' if math.isfinite(r['within']) else f'{"-":>13}'
         out.append(f'  {r["line"]:>4} {r["x"]:7.3f} {math.degrees(h.rms):10.4f} {math.degrees(h.max):10.4f} '
-                   f'{math.degrees(r["law_max"]):14.4f} {100.0 * r["within"]:13.1f} %')
+                   f'{math.degrees(r["law_max"]):14.4f}   {within}')
     return out
 
 

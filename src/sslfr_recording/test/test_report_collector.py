@@ -77,7 +77,8 @@ def test_lepten_report_lists_its_one_movement_and_every_line():
         assert r['within'] == 1.0
     text = report_render.render_text(rep)
     assert 'mobile_structure' not in text and 'secondary_reflector' not in text
-    assert 'budget 0.085 deg for |theta_T| <= 45 deg, 0.12 deg beyond' in text
+    assert 'budget 0.085 deg for |theta_T| <= 45 deg, 0.12 deg up to 80 deg' in text
+    assert ln['judged'] == ln['samples']                              # |theta_T| < 80 deg all along
     e = rep.energy
     assert e['ideal_kwh'] > 0 and math.isfinite(e['achieved_kwh'])
     # the exact angles aim every line's centre at the receiver's axis; a 0.45 m line's beam
