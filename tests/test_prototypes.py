@@ -84,11 +84,19 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
     assert ok.sum() > 200, ok.sum()
     setpoint = np.asarray(s['setpoint'])[ok]
     t = np.asarray(s.t)[ok]
-    jumps = t[1:][np.abs(np.diff(setpoint)) > math.radians(0.5)]
+    # the steps in the planner's recorded trajectories (1 s points; a status is sampled
+    # too seldom at 600x to time them): every 15 minutes while tracking (section 2.3.1)
+    planned = {}
+    for tr in day.trajectories:
+        if 'mirrors' in tr.joints:
+            planned.update(zip(np.round(tr.times).tolist(), tr.positions[:, tr.joints.index('mirrors')].tolist()))
+    pt = np.array(sorted(planned))
+    pv = np.array([planned[k] for k in pt])
+    inside = (pt >= t[0]) & (pt <= t[-1])
+    pt, pv = pt[inside], pv[inside]
+    jumps = pt[1:][np.abs(np.diff(pv)) > math.radians(0.5)]
     gaps = np.diff(jumps)
-    sample = float(np.median(np.diff(t)))                                      # recorded status period [s sim]
-    assert len(jumps) >= 30 and abs(np.median(gaps) - 900.0) <= 10.0, gaps     # seed 003 section 2.3.1
-    assert np.all(np.abs(gaps - 900.0) <= 2 * sample + 10.0), (gaps, sample)
+    assert len(jumps) >= 30 and np.all(np.abs(gaps - 900.0) <= 2.0), gaps
     rate = abs(setpoint[-1] - setpoint[0]) / (t[-1] - t[0]) * 3600.0
     assert 6.5 <= math.degrees(rate) <= 8.5, math.degrees(rate)                # ~7.4 deg/h
     m = desc.movement('mirrors')
@@ -102,7 +110,7 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
     # on its setpoint to the microstep between steps (a status during a 24 s move aside)
     assert np.percentile(err, 90) <= (m.step or 0.0) + 1e-6, math.degrees(np.percentile(err, 90))
     print(f'\nseed 003 day: {len(jumps)} steps, every {np.median(gaps):.0f} s; drive rate {math.degrees(rate):.2f} '
-          f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; p99 |measured - '
+          f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - '
           f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg')
 
 

@@ -542,6 +542,26 @@ def collector_problems(doc: Mapping[str, Any], namespace: str, where: str) -> li
         if node_params(doc, 'safety', namespace).get('wind.enabled') is True:
             errors.append(f'{where}: safety: wind.enabled: true but the collector description {path} '
                           f'lists no anemometer (sensors: kind anemometer)')
+    return errors + thermal_problems(desc, node_params(doc, 'absorber_board', namespace), where, path)
+
+
+def thermal_problems(desc, absorber: Mapping[str, Any], where: str, path) -> list[str]:
+    """A flow meter counted (``absorber_board`` ``flow_meter_pin`` >= 0) on a collector
+    whose description lists no ``flow_meter`` sensor, and an ``aperture_area`` that is
+    not the description's lines x line_width x line_length."""
+    from sslfr_planner.analysis.ideal import aperture_area
+    errors = []
+    pin = absorber.get('flow_meter_pin', -1)
+    if isinstance(pin, int) and not isinstance(pin, bool) and pin >= 0 and \
+            not any(s.kind == 'flow_meter' for s in desc.sensors.values()):
+        errors.append(f'{where}: absorber_board: flow_meter_pin: {pin} but the collector description '
+                      f'{path} lists no flow meter (sensors: kind flow_meter)')
+    area = absorber.get('aperture_area')
+    expected = aperture_area(desc)
+    if isinstance(area, (int, float)) and not isinstance(area, bool) and area != 0 and \
+            abs(float(area) - expected) > 1e-6 * expected:
+        errors.append(f'{where}: absorber_board: aperture_area: {area!r} contradicts the collector description '
+                      f'{path}: lines x line_width x line_length = {expected!r} m^2')
     return errors
 
 

@@ -2,7 +2,8 @@
 
 Subscribes, for each collector namespace of its ``collectors`` parameter, the
 collector's ``tracker/phase`` (transient local), ``safety/state``,
-``axes/<axis>/status``, the absorber temperatures and ``irradiance/beam``, feeds
+``axes/<axis>/status``, the absorber temperatures, ``irradiance/beam`` and
+``absorber/thermal_power`` (published where a flow meter counts), feeds
 :class:`sslfr_field.live.FieldState` (arrival times on the steady clock: link health),
 and serves :class:`sslfr_field.page.FieldApp`. Commands call the collector's own
 ``<namespace>/planner/set_mode``. Diagnostics: ``field_page: field page`` on
@@ -17,11 +18,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Temperature
-from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, TrackerPhase
+from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, ThermalPower, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, IRRADIANCE_BEAM, JOINTS,
-                                   LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE,
-                                   collector_id)
+                                   LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, THERMAL_POWER, THERMOCOUPLES,
+                                   TRACKER_PHASE, collector_id)
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now
 from sslfr_web import commands
 from sslfr_web.app import Server
@@ -54,6 +55,8 @@ class FieldPageNode(LeanEvents, Node):
                 c, now(), LEVEL_NAMES.get(m.level, str(m.level)), m.reasons), qos(SAFETY_STATE))
             sub(Irradiance, f'{ns}/{IRRADIANCE_BEAM.name}', lambda m, c=cid: st.on_beam(c, now(), m.beam),
                 qos(IRRADIANCE_BEAM))
+            sub(ThermalPower, f'{ns}/{THERMAL_POWER.name}', lambda m, c=cid: st.on_thermal(
+                c, now(), m.volume_flow, m.power), qos(THERMAL_POWER))
             for which in THERMOCOUPLES:
                 sub(Temperature, f'{ns}/{ABSORBER_TEMPERATURE.of(which)}',
                     lambda m, c=cid, w=which: st.on_temperature(c, now(), w, m.temperature), qos(ABSORBER_TEMPERATURE))

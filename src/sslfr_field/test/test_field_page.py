@@ -25,6 +25,7 @@ def test_live_state_link_health_and_values():
     st.on_axis('c1', 10.6, 'not_a_joint', 'x', 0.0, 0.0)        # ignored
     st.on_temperature('c1', 10.7, 'outlet', 152.0)
     st.on_beam('c1', 10.8, float('inf'))
+    st.on_thermal('c1', 10.8, 150.0 / 3.6e6, float('nan'))         # a flow meter; power unknown
     snap = st.snapshot(12.0)
     c1, c2 = snap['collectors']
     assert c1['link'] == 'ok' and c1['last_heard_s'] == pytest.approx(1.2)
@@ -32,7 +33,9 @@ def test_live_state_link_health_and_values():
     assert c1['axes'] == {'mirrors': {'state': 'following', 'error': 0.001, 'measured': None}}
     assert c1['temperatures'] == {'outlet': 152.0} and c1['beam'] is None
     assert c1['page'] == 'http://10.0.0.21:8080/'
+    assert c1['flow'] == pytest.approx(150.0 / 3.6e6) and c1['thermal_power'] is None
     assert c2['link'] == 'never' and c2['last_heard_s'] is None
+    assert c2['flow'] is None and c2['thermal_power'] is None        # no flow meter: nothing shown
     assert st.snapshot(15.81)['collectors'][0]['link'] == 'lost'      # 5.01 s after the last message
     json.dumps(snap, allow_nan=False)                                  # strict JSON: no NaN
 

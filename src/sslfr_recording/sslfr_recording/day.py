@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import (ROSOUT, ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES,
-                                   JOINTS, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY)
+                                   JOINTS, SAFETY_STATE, THERMAL_POWER, TRACKER_PHASE, TRACKER_TRAJECTORY)
 from sslfr_common.timeconv import to_sec
 
 from .bag.metadata import BagError
@@ -32,13 +32,13 @@ TOPICS = {
     TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix',
     ABSORBER_TEMPERATURE.of('inlet'): 'inlet', ABSORBER_TEMPERATURE.of('outlet'): 'outlet',
     IRRADIANCE_BEAM.name: 'beam', TRACKER_TRAJECTORY.name: 'trajectory', JOINT_STATES.name: 'joints',
-    ROSOUT_KEY: 'logs',
+    ROSOUT_KEY: 'logs', THERMAL_POWER.name: 'thermal',
     **{AXIS_STATUS.of(a): 'axes' for a in JOINTS},
 }
 #: topic -> its columns (a key of _FIELDS); joint_states is split by joint instead
 _KIND = {TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix', IRRADIANCE_BEAM.name: 'beam',
          ABSORBER_TEMPERATURE.of('inlet'): 'temperature', ABSORBER_TEMPERATURE.of('outlet'): 'temperature',
-         TRACKER_TRAJECTORY.name: 'trajectory', ROSOUT_KEY: 'log', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
+         TRACKER_TRAJECTORY.name: 'trajectory', ROSOUT_KEY: 'log', THERMAL_POWER.name: 'thermal', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
 
 
 @dataclass
@@ -86,7 +86,9 @@ class Day:
     it was sent, ``trajectories`` the same messages as :class:`Trajectory`; ``logs``:
     the nodes' log lines (``/rosout``: level, name, msg) at their log time; ``topics``:
     message count per topic; ``diagnostics`` (decoded on first use): name, level,
-    message, values.
+    message, values; ``thermal``: ``absorber/thermal_power`` (volume_flow [m^3/s],
+    mass_flow [kg/s], power [W], beam [W/m^2], aperture [m^2], efficiency [-]; empty
+    for a collector without a flow meter).
     """
 
     bag: str
@@ -105,6 +107,7 @@ class Day:
     topics: dict[str, int]
     logs: Series = field(default_factory=Series)     # /rosout: level, name (node), msg at log time
     has_rosout: bool = False
+    thermal: Series = field(default_factory=Series)  # absorber/thermal_power (a flow meter only)
     _reader: BagReader | None = field(default=None, repr=False)
     _diagnostics: Series | None = field(default=None, repr=False)
 
@@ -187,6 +190,9 @@ _FIELDS = {
     'fix': {'status': lambda m: int(m.status.status), 'latitude': lambda m: float(m.latitude),
             'longitude': lambda m: float(m.longitude), 'altitude': lambda m: float(m.altitude)},
     'trajectory': {'points': lambda m: len(m.points)},
+    'thermal': {'volume_flow': lambda m: float(m.volume_flow), 'mass_flow': lambda m: float(m.mass_flow),
+                'power': lambda m: float(m.power), 'beam': lambda m: float(m.beam),
+                'aperture': lambda m: float(m.aperture), 'efficiency': lambda m: float(m.efficiency)},
     'log': {'level': lambda m: int(m.level), 'name': lambda m: str(m.name), 'msg': lambda m: str(m.msg)},
 }
 
@@ -276,7 +282,7 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
         inlet=series[ABSORBER_TEMPERATURE.of('inlet')], outlet=series[ABSORBER_TEMPERATURE.of('outlet')],
         beam=series[IRRADIANCE_BEAM.name], fix=series[GPS_FIX.name], trajectory=series[TRACKER_TRAJECTORY.name],
         trajectories=trajectories, topics=counts, logs=series[ROSOUT_KEY],
-        has_rosout=names[ROSOUT_KEY] is not None, _reader=reader)
+        has_rosout=names[ROSOUT_KEY] is not None, thermal=series[THERMAL_POWER.name], _reader=reader)
 
 
 def _read_diagnostics(reader: BagReader) -> Series:

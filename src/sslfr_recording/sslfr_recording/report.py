@@ -24,6 +24,7 @@ from sslfr_common.contract import JOINTS, LEVEL_NAMES, MIRRORS, PHASE_NAMES, TRA
 
 from .day import TOPICS, Day, read_day, reference, run_description
 from .report_energy import energy_estimate
+from .report_thermal import thermal_of
 
 MAX_GAP_S = 120.0
 #: rcl_interfaces/msg/Log levels: the timeline lists WARN and above
@@ -82,6 +83,7 @@ class DayReport:
     collector: str = ''                                   # the collector description's name ('' without one)
     joints: tuple = ()                                    # the movements reported
     lines: dict = field(default_factory=dict)             # line_tracking() or {'note': why not}
+    thermal: dict = field(default_factory=dict)           # report_thermal.thermal_of (a flow meter only)
     accuracy: dict = field(default_factory=dict)          # axis -> accuracy_of() dict
     timeline: list = field(default_factory=list)          # (t, kind, text, repeats, last_t), time order
     log_counts: dict = field(default_factory=dict)        # (level name, node) -> lines
@@ -433,6 +435,7 @@ def analyse(source, config: str | None = None) -> DayReport:
             if int(lvl) >= LOG_WARN] if len(lg) else []
     rep.timeline, rep.log_counts = timeline(pt, pv, st, sv, logs)
     rep.has_rosout = day.has_rosout
+    rep.thermal = thermal_of(day, gap_limit(day.thermal.t)) if len(day.thermal) else {}
     if len(bt) > 1:
         try:
             rep.energy = energy_estimate(rep.site, bt, day.beam['g'].astype(float),

@@ -10,6 +10,7 @@ import numpy as np
 from sslfr_common.contract import JOINT_STATES, JOINTS
 from sslfr_common.tracking_loss import loss_text
 
+from . import report_thermal
 from .report import MOVE_CAP, DayReport
 
 #: the timeline's longest listing in the text (the counts cover the rest)
@@ -98,6 +99,7 @@ def render_text(rep: DayReport) -> str:
                      f'angles ({share(en["achieved_kwh"])}){law} ({en["note"]})')
     elif en:
         lines.append(f'absorbed energy {en["note"]}')
+    lines += report_thermal.render(rep.thermal, utc)
     for axis, lk in rep.links.items():
         lines.append(f'link            {axis}: {lk["drops"]} drop(s), not up {lk["time_not_up"]:.0f} s, '
                      f'{lk["frames_lost"]} frames lost, {lk["frames_bad"]} bad, '

@@ -139,6 +139,9 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
 #: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
 #: absorber). Override with nodeset.yaml sim.anchor_margin.
 ANCHOR_MARGIN = 10.0
+#: [L/h] the flow through a simulated absorber with a flow meter (seed 003 section 3.2:
+#: the hydro-dynamic tests pump the water at a constant 150 L/h)
+FLOW_LPH = 150.0
 #: [s] the same with --boards firmware: the firmware boards start in 15-30 s on a loaded
 #: 2-core machine (each sensor world tabulates the sun, then its harness starts)
 FIRMWARE_ANCHOR_MARGIN = 25.0
@@ -225,6 +228,9 @@ def parser() -> argparse.ArgumentParser:
                    help=f'wall seconds the sensor simulators get to start before the simulated clock '
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
                         f'ahead of /clock, see sim.json sensor_lead_s)')
+    p.add_argument('--flow', type=ranged_float(0.0, 1.0e5, unit='L/h'), default=FLOW_LPH, metavar='LPH',
+                   help=f'water pumped through the absorber [L/h] when the site config counts a flow meter '
+                        f'(absorber_board flow_meter_pin; default {FLOW_LPH:g}: seed 003 section 3.2; 0: pump stopped)')
     p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
     p.add_argument('--wall-clock', action='store_true',
                    help='run on the system clock as on the Pi: from now (UTC) to --end (default: 10 min '
@@ -422,7 +428,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                   'speed': f'{speed:g}', 'anchor': '{anchor}', 'axis': bname, 'config': str(config),
                   'seed': args.seed + len(board_progs), 'world': run / 'world.json', 'key_file': key_file,
                   **site}
-        board_progs[bname] = Program(name=f'sim_{bname}', argv=nodeset_mod.sim_board_argv(board, exe, values),
+        argv = nodeset_mod.sim_board_argv(board, exe, values) + _flow_options(bname, params, ns.namespace, args.flow)
+        board_progs[bname] = Program(name=f'sim_{bname}', argv=argv,
                                      start=-1, stop=3, restart=False, kind='board')
     # ---- nodes (ports = the simulators' pty links)
     extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
@@ -657,6 +664,24 @@ class MemoryCensus(threading.Thread):
                 'peak_rss_sim_boards_mb': round(self.peak_boards / mb, 1),
                 'rss_pss_at_peak_mb': {k: [round(v[0] / mb, 1), round(v[1] / mb, 1)]
                                        for k, v in self.peak_detail.items()}}
+
+
+def _flow_options(board: str, params, namespace: str, lph: float) -> list[str]:
+    """The absorber simulator's flow meter options when the site config counts one
+    (``absorber_board`` ``flow_meter_pin`` >= 0): ``lph`` [L/h] at the config's K-factor,
+    and the collector description (its optics focus the sun: the thermal output is
+    measured against its aperture)."""
+    from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
+    namespace = namespace or ''
+    if namespace.strip('/'):             # the config as its nodes get it (sslfr_bringup.nodeset.site_config)
+        params = nodeset_mod.for_namespace(params, namespace)
+    node = nodeset_mod.node_params(params, 'absorber_board', namespace)
+    if board != 'absorber' or node.get('flow_meter_pin', -1) < 0:
+        return []
+    k = node.get('flow_meter_k_factor', ABSORBER_BOARD.defaults()['flow_meter_k_factor'])
+    out = ['--opt', f'flow_lph={lph:g}', '--opt', f'flow_k_factor={float(k):g}']
+    desc = nodeset_mod.node_params(params, 'planner', namespace).get(nodeset_mod.DESCRIPTION_KEY)
+    return out + (['--opt', f'description={desc}'] if desc else [])
 
 
 def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None, use_sim_time=True):

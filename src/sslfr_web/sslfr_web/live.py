@@ -100,6 +100,14 @@ def wind_dict(m) -> dict:
             'stamp': seconds_or_none(m.header.stamp)}
 
 
+def thermal_dict(m) -> dict:
+    """``absorber/thermal_power``: flow [m^3/s] and [L/h] (for people), power [W],
+    efficiency [-] (None: not computed)."""
+    return {'volume_flow': num(m.volume_flow, 9), 'lph': num(m.volume_flow * 3.6e6, 1), 'power': num(m.power, 1),
+            'efficiency': num(m.efficiency, 4), 'beam': num(m.beam, 0), 'aperture': num(m.aperture, 3),
+            'stamp': seconds_or_none(m.header.stamp)}
+
+
 def axis_dict(m) -> dict:
     link = int(m.link_state)
     return {'axis': m.axis, 'state': m.state, 'commanded': num(m.commanded), 'setpoint': num(m.setpoint),
@@ -149,7 +157,7 @@ class LiveState:
     #: key -> converter of its messages
     CONVERT: dict[str, Callable] = {'phase': phase_dict, 'safety': safety_dict, 'sun': sun_dict,
                                     'beam': beam_dict, 'gps': fix_dict, 'axes': axis_dict,
-                                    'temperatures': temperature_dict, WIND.name: wind_dict}
+                                    'temperatures': temperature_dict, WIND.name: wind_dict, 'thermal': thermal_dict}
     NESTED = ('axes', 'temperatures')
 
     def __init__(self, axes: tuple[str, ...] = JOINTS, wall: Callable[[], float] = time.time):
@@ -197,6 +205,9 @@ class LiveState:
 
     def on_wind(self, m) -> None:
         self._set(WIND.name, m)
+
+    def on_thermal(self, m) -> None:
+        self._set('thermal', m)
 
     def set_info(self, key: str, value: Any) -> None:
         with self._lock:

@@ -18,10 +18,10 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix, Temperature
-from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, TrackerPhase, Wind
+from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, ThermalPower, TrackerPhase, Wind
 from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
-                                   SAFETY_ESTOP, SAFETY_STATE, THERMOCOUPLES, TRACKER_PHASE, TRACKER_SUN,
-                                   WIND, collector_id)
+                                   SAFETY_ESTOP, SAFETY_STATE, THERMAL_POWER, THERMOCOUPLES, TRACKER_PHASE,
+                                   TRACKER_SUN, WIND, collector_id)
 from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
 
 from . import collector, commands, remote
@@ -56,6 +56,7 @@ class WebNode(LeanEvents, Node):
         sub(Irradiance, IRRADIANCE_BEAM.name, st.on_beam, qos(IRRADIANCE_BEAM))
         sub(NavSatFix, GPS_FIX.name, st.on_fix, qos(GPS_FIX))
         sub(Wind, WIND.name, st.on_wind, qos(WIND))
+        sub(ThermalPower, THERMAL_POWER.name, st.on_thermal, qos(THERMAL_POWER))   # a flow meter only
         for name in THERMOCOUPLES:
             sub(Temperature, ABSORBER_TEMPERATURE.of(name), lambda m, n=name: st.on_temperature(n, m),
                 qos(ABSORBER_TEMPERATURE))

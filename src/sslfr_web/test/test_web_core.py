@@ -557,3 +557,20 @@ def test_page_draws_the_described_collector_lines_and_movements():
     assert buf.maybe_sample(1782000000.0, s)
     assert buf.to_json()['columns']['mirrors_ideal'] == [pytest.approx(0.4962 * 0.4, abs=1e-6)]
     assert remote.REMOTE_PARAMS['planner']['collector.description'] == 'collector_description'
+
+
+def test_thermal_output_shown_on_the_page():
+    """Issue 34: a collector with a flow meter: flow [L/h], thermal power [W] and the
+    efficiency on the page (None when not computed: JSON has no NaN); none otherwise."""
+    from sslfr_interfaces.msg import ThermalPower
+    st = live.LiveState(wall=lambda: 100.0)
+    assert 'thermal' not in json.loads(json.dumps(st.snapshot()))
+    st.on_thermal(ThermalPower(volume_flow=150.0 / 3.6e6, power=523.4, beam=801.0, aperture=1.0,
+                               efficiency=0.6534))
+    snap = json.loads(json.dumps(st.snapshot()))
+    assert snap['thermal'] == {'volume_flow': 4.1667e-05, 'lph': 150.0, 'power': 523.4, 'efficiency': 0.6534,
+                               'beam': 801.0, 'aperture': 1.0, 'stamp': None}
+    st.on_thermal(ThermalPower(volume_flow=150.0 / 3.6e6, power=12.0, beam=math.nan, aperture=1.0,
+                               efficiency=math.nan))
+    snap = json.loads(json.dumps(st.snapshot()))
+    assert snap['thermal']['efficiency'] is None and snap['thermal']['beam'] is None

@@ -86,6 +86,10 @@ function render(s) {
   const w = s.wind;
   if (w) setText('wind', `${fix(w.speed, 1, ' m/s')} (gust ${fix(w.gust, 1, ' m/s')}, mean ` +
     `${fix(w.mean, 1, ' m/s')} over ${fix(w.window / 60, 1, ' min')})`, age('wind') > STALE_S);
+  const th = s.thermal;          // a collector with a flow meter only
+  $('thermal-row').hidden = !th;
+  if (th) setText('thermal', `${fix(th.power, 0, ' W')} at ${fix(th.lph, 1, ' L/h')}, efficiency ` +
+    (th.efficiency === null ? '– (no beam)' : fix(100 * th.efficiency, 1, ' %')), age('thermal') > STALE_S);
   drawSouth(s); drawSide(s);
 }
 
