@@ -23,7 +23,7 @@ import numpy as np
 from . import lepten
 
 #: seed 004 section 3 (eq. 10): the largest mirror positioning error of the LEPTEN tracker,
-#: 0.085 deg while |theta_T| <= 45 deg (its main operating period) and 0.12 deg beyond [rad]
+#: 0.085 deg while |theta_T| <= 45 deg (its main operating period) and 0.12 deg up to 80 deg [rad]
 POSITIONING_BUDGET = (math.radians(0.085), math.radians(0.12))
 #: |theta_T| up to which the smaller budget applies [rad]
 POSITIONING_BUDGET_SPLIT = math.radians(45.0)
