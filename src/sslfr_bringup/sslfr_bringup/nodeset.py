@@ -28,6 +28,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 from sslfr_common.contract import MIRRORS
+from sslfr_common.params import flatten as flatten_params
 
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
@@ -409,7 +410,7 @@ def node_params(params: Mapping[str, Any], node: str, namespace: str = '') -> di
     fqn = f'/{namespace.strip("/")}/{node}' if namespace.strip('/') else f'/{node}'
     for key, section in params.items():
         if isinstance(section, Mapping) and section_matches(str(key), fqn):
-            out.update(_flatten(section.get('ros__parameters') or {}))
+            out.update(flatten_params(section.get('ros__parameters') or {}))
     return out
 
 
@@ -479,7 +480,7 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
         known = [tables[n.name] for n in matched]
         if any(t is None for t in known):
             continue                  # a node without a table: cannot judge its keys
-        for name in _flatten(section.get('ros__parameters') or {}):
+        for name in flatten_params(section.get('ros__parameters') or {}):
             if name in ROS_PARAMETERS or name.startswith(ROS_PARAMETER_PREFIXES) or any(name in t for t in known):
                 continue
             names = sorted({k for t in known for k in t.names})
@@ -580,17 +581,6 @@ def description_value(desc, key: str):
         values['collector.tracking_step'] = m.law_params['step_s']
     v = values.get(key)
     return float(v) if isinstance(v, float) and math.isfinite(v) else v
-
-
-def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
-    out = {}
-    for k, v in d.items():
-        key = f'{prefix}{k}'
-        if isinstance(v, Mapping):
-            out.update(_flatten(v, key + '.'))
-        else:
-            out[key] = v
-    return out
 
 
 # ---------------------------------------------------------------------------------

@@ -138,9 +138,7 @@ class OperatorApp:
                          'login_rate_limited': 0, 'events_sent': 0, 'clients': 0, 'bad_requests': 0,
                          'streams_evicted': 0, 'errors': 0, 'unlocks': 0}
         self.oneline = netguard.OneLineLog(lambda level, text: self.backend.log(level, text), LOG_INTERVAL, clock)
-        self.guard = netguard.ConnectionGuard(netguard.Limits(
-            int(cfg['max_connections_per_address']), int(cfg['max_connections']),
-            float(cfg['header_timeout']), float(cfg['idle_timeout'])), self.oneline)
+        self.guard = netguard.ConnectionGuard(netguard.limits_from(cfg), self.oneline)
         self.streams = netguard.StreamSlots(int(cfg['max_streams_per_address']), int(cfg['max_streams']))
         self._clients: set[asyncio.Queue] = set()
         self._report_lock = asyncio.Lock()

@@ -25,6 +25,7 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
+from sslfr_common.params import flatten as flatten_params
 
 from ..cli_input import (CliError, OneLineParser, ranged_float, bounded_int, load_yaml_file, output_file, run,
                          time_step, write_atomically)
@@ -48,17 +49,6 @@ MAX_YEAR_SAMPLES = 527_040
 MAX_TILT_SAMPLES = 105_408
 
 _YEAR_SPAN = 366 * 86400.0
-
-
-def _flatten(d: dict, prefix: str = '') -> dict:
-    out = {}
-    for key, value in d.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + '.'))
-        else:
-            out[name] = value
-    return out
 
 
 def default_config() -> Path | None:
@@ -95,7 +85,7 @@ def load_config(path: str | None) -> tuple[AnalysisSite, OpticalParameters, dict
     for node, section in raw.items():
         if not isinstance(section, dict) or not isinstance(section.get('ros__parameters', {}), dict):
             raise CliError(f'config {where}: section {node!r} must be a mapping with a ros__parameters mapping')
-        flat = _flatten(section.get('ros__parameters') or {})
+        flat = flatten_params(section.get('ros__parameters') or {})
         if node in ('/**', 'planner'):
             params.update({k: v for k, v in flat.items() if k.startswith(('site.', 'collector.'))})
         if node == 'analysis':
