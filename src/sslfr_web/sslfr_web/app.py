@@ -104,9 +104,11 @@ class Backend(Protocol):
 
     def ros_time(self) -> float | None: ...
 
-    def jog_limits(self) -> dict[str, commands.JogLimits]: ...
+    def jog_limits(self) -> dict[str, commands.JogLimits]: ...   # the collector's movements only
 
     def bag_dir(self) -> str | None: ...
+
+    def site_config(self) -> str | None: ...
 
     async def call(self, cmd: commands.Command) -> dict: ...
 
@@ -468,7 +470,8 @@ class OperatorApp:
         origin = self.origin(request, s)
         try:
             body = await self._read_json(request)
-            cmd = commands.validate(name, body, self.backend.jog_limits())
+            limits = self.backend.jog_limits()          # one per movement of the collector
+            cmd = commands.validate(name, body, limits, axes=tuple(limits))
         except commands.CommandError as exc:
             self.counters['commands_refused'] += 1
             self.counters['bad_requests'] += 1
@@ -523,8 +526,11 @@ class OperatorApp:
 
     async def _make_report(self, bag: Path, out: Path) -> tuple[int, str]:
         out.mkdir(parents=True, exist_ok=True)
+        # the run's site config: the report's collector (its description) and site parameters
+        config = getattr(self.backend, 'site_config', lambda: None)()
         proc = await asyncio.create_subprocess_exec(
             sys.executable, '-m', 'sslfr_bringup.cli', 'report', str(bag), '--out', str(out),
+            *(['--config', str(config)] if config else []),
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
             env={**os.environ, 'MPLBACKEND': 'Agg'})
         try:

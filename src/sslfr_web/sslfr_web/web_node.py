@@ -21,7 +21,7 @@ from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, I
                                    TRACKER_SUN, WIND)
 from sslfr_common.node import CONFIG_ERRORS, declare_parameters, qos, run_node, steady_now
 
-from . import commands, remote
+from . import collector, commands, remote
 from .app import OperatorApp
 from .live import DayBuffer, LiveState
 from .page_host import PageHost
@@ -42,6 +42,7 @@ class WebNode(PageHost):
 
     def __init__(self, **kwargs):
         super().__init__('web', **kwargs)
+        self._ros_args = list(kwargs.get('cli_args') or sys.argv)     # composed: the node's own arguments
         self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
@@ -67,6 +68,7 @@ class WebNode(PageHost):
         self._param_clients: dict = {}
         self._remote_asked: dict = {}
         self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
+        self._description = None              # the planner's collector.description loaded (or refused)
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
@@ -80,10 +82,19 @@ class WebNode(PageHost):
     def bag_dir(self) -> str | None:
         return self.cfg['bag_dir'] or self.state.info.get('bag_dir')
 
+    def site_config(self) -> str | None:
+        """The site config this node set runs with (the first ``--params-file`` of the
+        node's arguments, as ``sslfr up`` and the launch file pass it), for the day
+        reports of the recorded days: their collector and site parameters."""
+        files = collector.description_mod.params_files(self._ros_args)
+        return files[0] if files else None
+
     def jog_limits(self) -> dict[str, commands.JogLimits]:
+        """The jog bounds of each movement of the collector (its description's, once
+        known; the page's commands name no other axis)."""
         info = self.state.info
         out = {}
-        for axis in JOINTS:
+        for axis in (info.get('collector') or {}).get('joints') or JOINTS:
             measured = (self.state.get('axes', axis) or {}).get('measured')
             out[axis] = commands.JogLimits(float(self.cfg['max_jog']), info.get(f'{axis}.max_jog'),
                                            info.get(f'{axis}.lower_limit'), info.get(f'{axis}.upper_limit'),
@@ -108,8 +119,13 @@ class WebNode(PageHost):
 
     def _steady_tick(self) -> None:
         now = steady_now(self._steady)
+        joints = (self.state.info.get('collector') or {}).get('joints')
         for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
             client = self._param_clients.get(node)
+            if joints is not None and node.endswith('_driver') and node[:-len('_driver')] not in joints:
+                if client is not None:                # a driver of a movement the collector lacks
+                    self._drop_param_client(node)
+                continue
             if now < due:
                 continue
             if client is None:
@@ -141,6 +157,23 @@ class WebNode(PageHost):
         for key, value in remote.apply(node, names, values).items():
             self.state.set_info(key, value)
         self._remote_due[node] = asked + REMOTE_REFRESH
+        if node == 'planner':
+            self._load_collector(self.state.info.get('collector_description') or '')
+
+    def _load_collector(self, name: str) -> None:
+        """The collector description the planner names, once per name: the page draws it."""
+        if name == self._description:
+            return
+        self._description = name
+        try:
+            desc = collector.load(name, self._ros_args)
+        except ValueError as exc:          # DescriptionError: the planner refused it too
+            self.get_logger().warning(f'collector description {name!r}: {exc}; the page draws the '
+                                      "planner's geometry")
+            return
+        if desc is not None:
+            self.buffer.ideal = collector.ideal_drive(desc)
+            self.state.set_info('collector', collector.page_collector(desc))
 
     def _publish_diagnostics(self) -> None:
         password = self.op.passwords.line() is not None
