@@ -14,6 +14,7 @@ parameters with the seed 000 model (:func:`sslfr_planner.analysis.performance.da
 from __future__ import annotations
 
 import numpy as np
+from sslfr_common.contract import MIRRORS, MOBILE_STRUCTURE, SECONDARY_REFLECTOR
 
 from .day import Reference, reference
 
@@ -82,15 +83,15 @@ def energy_estimate(site: dict, t: np.ndarray, beam: np.ndarray, measured: dict,
         return {'ideal_kwh': e_ideal, 'achieved_kwh': e_held, 'note': note}
     dni = np.where(zen < np.pi / 2, beam, 0.0)
     zeros = np.zeros(t.size)
-    bm_law, ba_law = law.get('mobile_structure', zeros), law.get('secondary_reflector', zeros)
-    bm, ba = held.get('mobile_structure', zeros), held.get('secondary_reflector', zeros)
+    bm_law, ba_law = law.get(MOBILE_STRUCTURE, zeros), law.get(SECONDARY_REFLECTOR, zeros)
+    bm, ba = held.get(MOBILE_STRUCTURE, zeros), held.get(SECONDARY_REFLECTOR, zeros)
     n = t.size
     q_ideal = _chunked(lambda z, a, g, m, r: ideal.ideal_absorbed_power(desc, z, a, g, m, r),
                        n, zen, azi, dni, bm_law, ba_law)
     q_law = _chunked(lambda z, a, g, d, m, r: ideal.held_absorbed_power(desc, z, a, g, d, m, r),
-                     n, zen, azi, dni, law['mirrors'], bm_law, ba_law)
+                     n, zen, azi, dni, law[MIRRORS], bm_law, ba_law)
     q_held = _chunked(lambda z, a, g, d, m, r: ideal.held_absorbed_power(desc, z, a, g, d, m, r),
-                      n, zen, azi, dni, held['mirrors'], bm, ba)
+                      n, zen, azi, dni, held[MIRRORS], bm, ba)
     note = (f'seed 000 optical model on the 3-D ray trace (docs/optics.md) on the collector {desc.name} '
             f'({desc.optics.lines} lines, {ideal.aperture_area(desc):g} m2 of mirrors), recorded beam irradiance')
     if missing:

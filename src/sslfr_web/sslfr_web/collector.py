@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+from sslfr_common.contract import MIRRORS
 from sslfr_planner import description as description_mod
 from sslfr_planner.prototype import commanded_lines, law_offsets, line_positions
 
@@ -32,7 +33,7 @@ def page_collector(desc: description_mod.Description) -> dict:
     [m], central_line, tilting (the collector has longitudinal movements)."""
     o = desc.optics
     offsets = law_offsets(desc, np.zeros(1))[0]
-    return {'name': desc.name, 'joints': list(desc.joints), 'law': desc.movements['mirrors'].law,
+    return {'name': desc.name, 'joints': list(desc.joints), 'law': desc.movements[MIRRORS].law,
             'lines': [{'x': round(float(x), 6), 'offset': round(float(b), 9)}
                       for x, b in zip(line_positions(desc), offsets)],
             'line_width': o.line_width, 'aim_height': o.receiver_height, 'receiver_width': o.receiver_width,
