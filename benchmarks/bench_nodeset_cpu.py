@@ -36,6 +36,9 @@ from the start of the run.
 ``--executor rclpy`` runs the nodes with rclpy's SingleThreadedExecutor instead of
 sslfr_common's LeanExecutor; ``--peer`` runs both at once (two node sets, own domains,
 same window) and prints the ratio, so that a loaded or throttled machine affects both.
+``--peer-root DIR`` runs the same benchmark of another checkout (the previous code: a
+``git worktree`` of the last release, set up with its own ``make setup``) at the same
+time instead, and prints this code's total over that one's.
 
     python benchmarks/bench_nodeset_cpu.py [--window 140] [--confine 0.4] [--layout NAME] [--peer]
 """
@@ -253,13 +256,25 @@ def main(argv=None) -> int:
     ap.add_argument('--peer', action='store_true',
                     help="also run, at the same time and in its own domain, the same node set with rclpy's "
                          "SingleThreadedExecutor (the peer), and print the ratio of the two totals")
+    ap.add_argument('--peer-root', default=None,
+                    help='run the same benchmark of the checkout DIR (the previous code) at the same time, '
+                         'in its own domain, and print the ratio of the two totals')
     args = ap.parse_args(argv)
     peer = None
-    if args.peer:
-        rest = [a for a in (sys.argv[1:] if argv is None else argv) if a != '--peer']
+    if args.peer or args.peer_root:
+        given = list(sys.argv[1:] if argv is None else argv)
+        rest = [a for i, a in enumerate(given) if a not in ('--peer', '--peer-root')
+                and not (i and given[i - 1] == '--peer-root') and not a.startswith('--peer-root=')]
         peer_json = Path(tempfile.mkdtemp(prefix='bench-cpu-peer-')) / 'peer.json'
-        peer = subprocess.Popen([sys.executable, __file__, *rest, '--executor', 'rclpy', '--json', str(peer_json)],
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if args.peer_root:
+            root = Path(args.peer_root).resolve()
+            cmd = ['bash', '-c', '. scripts/env.sh && exec python benchmarks/bench_nodeset_cpu.py "$@"', 'bench',
+                   *rest, '--json', str(peer_json)]
+            env = {k: v for k, v in os.environ.items() if k not in ('PYTHONPATH', 'AMENT_PREFIX_PATH', 'VIRTUAL_ENV')}
+            peer = subprocess.Popen(cmd, cwd=root, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        else:
+            peer = subprocess.Popen([sys.executable, __file__, *rest, '--executor', 'rclpy', '--json', str(peer_json)],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     minutes = int(args.window // 60) + 3
     out = Path(tempfile.mkdtemp(prefix='bench-cpu-'))
     if args.wall_clock:
@@ -370,9 +385,15 @@ def main(argv=None) -> int:
             print('peer run failed:\n' + text[-3000:])
             return 1
         po = other['total_cpu_percent']
-        print(f"peer in the same window (rclpy's SingleThreadedExecutor, own domain): total CPU {po:.1f} % "
+        who = (f'the code of {args.peer_root}' if args.peer_root else "rclpy's SingleThreadedExecutor")
+        ratio = 'this code / that code' if args.peer_root else 'LeanExecutor / rclpy'
+        print(f"peer in the same window ({who}, own domain): total CPU {po:.1f} % "
               f'({", ".join(f"{k} {v:.2f}" for k, v in sorted(other["cpu_percent"].items(), key=lambda kv: -kv[1]))}); '
-              f'LeanExecutor / rclpy = {total / po:.2f}' if po else 'peer: no CPU measured')
+              f'{ratio} = {total / po:.2f}' if po else 'peer: no CPU measured')
+        for n in sorted(cpu):
+            if n in other['cpu_percent'] and other['cpu_percent'][n]:
+                print(f'  {n:<44} {cpu[n]:6.2f} % vs {other["cpu_percent"][n]:6.2f} %  '
+                      f'({cpu[n] / other["cpu_percent"][n]:.2f})')
     print(f'status heartbeat, largest gap [s]: {deadlines["status_gap_max_s"]}')
     print(f'tracking error while following [motor steps] (bound: 1 step + sensor noise): '
           f'{deadlines["tracking_error_steps"]}')

@@ -47,9 +47,11 @@ def test_default_node_set_is_the_tracker():
     assert order[0] == 'recorder' and order.index('safety') < order.index('mirrors_driver')
     assert ns.node('safety').critical
     assert 0 < ns.domain_id and ns.discovery_range == 'LOCALHOST'
-    for node in ns.nodes:
+    full = nodeset.for_config(ns, nodeset.resolve_config(ns.config))    # seed 000's collector: every node
+    assert [n.name for n in full.nodes] == [n.name for n in ns.nodes]
+    for node in full.nodes:
         if node.board:
-            board = ns.boards[node.board]
+            board = full.boards[node.board]
             assert board.device.startswith('/dev/sslfr/') and board.sim_executable
 
 
@@ -144,7 +146,10 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     by = {e['name']: e for e in entries}
     moved = str(tmp_path / 'site.params.yaml')      # the site config, moved under /sslfr1
     assert by['mirrors_driver']['lifecycle'] and not by['planner']['lifecycle']
-    assert by['mirrors_driver']['parameters'] == [moved, {'axis': 'mirrors', 'port': '/dev/sslfr/mirrors'}]
+    from sslfr_bringup.collector_set import driver_parameters
+    from sslfr_planner.description import load
+    mv = load(nodeset.config_dir() / nodeset.load().collector).movement('mirrors')
+    assert by['mirrors_driver']['parameters'] == [moved, {**driver_parameters(mv), 'port': '/dev/sslfr/mirrors'}]
     assert by['gps']['parameters'] == [moved]      # its port comes from the config's gps section
     assert all(e['namespace'] == '/sslfr1' for e in entries)
     # the node sections reach the namespaced nodes (rcl: a bare `planner:` is the root's only)

@@ -69,6 +69,27 @@ def test_wind_supervision_needs_an_anemometer_in_the_description(tmp_path):
     assert nodeset.check_config(ns, nodeset.read_params(site), where=str(site)) == []
 
 
+def test_a_flow_meter_needs_one_in_the_description_and_its_aperture(tmp_path):
+    """Seed 003's description lists the flow meter of its 150 L/h tests and its config
+    counts it with the description's aperture (1 m^2); without the sensor, with another
+    aperture, or with an anemometer on the same (one) pulse input: refused."""
+    ns = nodeset.load()
+    desc = yaml.safe_load((CONFIG / 'collectors' / 'bucaramanga_single_axis.yaml').read_text())
+    assert [s['name'] for s in desc['sensors'] if s['kind'] == 'flow_meter'] == ['flow']
+    site, _ = _copy(tmp_path, lambda d: d.update(sensors=[s for s in d['sensors'] if s['kind'] != 'flow_meter']),
+                    site='bucaramanga_single_axis.yaml')
+    errors = nodeset.check_config(ns, nodeset.read_params(site), where=str(site))
+    assert any('absorber_board: flow_meter_pin: 8 but the collector description' in e for e in errors), errors
+    site, _ = _copy(tmp_path, site='bucaramanga_single_axis.yaml')
+    assert nodeset.check_config(ns, nodeset.read_params(site), where=str(site)) == []
+    site.write_text(site.read_text().replace('aperture_area: 1.0 ', 'aperture_area: 1.5 ').replace(
+        'flow_meter_pin: 8 ', 'flow_meter_pin: 8\n    anemometer_pin: 7 '))
+    errors = nodeset.check_config(ns, nodeset.read_params(site), where=str(site))
+    assert any('aperture_area: 1.5 contradicts the collector description' in e and '1.0 m^2' in e
+               for e in errors), errors
+    assert any('counts one pulse input' in e for e in errors), errors
+
+
 @pytest.mark.parametrize('command', ['doctor', 'sim', 'up'])
 def test_a_broken_description_starts_nothing(command, ros_env, tmp_path):
     site, desc = _copy(tmp_path, lambda d: d['movements']['mirrors'].update(drive='hydraulic_ram'))

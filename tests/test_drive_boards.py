@@ -1,5 +1,7 @@
-"""Topic-level: the REAL ``axis_driver`` executable against the simulated boards of the
-drives without switches, each its own process on a real pty (issue 34 item 3).
+"""Topic-level: the REAL ``axis_driver`` executable against the boards of the drives
+without switches, each its own process on a real pty (issue 34 item 3), on both board
+backends: the Python simulators (``sim_board``) and the boards' firmware in simavr
+(``fw_board``, the same command line: ``./sslfr sim --boards firmware``).
 
 * Linear actuator closed on an inclinometer (seed 004, ``--kind actuator``): the driver
   (``drive: linear_actuator_inclinometer``, the description's deadband) references the
@@ -30,12 +32,23 @@ from sslfr_sim.actuator import shipped_description
 
 pytestmark = pytest.mark.timeout(120)
 R = math.radians
+#: board backend -> the module run as the board process (same arguments)
+BACKENDS = {'sim': 'sslfr_sim.runner', 'firmware': 'sslfr_sim.fw_board'}
+
+
+@pytest.fixture(params=sorted(BACKENDS))
+def backend(request):
+    if request.param == 'firmware':
+        from fw_support import require
+        require('firmware', 'sim')
+    return request.param
 
 
 class DriveRig:
     """A simulated board process + an axis_driver process + the test's publishers."""
 
-    def __init__(self, launch, ros, ros_env, tmp_path, kind: str, sim_opts: dict, params: dict):
+    def __init__(self, launch, ros, ros_env, tmp_path, kind: str, sim_opts: dict, params: dict,
+                 backend: str = 'sim'):
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from sslfr_interfaces.msg import AxisStatus, SafetyState
         from trajectory_msgs.msg import JointTrajectory
@@ -45,7 +58,7 @@ class DriveRig:
         self.dir = tempfile.mkdtemp(prefix='axdr')
         self.port = os.path.join(self.dir, 'board')
         ctl = os.path.join(self.dir, 'ctl')
-        argv = [sys.executable, '-m', 'sslfr_sim.runner', '--kind', kind, '--axis', 'mirrors',
+        argv = [sys.executable, '-m', BACKENDS[backend], '--kind', kind, '--axis', 'mirrors',
                 '--link', self.port, '--control', ctl, '--seed', '7']
         for k, v in sim_opts.items():
             argv += ['--opt', f'{k}={v}']
@@ -97,11 +110,11 @@ class DriveRig:
 
 
 @pytest.fixture
-def drive_rig(launch, ros, ros_env, tmp_path):
+def drive_rig(launch, ros, ros_env, tmp_path, backend):
     rigs = []
 
     def make(**kw):
-        r = DriveRig(launch, ros, ros_env, tmp_path, **kw)
+        r = DriveRig(launch, ros, ros_env, tmp_path, backend=backend, **kw)
         rigs.append(r)
         return r
     yield make

@@ -481,6 +481,39 @@ def test_absorber_counts_anemometer_pulses(tmp_path):
         h.stop()
 
 
+def test_absorber_counts_flow_meter_pulses(tmp_path):
+    """Issue 34: the simulated absorber pumping seed 003's 150 L/h through a 450 pulse/L
+    meter (sslfr_sim AbsorberSim, flow_lph) drives 18.75 Hz on the pin the host set for
+    the flow meter (D8, seed 003's site config), re-commanded at 4 Hz as the firmware
+    board's sim does (the wave keeps its phase: a restart per command added an edge
+    each, 20 Hz); the firmware counts every edge and the host's flow
+    (sslfr_drivers.sensors.thermal) is 150 L/h within 2 %."""
+    from sslfr_drivers.sensors import thermal
+    from sslfr_sim.sensors import AbsorberSim
+    sim = AbsorberSim({'flow_lph': 150.0, 'flow_k_factor': 450.0})
+    hz = sim.pulse_frequency()
+    assert hz == pytest.approx(18.75)
+    h = _harness('absorber', tmp_path)
+    host = _in_session(h.path)
+    try:
+        assert host.request(ms.SetPulseInput(8)) == m.Ack(ms.SetPulseInput.TYPE)
+        s = []
+        for _ in range(26):
+            h.cmd(f'pulses {hz:.4f}')
+            s += _samples(host, ms.PulseSample, 0.25)
+        assert len(s) >= 22 and all(x.pin == 8 for x in s)
+        tracker = thermal.ThermalTracker(450.0, window=5.0)
+        out = [tracker.add(x.board_ms, x.count, steady=x.board_ms / 1000.0) for x in s]
+        flow, _ = out[-1]
+        assert flow.window == pytest.approx(5.0, abs=0.01)
+        assert thermal.litres_per_hour(flow.volume_flow) == pytest.approx(150.0, rel=0.02)
+        st = h.status()
+        assert abs(st['fw_pulses'] - st['pulses_sent']) <= 1             # every edge counted
+    finally:
+        host.close()
+        h.stop()
+
+
 def test_irradiance_auto_range_covers_0_to_120_klx(tmp_path):
     from sslfr_drivers.sensors import veml7700
     h = _harness('irradiance', tmp_path)

@@ -338,3 +338,31 @@ def test_actuator_conforms_to_the_python_simulator(tmp_path):
                 diffs.append((name, (a.position, a.target), (b.position, b.target)))
         print(f'{name:36s} {_act_norm(name, a)}  {_act_norm(name, b)}')
     assert not diffs, '\n'.join(f'{n}: firmware {a} / simulator {b}' for n, a, b in diffs)
+
+
+def test_actuator_built_for_another_descriptions_drive(tmp_path):
+    """A description whose drive differs from boards/actuator_params.h (here a 0.3 deg
+    deadband) runs an image built for it (fw_harness.actuator_elf, as fw_board does): a
+    MOVE_TO 0.2 deg away is inside its deadband (never driven; the shipped build's 0.05
+    deg band would drive), one 1 deg away ends within 0.3 deg."""
+    import dataclasses
+    from sslfr_drivers import firmware as fw
+    from sslfr_sim.fw_harness import Harness, actuator_elf, actuator_mech
+    cfg = dataclasses.replace(_act_config(), deadband=math.radians(0.3))
+    path = actuator_elf(cfg)
+    assert path != fw.elf('actuator') and path.exists()
+    rec = dataclasses.replace(m.ConfigRecord.defaults(int(m.BoardKind.AXIS_ACTUATOR)), board_id=4, axis=0)
+    h = Harness('actuator', eeprom=provisioned(rec), link=str(tmp_path / 'act'), act=actuator_mech(cfg, 0.0),
+                elf_path=str(path)).start()
+    host = fw_host(h.path).heartbeat()
+    try:
+        assert host.request(m.SetZero(0)) == m.Ack(m.SetZero.TYPE)
+        assert host.request(m.MoveTo(round(math.radians(0.2) / STEP), 2000.0)) == m.Ack(m.MoveTo.TYPE)
+        assert not wait_for(lambda: h.status()['duty'] != 0.0, 1.0)
+        assert host.request(m.MoveTo(round(math.radians(1.0) / STEP), 2000.0)) == m.Ack(m.MoveTo.TYPE)
+        assert wait_for(lambda: h.status()['duty'] != 0.0, 2.0)
+        st = _settle(host)
+        assert abs(st.sensor_angle - math.radians(1.0)) <= math.radians(0.3) and st.fault_bits == 0
+    finally:
+        host.close()
+        h.stop()

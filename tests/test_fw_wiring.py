@@ -136,3 +136,86 @@ def test_xbee_hub_with_several_firmware_boards(tmp_path):
         hub.close()
         ctl.cmd('quit')
         assert proc.wait(10) == 0
+
+
+def test_actuator_board_through_the_control_socket(tmp_path):
+    """``--kind actuator`` (seed 004's board, its drive from the shipped description):
+    the line where ``initial_angle_deg`` puts it, a MOVE_TO followed within the deadband
+    (the truth in ``status``), ``stall on`` jams the bar (fault STALL), ``reset``
+    reboots it unreferenced; the lines are not moved by hand (``set_angle`` refused, as
+    by the Python board)."""
+    from sslfr_sim.actuator import ActuatorConfig, shipped_description
+    cfg = ActuatorConfig.from_description(shipped_description())
+    step, band = cfg.step_rad, cfg.deadband + math.radians(0.03)
+    link_path = str(tmp_path / 'mirrors')
+    proc, pty, ctl = _fw_board(tmp_path, '--kind', 'actuator', '--axis', 'mirrors', '--link', link_path,
+                               '--opt', 'initial_angle_deg=-10')
+    link = BoardLink(SerialTransport(link_path), heartbeat=0.25).start()
+
+    def board():
+        return ctl.cmd('status')['boards'][0]
+    try:
+        assert link.wait_up(5) and link.info.name_str == 'sslfr-actuator'
+        st = board()
+        assert st['kind'] == 'AXIS_ACTUATOR' and abs(st['angle'] - math.radians(-10)) < 1e-6
+        assert not st['homed'] and st['target'] is None and st['faults'] & m.FaultBits.RESET
+        with pytest.raises(RuntimeError, match='set_angle'):
+            ctl.cmd('set_angle 5')
+        link.request(m.SetZero(round(math.radians(-10) / step)))
+        link.request(m.MoveTo(round(math.radians(-8) / step), 3000.0))
+        assert wait_for(lambda: board()['target'] is not None, 2)
+        assert abs(board()['target'] - math.radians(-8)) < band
+        assert wait_for(lambda: not link.request(m.GetStatus()).moving, 10)
+        assert abs(board()['angle'] - math.radians(-8)) < band and board()['homed']
+        ctl.cmd('stall on')                                   # the bar jammed: the line stays
+        link.request(m.MoveTo(round(math.radians(-4) / step), 3000.0))
+        assert wait_for(lambda: link.request(m.GetStatus()).fault_bits & m.FaultBits.STALL, 6)
+        st = board()
+        assert st['stalled'] and abs(st['angle'] - math.radians(-8)) < band
+        ctl.cmd('stall off')
+        resets = link.resets
+        ctl.cmd('reset')
+        assert wait_for(lambda: link.resets > resets and link.state == LinkState.UP, 5)
+        assert not link.request(m.GetStatus()).homed and not board()['homed']
+    finally:
+        link.stop()
+        ctl.cmd('quit')
+        assert proc.wait(10) == 0
+
+
+def test_switchless_board_behind_the_xbee_hub(tmp_path):
+    """``axis_noswitch`` behind the XBee coordinator: the switchless build, the shipped
+    seed-003 description's step (0.1125 deg) on the joint, a board reset (one board
+    selected) loses the reference."""
+    from sslfr_drivers.link.xbee_hub import XBeeHub
+    addr = ADDR['mirrors']
+    proc, pty, ctl = _fw_board(tmp_path, '--xbee', '--board', f'axis_noswitch:mirrors@{addr}',
+                               '--opt', 'initial_angle_deg=5')
+    path = str(tmp_path / 'mirrors')
+    hub = XBeeHub(pty, {addr: path}, control=str(tmp_path / 'hub.sock'))
+    t = threading.Thread(target=hub.serve, daemon=True)
+    t.start()
+    link = BoardLink(SerialTransport(path), heartbeat=0.25)
+    try:
+        link.start()
+        assert link.wait_up(20) and link.info.name_str == 'sslfr-axis-nosw'
+        st = ctl.cmd('status')['boards'][0]
+        assert st['name'] == 'sslfr-axis-nosw' and abs(st['angle'] - math.radians(5)) < 1e-9
+        step = math.radians(0.1125)
+        ref = round(math.radians(5) / step)
+        link.request(m.SetZero(ref))
+        link.request(m.MoveTo(ref + 100, 2000.0))
+        assert wait_for(lambda: ctl.cmd('status')['boards'][0]['counter'] == ref + 100, 4)
+        st = ctl.cmd('status')['boards'][0]
+        assert abs(st['angle'] - (math.radians(5) + 100 * step)) < 1e-6 and st['homed']
+        resets = link.resets
+        ctl.cmd(f'reset @{addr.lower()}')
+        assert wait_for(lambda: link.resets > resets and link.state == LinkState.UP, 5)
+        assert not link.request(m.GetStatus()).homed
+    finally:
+        link.stop()
+        hub.running = False
+        t.join(3)
+        hub.close()
+        ctl.cmd('quit')
+        assert proc.wait(10) == 0

@@ -61,6 +61,8 @@ def test_sim_refuses_a_config_a_node_would_refuse_before_starting_anything(ros_e
     site = tmp_path / 'bad.yaml'
     doc = yaml.safe_load((ROOT / 'src/sslfr_bringup/config/almeria_sslfr.yaml').read_text())
     doc.setdefault('planner', {}).setdefault('ros__parameters', {})['horizon'] = -5.0
+    doc['planner']['ros__parameters']['collector.description'] = str(
+        ROOT / 'src/sslfr_bringup/config/collectors/almeria_three_movement.yaml')   # the copy is elsewhere
     site.write_text(yaml.safe_dump(doc))
     proc = _sslfr([*SIM, '--config', str(site), '--out', str(tmp_path / 'out')], ros_env, tmp_path)
     out, _ = proc.communicate(timeout=60)

@@ -22,6 +22,7 @@
  */
 #include "board.h"
 #include "actuator_params.h"
+#include "actuator_state.h"
 
 #include <math.h>
 #include <util/atomic.h>
@@ -37,25 +38,9 @@
 static volatile uint32_t g_adc_sum;
 static volatile uint16_t g_adc_n;
 
-/* the board's state (read by the harness by symbol: `act`) */
-typedef struct __attribute__((packed)) {
-    float measured;     /* [rad] line angle, offset removed */
-    float target;       /* [rad] */
-    float speed;        /* [rad/s] the move's limit */
-    float duty;         /* signed [-1, 1] */
-    int32_t zero;       /* [steps] counter - measured / step */
-    uint16_t faults;
-    uint8_t has_target, homed, driving;
-    /* motion watch */
-    uint32_t since;     /* [ms] start of the move (driving without a pause) */
-    uint8_t watching, nblocks;
-    float block_sum;
-    uint8_t block_n;
-    uint32_t block_start;
-    float blocks[NBLOCKS];
-} act_state_t;
-
+/* the board's state (read by the harness by symbol: `act`, actuator_state.h) */
 volatile act_state_t act __attribute__((used));
+static float act_blocks[NBLOCKS];   /* the motion watch's 100 ms block means */
 
 ISR(ADC_vect)
 {
@@ -142,18 +127,18 @@ static uint8_t watch_update(uint32_t now, uint8_t driving, float angle)
     if ((uint32_t)(now - act.block_start) + CONTROL_MS >= BLOCK_MS) {
         float mean = act.block_sum / act.block_n;
         if (act.nblocks == NBLOCKS) {
-            for (uint8_t i = 1; i < NBLOCKS; i++) act.blocks[i - 1] = act.blocks[i];
+            for (uint8_t i = 1; i < NBLOCKS; i++) act_blocks[i - 1] = act_blocks[i];
             act.nblocks--;
         }
-        act.blocks[act.nblocks++] = mean;
+        act_blocks[act.nblocks++] = mean;
         act.block_sum = 0.0f;
         act.block_n = 0;
         act.block_start = now + CONTROL_MS;
         if (act.nblocks == NBLOCKS) {
             float a = 0.0f, b = 0.0f;
             for (uint8_t i = 0; i < QUARTER; i++) {
-                a += act.blocks[i];
-                b += act.blocks[NBLOCKS - 1 - i];
+                a += act_blocks[i];
+                b += act_blocks[NBLOCKS - 1 - i];
             }
             if (fabsf(b - a) / QUARTER < ACT_STALL_MIN)
                 return 1;

@@ -58,6 +58,7 @@
 #include "sim_hex.h"
 #include "session.h"
 #include "axis_state.h"
+#include "actuator_state.h"
 
 #define TICK_CYCLES (F_CPU_HZ / 1000u)    /* 1 ms */
 #define TXBUF_SIZE (1u << 20)
@@ -91,7 +92,7 @@ static char cmdbuf[65536];
 static size_t cmd_len;
 static int running = 1;
 static uint64_t last_rx_cycle, mark_cycle;
-static uint32_t sym_ax, sym_session, sym_stop, sym_pulses, sym_pulse_pin;
+static uint32_t sym_ax, sym_act, sym_session, sym_stop, sym_pulses, sym_pulse_pin;
 enum { PENDING_NONE, PENDING_RESET, PENDING_HANG };
 static int pending;                        /* CPU state changes asked for by a command */
 
@@ -320,6 +321,14 @@ static void status_json(void)
                a.homing ? "true" : "false", a.faults, a.steps_total);
         printf(",\"hl_stowing\":%s,\"seek_switch\":%u", a.hl_stowing ? "true" : "false", a.seek_switch);
     }
+    if (sym_act) {
+        act_state_t a;
+        ram_read(sym_act, 0, &a, sizeof a);
+        printf(",\"measured\":%.9f,\"act_target\":%.9f,\"has_target\":%s,\"zero\":%d,\"homed\":%s,"
+               "\"faults\":%u,\"act_speed\":%.6f,\"act_duty\":%.4f,\"driving\":%s", a.measured, a.target,
+               a.has_target ? "true" : "false", a.zero, a.homed ? "true" : "false", a.faults, a.speed, a.duty,
+               a.driving ? "true" : "false");
+    }
     if (sym_pulses) {
         uint32_t n;
         ram_read(sym_pulses, 0, &n, sizeof n);
@@ -542,6 +551,7 @@ int main(int argc, char **argv)
         f.frequency = F_CPU_HZ;
         avr_load_firmware(avr, &f);
         sym_ax = symbol(&f, "ax");
+        sym_act = symbol(&f, "act");
         sym_session = symbol(&f, "g_session");
         sym_stop = symbol(&f, "_exit");        /* cli; rjmp . */
         sym_pulses = symbol(&f, "g_pulses");
@@ -553,6 +563,7 @@ int main(int argc, char **argv)
             return 1;
         }
         sym_ax = symbol(&f, "ax");
+        sym_act = symbol(&f, "act");
         sym_session = symbol(&f, "g_session");
         sym_stop = symbol(&f, "_exit");
     }

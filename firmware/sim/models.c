@@ -64,6 +64,7 @@ struct model {
     char pulse_port;       /* 0: none */
     int pulse_bit, pulse_level;
     double pulse_hz;       /* [Hz] 0 = at rest */
+    int pulse_running;     /* the square wave's timer is registered */
     uint32_t pulse_pin_addr;   /* firmware RAM of its pulse pin (0: unknown) */
     int pulse_follow;      /* drive the pin the firmware counts on */
     uint64_t pulses_sent;  /* falling edges driven */
@@ -298,8 +299,10 @@ void model_set_pulse_pin_addr(model_t *m, uint32_t addr) { m->pulse_pin_addr = a
 static avr_cycle_count_t pulse_timer(avr_t *avr, avr_cycle_count_t when, void *param)
 {
     model_t *m = (model_t *)param;
-    if (!(m->pulse_hz > 0))
+    if (!(m->pulse_hz > 0)) {
+        m->pulse_running = 0;
         return 0;
+    }
     if (m->pulse_follow && m->pulse_pin_addr) {
         char port;
         int bit;
@@ -498,8 +501,11 @@ void model_after_reset(model_t *m)
         avr_cycle_timer_register(m->avr, 1, sw_timer, m);
     if (m->kind == B_ACTUATOR)
         avr_cycle_timer_register(m->avr, F_CPU_HZ / 1000, act_timer, m);
-    if (m->kind == B_ABSORBER && m->pulse_hz > 0)
+    m->pulse_running = 0;                        /* the reset dropped the cycle timers */
+    if (m->kind == B_ABSORBER && m->pulse_hz > 0) {
         avr_cycle_timer_register(m->avr, 1, pulse_timer, m);
+        m->pulse_running = 1;
+    }
 }
 
 static int hexval(int c)
@@ -562,7 +568,10 @@ int model_command(model_t *m, const char *line, char *reply, size_t n)
     }
     if (!strcmp(word, "pulses") && m->kind == B_ABSORBER) {
         /* pulses HZ [PIN]: a square wave of HZ on Arduino pin PIN (7, 8 or 11); without
-         * PIN on the pin the firmware counts on (SET_PULSE_INPUT) */
+         * PIN on the pin the firmware counts on (SET_PULSE_INPUT). A new HZ on a running
+         * wave keeps its phase (the next edge comes at the new half period): restarting
+         * it at every command (the sim sends one with every thermocouple sample, 4 Hz)
+         * added up to one edge per command */
         double hz;
         int pin = -1, k = sscanf(args, "%lf %d", &hz, &pin);
         char port = 0;
@@ -571,22 +580,25 @@ int model_command(model_t *m, const char *line, char *reply, size_t n)
             snprintf(reply, n, "pulses: HZ (0..2000) [PIN (7, 8 or 11)]");
             return 1;
         }
-        avr_cycle_timer_cancel(m->avr, pulse_timer, m);
         m->pulse_follow = k == 1;
         if (k == 2 && (port != m->pulse_port || bit != m->pulse_bit)) {
+            avr_cycle_timer_cancel(m->avr, pulse_timer, m);    /* another pin: start again */
+            m->pulse_running = 0;
             if (m->pulse_port)
                 pin_drive(m, m->pulse_port, m->pulse_bit, 1);
             m->pulse_port = port;
             m->pulse_bit = bit;
             m->pulse_level = 0;
         }
-        if (m->pulse_port && !m->pulse_level) {
+        if (m->pulse_port && !m->pulse_level && !m->pulse_running) {
             m->pulse_level = 1;
             pin_drive(m, m->pulse_port, m->pulse_bit, 1);
         }
         m->pulse_hz = hz;
-        if (hz > 0)
+        if (hz > 0 && !m->pulse_running) {
             avr_cycle_timer_register(m->avr, (avr_cycle_count_t)(F_CPU_HZ / (2.0 * hz)) + 1, pulse_timer, m);
+            m->pulse_running = 1;
+        }
         return 0;
     }
     if (!strcmp(word, "lux") && m->kind == B_IRRADIANCE) {

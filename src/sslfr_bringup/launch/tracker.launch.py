@@ -43,6 +43,7 @@ def _entries(config: str | None = None, namespace: str | None = None, write_dir:
 
     ns = nodeset.load()
     cfg = nodeset.resolve_config(config or None, default=ns.config)
+    ns = nodeset.for_config(ns, cfg, namespace)       # the nodes the collector's description names
     return nodeset.launch_entries(ns, cfg, namespace=namespace, write_dir=write_dir,
                                   use_sim_time=use_sim_time, layout=layout)
 

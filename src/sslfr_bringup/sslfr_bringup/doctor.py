@@ -33,7 +33,7 @@ def check_site_config(config: str | None, nodeset_path: str | None = None) -> in
     try:
         ns = nodeset.load(nodeset_path)
         path = nodeset.resolve_config(config, default=ns.config)
-        problems = nodeset.check_config(ns, nodeset.read_params(path), where=str(path))
+        problems = nodeset.check_config(nodeset.for_config(ns, path), nodeset.read_params(path), where=str(path))
     except nodeset.NodeSetError as exc:
         print(f'sslfr doctor: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2

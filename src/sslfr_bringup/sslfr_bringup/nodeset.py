@@ -27,7 +27,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
+from sslfr_common.files import user_path
 from sslfr_common.contract import MIRRORS
+from sslfr_common.params import flatten as flatten_params
 
 from sslfr_bringup.dds_profile import with_profile
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
@@ -106,6 +108,11 @@ class NodeSet:
     #: a site config is judged against all of them, not the selection
     all_nodes: tuple[NodeSpec, ...] = ()
     path: Path | None = None
+    #: the simulated axis board of each drive kind: {kind: {package, executable, args}}
+    drive_sims: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    #: the collector description of a config that names none (relative to config_dir());
+    #: after :func:`for_config`: the description the set was narrowed to (absolute)
+    collector: str = 'collectors/almeria_three_movement.yaml'
 
     def node(self, name: str) -> NodeSpec:
         """Return the node called ``name`` (KeyError with the known names)."""
@@ -189,7 +196,7 @@ def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr
             return path.is_file()
         except (OSError, ValueError):
             return False
-    p = Path(name).expanduser()
+    p = user_path(name)
     if is_file(p):
         return p.resolve()
     for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
@@ -268,7 +275,15 @@ def parse(data: Mapping[str, Any], path: Path | None = None) -> NodeSet:
     problems = check_bounds(*watchdog)
     if problems:
         raise NodeSetError('defaults.' + '; defaults.'.join(problems))
+    drive_sims = {}
+    for kind, sim in (data.get('drive_sims') or {}).items():
+        if not isinstance(sim, Mapping) or not sim.get('package') or not sim.get('executable'):
+            raise NodeSetError(f'drive_sims.{kind}: needs package, executable and args')
+        drive_sims[str(kind)] = {'package': str(sim['package']), 'executable': str(sim['executable']),
+                                 'args': _as_tuple_str(sim.get('args'), f'drive_sims.{kind}.args')}
     return NodeSet(nodes=tuple(nodes), boards=boards, config=str(d.get('config', 'almeria_sslfr.yaml')),
+                   drive_sims=drive_sims,
+                   collector=str(d.get('collector', 'collectors/almeria_three_movement.yaml')),
                    domain_id=domain_id, discovery_range=str(d.get('discovery_range', 'LOCALHOST')),
                    namespace=str(d.get('namespace') or ''), restart_backoff=backoff,
                    stable_after=float(d.get('stable_after', 60.0)),
@@ -318,6 +333,25 @@ def load(path: str | os.PathLike | None = None) -> NodeSet:
     """Load the node set (default: ``config/nodeset.yaml`` of this package)."""
     p = Path(path) if path else config_dir() / NODESET_FILE
     return parse(_yaml_document(p, 'node set', f'node set {p}'), p)
+
+
+def for_config(ns: NodeSet, config: str | os.PathLike, namespace: str | None = None) -> NodeSet:
+    """``ns`` narrowed to the collector the site config ``config`` names (its
+    description: :mod:`sslfr_bringup.collector_set`); NodeSetError when the config is
+    unreadable or the description invalid (nothing started)."""
+    from sslfr_planner import description as desc_mod
+
+    from sslfr_bringup import collector_set
+    nsp = ns.namespace if namespace is None else namespace
+    name = node_params(for_namespace(read_params(config), nsp), 'planner', nsp).get(DESCRIPTION_KEY)
+    path = desc_mod.resolve(name, Path(config).parent) if isinstance(name, str) and name \
+        else desc_mod.resolve(ns.collector, config_dir())
+    try:
+        return collector_set.for_collector(ns, desc_mod.load(path))
+    except desc_mod.DescriptionError as exc:
+        raise NodeSetError(f'{config}: {DESCRIPTION_KEY} {str(path)!r}:\n  ' + '\n  '.join(exc.problems)) from None
+    except ValueError as exc:
+        raise NodeSetError(str(exc)) from None
 
 
 def _yaml_document(path, what: str, label: str):
@@ -378,7 +412,7 @@ def node_params(params: Mapping[str, Any], node: str, namespace: str = '') -> di
     fqn = f'/{namespace.strip("/")}/{node}' if namespace.strip('/') else f'/{node}'
     for key, section in params.items():
         if isinstance(section, Mapping) and section_matches(str(key), fqn):
-            out.update(_flatten(section.get('ros__parameters') or {}))
+            out.update(flatten_params(section.get('ros__parameters') or {}))
     return out
 
 
@@ -448,7 +482,7 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
         known = [tables[n.name] for n in matched]
         if any(t is None for t in known):
             continue                  # a node without a table: cannot judge its keys
-        for name in _flatten(section.get('ros__parameters') or {}):
+        for name in flatten_params(section.get('ros__parameters') or {}):
             if name in ROS_PARAMETERS or name.startswith(ROS_PARAMETER_PREFIXES) or any(name in t for t in known):
                 continue
             names = sorted({k for t in known for k in t.names})
@@ -468,6 +502,8 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
                 errors.append(line)
                 seen.add(err)
     errors.extend(collector_problems(doc, nsp, where))
+    from sslfr_bringup.collector_set import contradictions
+    errors.extend(contradictions(ns, lambda name: node_params(doc, name, nsp), where))
     return errors
 
 
@@ -509,6 +545,26 @@ def collector_problems(doc: Mapping[str, Any], namespace: str, where: str) -> li
         if node_params(doc, 'safety', namespace).get('wind.enabled') is True:
             errors.append(f'{where}: safety: wind.enabled: true but the collector description {path} '
                           f'lists no anemometer (sensors: kind anemometer)')
+    return errors + thermal_problems(desc, node_params(doc, 'absorber_board', namespace), where, path)
+
+
+def thermal_problems(desc, absorber: Mapping[str, Any], where: str, path) -> list[str]:
+    """A flow meter counted (``absorber_board`` ``flow_meter_pin`` >= 0) on a collector
+    whose description lists no ``flow_meter`` sensor, and an ``aperture_area`` that is
+    not the description's lines x line_width x line_length."""
+    from sslfr_planner.analysis.ideal import aperture_area
+    errors = []
+    pin = absorber.get('flow_meter_pin', -1)
+    if isinstance(pin, int) and not isinstance(pin, bool) and pin >= 0 and \
+            not any(s.kind == 'flow_meter' for s in desc.sensors.values()):
+        errors.append(f'{where}: absorber_board: flow_meter_pin: {pin} but the collector description '
+                      f'{path} lists no flow meter (sensors: kind flow_meter)')
+    area = absorber.get('aperture_area')
+    expected = aperture_area(desc)
+    if isinstance(area, (int, float)) and not isinstance(area, bool) and area != 0 and \
+            abs(float(area) - expected) > 1e-6 * expected:
+        errors.append(f'{where}: absorber_board: aperture_area: {area!r} contradicts the collector description '
+                      f'{path}: lines x line_width x line_length = {expected!r} m^2')
     return errors
 
 
@@ -527,17 +583,6 @@ def description_value(desc, key: str):
         values['collector.tracking_step'] = m.law_params['step_s']
     v = values.get(key)
     return float(v) if isinstance(v, float) and math.isfinite(v) else v
-
-
-def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
-    out = {}
-    for k, v in d.items():
-        key = f'{prefix}{k}'
-        if isinstance(v, Mapping):
-            out.update(_flatten(v, key + '.'))
-        else:
-            out[key] = v
-    return out
 
 
 # ---------------------------------------------------------------------------------
@@ -572,7 +617,7 @@ def absolute_description(params: Mapping[str, Any], config: str | os.PathLike) -
     for key, section in params.items():
         values = section.get('ros__parameters') if isinstance(section, Mapping) else None
         name = values.get(DESCRIPTION_KEY) if isinstance(values, Mapping) else None
-        if isinstance(name, str) and name and not Path(name).expanduser().is_absolute():
+        if isinstance(name, str) and name and not user_path(name).is_absolute():
             section = {**section, 'ros__parameters': {**values, DESCRIPTION_KEY: str(
                 (Path(config).resolve().parent / name).resolve())}}
         out[key] = section

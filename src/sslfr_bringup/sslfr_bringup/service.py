@@ -174,7 +174,7 @@ def _body(argv: list[str]) -> int:
     try:
         ns = nodeset_mod.load()
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
-        nodeset_mod.checked_params(ns, config, args.namespace)   # what `sslfr up` will check at start
+        nodeset_mod.checked_params(nodeset_mod.for_config(ns, config, args.namespace), config, args.namespace)   # what `sslfr up` will check at start
     except nodeset_mod.NodeSetError as exc:
         why = ' '.join(part.strip() for part in str(exc).splitlines() if part.strip())
         raise CliError(f'argument --config: {why}') from None

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, TextIO
 
+from sslfr_common.cliargs import CliError, one_line
 from sslfr_common.contract import CLOCK, DIAGNOSTICS
 from sslfr_common.sdnotify import Notifier, NotifyListener
 
@@ -102,6 +103,23 @@ class StopSignals:
         """Sleep up to ``seconds``, then :meth:`check`."""
         self.requested.wait(seconds)
         self.check()
+
+
+def supervised_main(prog: str, body: Callable[[StopSignals, Path], int]) -> int:
+    """Run ``body(stop, run_dir)``, a command that starts processes (``sslfr up``,
+    ``sslfr station``): stop signals caught throughout, ``run_dir`` a fresh directory
+    removed afterwards; a :class:`CliError` is one line and exit 2, a stop signal exit 0."""
+    with StopSignals() as stop:
+        run_dir = Path(tempfile.mkdtemp(prefix=f'sslfr-{prog}-'))
+        try:
+            return body(stop, run_dir)
+        except CliError as exc:
+            print(f'sslfr {prog}: error: {one_line(exc)}', file=sys.stderr)
+            return 2
+        except Interrupted:
+            return 0
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
 
 
 def _orphan_guard(argv: list[str]) -> list[str]:
@@ -672,6 +690,14 @@ class RosSide(threading.Thread):
     def note(self, name: str, event: str, detail: str, critical: bool) -> None:
         self._notes.put((name, event, detail, critical))
 
+    def trigger(self, service: str, timeout: float) -> tuple[bool, str]:
+        """Call the std_srvs/Trigger ``service`` (waiting for it within ``timeout`` [s]):
+        (success, message); (False, why) when it was not answered in time."""
+        done, answer = threading.Event(), []
+        self._jobs.put(('trigger', (service, timeout, answer, done)))
+        done.wait(timeout + 0.5)
+        return tuple(answer[0]) if answer else (False, f'{service}: no answer within {timeout:g} s')
+
     def deactivate(self, names: list[str], timeout: float) -> None:
         done = threading.Event()
         self._jobs.put(('deactivate', (names, timeout, done)))
@@ -797,6 +823,20 @@ class RosSide(threading.Thread):
                     kind, arg = self._jobs.get_nowait()
                 except queue.Empty:
                     executor.spin_once(timeout_sec=0.02)
+                    continue
+                if kind == 'trigger':
+                    from std_srvs.srv import Trigger
+                    service, timeout, answer, done = arg
+                    deadline = time.monotonic() + timeout
+                    client, future = node.create_client(Trigger, service), None
+                    while time.monotonic() < deadline and not (future and future.done()):
+                        if future is None and client.service_is_ready():
+                            future = client.call_async(Trigger.Request())
+                        executor.spin_once(timeout_sec=0.02)
+                    if future is not None and future.done() and future.result() is not None:
+                        answer.append((bool(future.result().success), str(future.result().message)))
+                    node.destroy_client(client)
+                    done.set()
                     continue
                 if kind == 'active':
                     if arg not in clients:  # kept for a quick deactivate at stop

@@ -38,6 +38,16 @@ JOINT_RANGE: dict[str, tuple[float, float]] = {
     SECONDARY_REFLECTOR: (-math.pi / 2, math.pi / 2),
 }
 
+#: Kinematic limits of each joint [rad], whatever the collector: a mirror line turns at
+#: most half a turn either way, the structure and the reflector tilt at most to the
+#: vertical. A collector description's mechanical range lies within them; the rules on
+#: a range (a driver's soft limits, a planner pose) are judged against the collector's.
+JOINT_LIMITS: dict[str, tuple[float, float]] = {
+    MIRRORS: (-math.pi, math.pi),
+    MOBILE_STRUCTURE: (-math.pi / 2, math.pi / 2),
+    SECONDARY_REFLECTOR: (-math.pi / 2, math.pi / 2),
+}
+
 #: Stow (defocus) position per joint [rad], also where the SLEEP switch (the home
 #: reference) closes: mirrors go to the sleeping position +pi/2 (seed 000 section
 #: 3.5.2, "no dust is deposited on the mirrors"); the longitudinal axes go back to
@@ -205,6 +215,8 @@ AXIS_STATUS = Topic('axes/{axis}/status', 'sslfr_interfaces/msg/AxisStatus')
 ABSORBER_TEMPERATURE = Topic('absorber/{thermocouple}_temperature', 'sensor_msgs/msg/Temperature')
 LIMIT_SWITCHES = Topic('limit_switches', 'sslfr_interfaces/msg/LimitSwitches')
 WIND = Topic('wind', 'sslfr_interfaces/msg/Wind')
+ABSORBER_FLOW = Topic('absorber/flow', 'sslfr_interfaces/msg/Flow')
+THERMAL_POWER = Topic('absorber/thermal_power', 'sslfr_interfaces/msg/ThermalPower')
 IRRADIANCE_ILLUMINANCE = Topic('irradiance/illuminance', 'sensor_msgs/msg/Illuminance')
 IRRADIANCE_BEAM = Topic('irradiance/beam', 'sslfr_interfaces/msg/Irradiance')
 SAFETY_STATE = Topic('safety/state', 'sslfr_interfaces/msg/SafetyState')
@@ -216,7 +228,8 @@ ROSOUT = Topic('/rosout', 'rcl_interfaces/msg/Log', Qos.LOG)
 
 TOPICS: tuple[Topic, ...] = (
     GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
-    AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, WIND, IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
+    AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, WIND, ABSORBER_FLOW, THERMAL_POWER,
+    IRRADIANCE_ILLUMINANCE, IRRADIANCE_BEAM,
     SAFETY_STATE, DIAGNOSTICS, CLOCK, ROSOUT)
 
 #: Each family's members: the axes and the thermocouples.

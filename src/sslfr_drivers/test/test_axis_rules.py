@@ -108,7 +108,8 @@ def test_table_per_axis_defaults_come_from_the_contract():
 
 @pytest.mark.parametrize('change,word', [
     ({'lower_limit': 1.6}, 'soft limits need lower_limit < upper_limit'),
-    ({'lower_limit': -1.0}, 'exceed the mechanical range'),
+    ({'axis': 'mobile_structure', 'lower_limit': -1.6, 'stow_position': 0.0, 'home_position': 0.0,
+      'wind_stow_position': 0.0, 'host_loss_stow_position': 0.0}, 'exceed the kinematic limits'),
     ({'stow_position': -0.5, 'lower_limit': -0.4}, 'stow_position'),
     ({'min_speed': 0.1, 'max_speed': 0.05}, 'min_speed > max_speed'),
     ({'max_speed': 5.0}, 'max_speed: 5.0 rad/s is outside'),

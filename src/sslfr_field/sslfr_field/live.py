@@ -2,9 +2,11 @@
 
 The field page node feeds plain facts decoded from each collector's topics
 (``tracker/phase``, ``safety/state``, ``axes/<axis>/status``, the absorber
-temperatures, ``irradiance/beam``) with the steady time they arrived; :meth:`FieldState.snapshot`
+temperatures, ``irradiance/beam``, ``absorber/thermal_power`` where a flow meter
+counts) with the steady time they arrived; :meth:`FieldState.snapshot`
 gives the page its JSON: per collector phase and mode, safety level and reasons,
-axis states and errors [rad], temperatures [degC], beam irradiance [W/m^2], and the
+axis states and errors [rad], temperatures [degC], beam irradiance [W/m^2], flow
+[m^3/s] and thermal power [W] (null: no flow meter heard), and the
 link health: ``ok`` while something arrived within ``lost_after`` seconds (steady
 clock), ``lost`` after that, ``never`` before the first message. NaN (unknown) is sent
 as null.
@@ -43,6 +45,8 @@ class CollectorView:
     axes: dict = field(default_factory=dict)          # axis -> {'state', 'error', 'measured'}
     temperatures: dict = field(default_factory=dict)  # 'inlet'/'outlet' -> degC
     beam: float | None = None                         # W/m^2
+    flow: float | None = None                         # m^3/s (a flow meter only)
+    thermal_power: float | None = None                # W
     last_heard: float | None = None                   # steady time [s]
     messages: int = 0
 
@@ -85,6 +89,10 @@ class FieldState:
         v = self._heard(cid, now)
         v.beam = _num(beam)
 
+    def on_thermal(self, cid: str, now: float, flow: float, power: float) -> None:
+        v = self._heard(cid, now)
+        v.flow, v.thermal_power = _num(flow), _num(power)
+
     def link(self, cid: str, now: float) -> str:
         """'ok', 'lost' (silent for more than ``lost_after`` s) or 'never'."""
         v = self.views[cid]
@@ -99,7 +107,8 @@ class FieldState:
             out.append({'id': cid, 'namespace': v.namespace, 'page': v.page, 'phase': v.phase, 'mode': v.mode,
                         'phase_reason': v.phase_reason, 'safety_level': v.safety_level,
                         'safety_reasons': list(v.safety_reasons), 'axes': {k: dict(v.axes[k]) for k in JOINTS if k in v.axes},
-                        'temperatures': dict(v.temperatures), 'beam': v.beam, 'link': self.link(cid, now),
+                        'temperatures': dict(v.temperatures), 'beam': v.beam, 'flow': v.flow,
+                        'thermal_power': v.thermal_power, 'link': self.link(cid, now),
                         'last_heard_s': None if v.last_heard is None else round(now - v.last_heard, 2),
                         'messages': v.messages})
         counts = {}

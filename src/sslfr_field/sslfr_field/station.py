@@ -24,8 +24,8 @@ import shlex
 import shutil
 import socket
 import sys
-import tempfile
 from pathlib import Path
+from sslfr_common.files import user_path
 
 from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
 from sslfr_field import field as field_mod
@@ -161,7 +161,8 @@ def load_checked(path: str) -> field_mod.Field:
 
     def check(cfg, nsp):
         try:
-            return nodeset.check_config(ns, nodeset.read_params(cfg), nsp, where=str(cfg))
+            return nodeset.check_config(nodeset.for_config(ns, cfg, nsp), nodeset.read_params(cfg), nsp,
+                                        where=str(cfg))
         except nodeset.NodeSetError as exc:
             return [str(exc)]
     return field_mod.load(path, check_config=check)
@@ -183,7 +184,7 @@ def parser() -> argparse.ArgumentParser:
 
 def resolve_field(name: str) -> Path:
     """A field file: a path as given, else a name in sslfr_bringup's config/fields."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if p.is_file():
         return p
     from sslfr_bringup.nodeset import config_dir
@@ -196,25 +197,17 @@ def resolve_field(name: str) -> Path:
 def main(argv: list[str]) -> int:
     """``sslfr station``: 0 after a stop signal, 1 when it cannot run, 2 for a bad
     field description or arguments."""
-    from sslfr_bringup.supervisor import Interrupted, StopSignals
-    from sslfr_common.cliargs import CliError, one_line
-    with StopSignals() as stop:
-        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-station-'))
+    from sslfr_bringup.supervisor import supervised_main
+
+    def body(stop, run_dir) -> int:
+        args = parser().parse_args(argv)
         try:
-            args = parser().parse_args(argv)
-            try:
-                f = load_checked(str(resolve_field(args.field)))
-            except field_mod.FieldError as exc:
-                print(f'sslfr station: {exc.one_line()}', file=sys.stderr)
-                return 2
-            return run(f, args, stop, run_dir)
-        except CliError as exc:
-            print(f'sslfr station: error: {one_line(exc)}', file=sys.stderr)
+            f = load_checked(str(resolve_field(args.field)))
+        except field_mod.FieldError as exc:
+            print(f'sslfr station: {exc.one_line()}', file=sys.stderr)
             return 2
-        except Interrupted:
-            return 0
-        finally:
-            shutil.rmtree(run_dir, ignore_errors=True)
+        return run(f, args, stop, run_dir)
+    return supervised_main('station', body)
 
 
 def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say=None, tick=None,

@@ -11,9 +11,9 @@ from aiohttp.test_utils import TestClient, TestServer
 
 from sslfr_field import page
 from sslfr_field.live import FieldState
+from field_fixtures import PASSWORD, Backend
 from sslfr_web import auth
 
-PASSWORD = 'field-pass-123'
 
 
 def test_live_state_link_health_and_values():
@@ -25,6 +25,7 @@ def test_live_state_link_health_and_values():
     st.on_axis('c1', 10.6, 'not_a_joint', 'x', 0.0, 0.0)        # ignored
     st.on_temperature('c1', 10.7, 'outlet', 152.0)
     st.on_beam('c1', 10.8, float('inf'))
+    st.on_thermal('c1', 10.8, 150.0 / 3.6e6, float('nan'))         # a flow meter; power unknown
     snap = st.snapshot(12.0)
     c1, c2 = snap['collectors']
     assert c1['link'] == 'ok' and c1['last_heard_s'] == pytest.approx(1.2)
@@ -32,7 +33,9 @@ def test_live_state_link_health_and_values():
     assert c1['axes'] == {'mirrors': {'state': 'following', 'error': 0.001, 'measured': None}}
     assert c1['temperatures'] == {'outlet': 152.0} and c1['beam'] is None
     assert c1['page'] == 'http://10.0.0.21:8080/'
+    assert c1['flow'] == pytest.approx(150.0 / 3.6e6) and c1['thermal_power'] is None
     assert c2['link'] == 'never' and c2['last_heard_s'] is None
+    assert c2['flow'] is None and c2['thermal_power'] is None        # no flow meter: nothing shown
     assert st.snapshot(15.81)['collectors'][0]['link'] == 'lost'      # 5.01 s after the last message
     json.dumps(snap, allow_nan=False)                                  # strict JSON: no NaN
 
@@ -47,30 +50,11 @@ def test_parameters_are_checked():
     assert page._check_lists({**ok, 'collector_pages': ['http://x/']})
 
 
-class Backend:
-    def __init__(self):
-        self.state = FieldState([('c1', '/c1', ''), ('c2', '/c2', '')])
-        self.calls, self.logs = [], []
-
-    def snapshot(self):
-        return self.state.snapshot(1.0)
-
-    def ros_time(self):
-        return 1.0
-
-    def log(self, level, text):
-        self.logs.append((level, text))
-
-    async def call(self, cid, cmd):
-        self.calls.append((cid, cmd.service, dict(cmd.request)))
-        return {'success': cid != 'c2', 'message': 'refused: maintenance' if cid == 'c2' else ''}
-
-
 def run(tmp_path, body, **cfg):
     pw = auth.write_password_file(tmp_path / 'pw', PASSWORD)
     conf = {**page.field_page_params().defaults(), 'collectors': ['/c1', '/c2'], 'collector_ids': ['c1', 'c2'],
             'password_file': str(pw), 'audit_file': str(tmp_path / 'audit.jsonl'), **cfg}
-    backend = Backend()
+    backend = Backend(('c2',))
     op = page.FieldApp(conf, backend, {'c1': '/c1', 'c2': '/c2'})
 
     async def main():

@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import yaml
+from sslfr_common.files import user_path
 
-from sslfr_common.contract import DRIVE_KINDS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
+from sslfr_common.contract import DRIVE_KINDS, JOINT_LIMITS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
 from sslfr_common.drives import LeverGeometry
 
 #: drive kinds (issue 34 item 3): (a) stepper with limit switches, optional encoder or
@@ -47,9 +48,8 @@ LAW_MOVEMENTS: dict[str, tuple[str, ...]] = {
     'seed003_linkage': (JOINTS[0],),
     **{law: LONGITUDINAL_JOINTS for law in ('continuous', 'eq16', 'optimum_fixed', 'daily')},
 }
-#: kinematic limits of each movement [deg]: a mirror line turns at most half a turn
-#: either way; the structure and reflector tilt at most to the vertical (seed 000 section 4)
-MOVEMENT_LIMITS_DEG = {JOINTS[0]: (-180.0, 180.0), **{j: (-90.0, 90.0) for j in LONGITUDINAL_JOINTS}}
+#: kinematic limits of each movement [deg] (contract JOINT_LIMITS)
+MOVEMENT_LIMITS_DEG = {j: (math.degrees(lo), math.degrees(hi)) for j, (lo, hi) in JOINT_LIMITS.items()}
 #: board kinds the node set knows (sslfr_bringup/config/nodeset.yaml ``boards``)
 BOARD_KINDS = ('axis', 'gps', 'absorber', 'irradiance')
 #: sensor kinds
@@ -611,7 +611,7 @@ def parse(data: Any, where: str = 'description') -> Description:
 def resolve(name: str, base: str | os.PathLike | None = None) -> Path:
     """The description file ``name``: absolute, or relative to ``base`` (the directory of
     the site config that names it)."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if not p.is_absolute() and base is not None:
         p = Path(base) / p
     return p
@@ -622,7 +622,7 @@ def find(name: str, params_files=(), cwd: str | os.PathLike | None = None) -> Pa
     the last of ``params_files`` (the node's ``--params-file`` arguments, later wins, as
     rcl) that has it, else in ``cwd`` (the current directory). When none has it, the
     path beside the last params file (or in cwd): :func:`load` then says it is missing."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if p.is_absolute():
         return p
     candidates = [Path(f).parent / p for f in reversed(list(params_files))]

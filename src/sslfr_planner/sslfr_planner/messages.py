@@ -16,13 +16,15 @@ from .site_source import SiteFix
 from .trajectory import Horizon
 
 
-def trajectory_msg(h: Horizon) -> JointTrajectory:
-    """``tracker/trajectory``: the horizon's points in :data:`JOINTS` order, stamped
+def trajectory_msg(h: Horizon, joints: tuple[str, ...] = JOINTS) -> JointTrajectory:
+    """``tracker/trajectory``: the horizon's points for ``joints`` (the collector's
+    movements, :data:`JOINTS` order; the horizon holds every contract joint), stamped
     at the first point, ``time_from_start`` relative to it (exact to the ns)."""
     t0 = float(h.t[0])
-    msg = JointTrajectory(joint_names=list(JOINTS))
+    msg = JointTrajectory(joint_names=list(joints))
     msg.header.stamp = stamp(t0)
-    pos, vel = h.positions.tolist(), h.velocities.tolist()
+    cols = [JOINTS.index(j) for j in joints]
+    pos, vel = h.positions[:, cols].tolist(), h.velocities[:, cols].tolist()
     msg.points = [JointTrajectoryPoint(positions=pos[k], velocities=vel[k],
                                        time_from_start=duration(float(h.t[k]) - t0))
                   for k in range(len(h))]

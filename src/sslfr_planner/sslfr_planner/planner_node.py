@@ -30,7 +30,7 @@ from sslfr_interfaces.msg import SafetyState, SunPosition, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
-from sslfr_common.contract import (DIAGNOSTICS, GPS_FIX, PHASE_NAMES, PLANNER_REPLAN, PLANNER_SET_MODE,
+from sslfr_common.contract import (DIAGNOSTICS, GPS_FIX, JOINTS, PHASE_NAMES, PLANNER_REPLAN, PLANNER_SET_MODE,
                                    SAFETY_STATE, TRACKER_PHASE, TRACKER_SUN, TRACKER_TRAJECTORY, collector_id)
 from sslfr_common.node import LeanEvents, ParameterGuard, declare_parameters, qos, run_node, to_ns, to_sec
 
@@ -64,6 +64,9 @@ class PlannerNode(LeanEvents, Node):
         self.cycle = DayCycle(self.cfg, self.selector.current(),   # ValueError: exit 2 (also a bad description)
                               for_node(self.cfg['collector.description'], kwargs.get('cli_args') or sys.argv))
         self.control = PhaseControl(self.cfg['initial_mode'])
+        #: the collector's movements: the joints of tracker/trajectory (all without a description)
+        desc = self.cycle.description
+        self.joints = desc.joints if desc is not None else JOINTS
         self._last_plan_ms = float('nan')
         self._last_error = ''
         self._last_error_steady = -float('inf')
@@ -256,7 +259,7 @@ class PlannerNode(LeanEvents, Node):
             self.counters['plan_errors'] += 1
             self._note_error(f'trajectory not published: {why}')
             return
-        self.pub_traj.publish(trajectory_msg(h))
+        self.pub_traj.publish(trajectory_msg(h, self.joints))
         self.control.published(TRAJECTORY, now)
         self.counters['trajectories'] += 1
 

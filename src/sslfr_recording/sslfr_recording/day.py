@@ -5,7 +5,9 @@ schemas.
 The day report (:mod:`.report`), the what-if comparison (:mod:`.bag.whatif`) and the
 simulated-day tests read a bag through :func:`read_day`, and build the ideal axis
 angles with :func:`reference`: the collector and site parameters of the run's own site
-config (:func:`planner_config`, read once) at the site the planner reported.
+config (:func:`planner_config`, read once) and the collector description it names
+(:func:`run_description`: the movements the collector has, their laws, its optics) at
+the site the planner reported.
 
 Times are ROS time [s since the Unix epoch]: each message's ``header.stamp``, or its
 log time when the stamp is zero or the type has no header; angles [rad].
@@ -17,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 from sslfr_common.contract import (ROSOUT, ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINT_STATES,
-                                   JOINTS, SAFETY_STATE, TRACKER_PHASE, TRACKER_TRAJECTORY)
+                                   JOINTS, SAFETY_STATE, THERMAL_POWER, TRACKER_PHASE, TRACKER_TRAJECTORY)
 from sslfr_common.timeconv import to_sec
 
 from .bag.metadata import BagError
@@ -30,13 +32,13 @@ TOPICS = {
     TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix',
     ABSORBER_TEMPERATURE.of('inlet'): 'inlet', ABSORBER_TEMPERATURE.of('outlet'): 'outlet',
     IRRADIANCE_BEAM.name: 'beam', TRACKER_TRAJECTORY.name: 'trajectory', JOINT_STATES.name: 'joints',
-    ROSOUT_KEY: 'logs',
+    ROSOUT_KEY: 'logs', THERMAL_POWER.name: 'thermal',
     **{AXIS_STATUS.of(a): 'axes' for a in JOINTS},
 }
 #: topic -> its columns (a key of _FIELDS); joint_states is split by joint instead
 _KIND = {TRACKER_PHASE.name: 'phase', SAFETY_STATE.name: 'safety', GPS_FIX.name: 'fix', IRRADIANCE_BEAM.name: 'beam',
          ABSORBER_TEMPERATURE.of('inlet'): 'temperature', ABSORBER_TEMPERATURE.of('outlet'): 'temperature',
-         TRACKER_TRAJECTORY.name: 'trajectory', ROSOUT_KEY: 'log', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
+         TRACKER_TRAJECTORY.name: 'trajectory', ROSOUT_KEY: 'log', THERMAL_POWER.name: 'thermal', **{AXIS_STATUS.of(a): 'status' for a in JOINTS}}
 
 
 @dataclass
@@ -84,7 +86,9 @@ class Day:
     it was sent, ``trajectories`` the same messages as :class:`Trajectory`; ``logs``:
     the nodes' log lines (``/rosout``: level, name, msg) at their log time; ``topics``:
     message count per topic; ``diagnostics`` (decoded on first use): name, level,
-    message, values.
+    message, values; ``thermal``: ``absorber/thermal_power`` (volume_flow [m^3/s],
+    mass_flow [kg/s], power [W], beam [W/m^2], aperture [m^2], efficiency [-]; empty
+    for a collector without a flow meter).
     """
 
     bag: str
@@ -103,6 +107,7 @@ class Day:
     topics: dict[str, int]
     logs: Series = field(default_factory=Series)     # /rosout: level, name (node), msg at log time
     has_rosout: bool = False
+    thermal: Series = field(default_factory=Series)  # absorber/thermal_power (a flow meter only)
     _reader: BagReader | None = field(default=None, repr=False)
     _diagnostics: Series | None = field(default=None, repr=False)
 
@@ -185,6 +190,9 @@ _FIELDS = {
     'fix': {'status': lambda m: int(m.status.status), 'latitude': lambda m: float(m.latitude),
             'longitude': lambda m: float(m.longitude), 'altitude': lambda m: float(m.altitude)},
     'trajectory': {'points': lambda m: len(m.points)},
+    'thermal': {'volume_flow': lambda m: float(m.volume_flow), 'mass_flow': lambda m: float(m.mass_flow),
+                'power': lambda m: float(m.power), 'beam': lambda m: float(m.beam),
+                'aperture': lambda m: float(m.aperture), 'efficiency': lambda m: float(m.efficiency)},
     'log': {'level': lambda m: int(m.level), 'name': lambda m: str(m.name), 'msg': lambda m: str(m.msg)},
 }
 
@@ -274,7 +282,7 @@ def read_day(bag: str | Path | BagReader, start_ns: int | None = None, end_ns: i
         inlet=series[ABSORBER_TEMPERATURE.of('inlet')], outlet=series[ABSORBER_TEMPERATURE.of('outlet')],
         beam=series[IRRADIANCE_BEAM.name], fix=series[GPS_FIX.name], trajectory=series[TRACKER_TRAJECTORY.name],
         trajectories=trajectories, topics=counts, logs=series[ROSOUT_KEY],
-        has_rosout=names[ROSOUT_KEY] is not None, _reader=reader)
+        has_rosout=names[ROSOUT_KEY] is not None, thermal=series[THERMAL_POWER.name], _reader=reader)
 
 
 def _read_diagnostics(reader: BagReader) -> Series:
@@ -315,39 +323,59 @@ def planner_config(config: str | Path | None) -> dict:
     return cfg
 
 
+def run_description(config: str | Path | None):
+    """The collector description the run's site config names (``collector.description``
+    of its planner section, relative to the config as the planner finds it), or None
+    when the config names none (or no config: the planner's defaults).
+    :class:`sslfr_planner.description.DescriptionError` (a ValueError) when it is broken."""
+    from sslfr_bringup import nodeset
+    from sslfr_planner import description
+
+    if not config:
+        return None
+    name = planner_config(config).get('collector.description') or ''
+    if not name:
+        return None
+    return description.load(description.find(name, [str(nodeset.resolve_config(config))]))
+
+
 @dataclass(frozen=True)
 class Reference:
     """The ideal of a run: the ephemeris core's tracking table
-    (:func:`sslfr_planner.tracking_table.evaluate`, NREL SPA + seed 000 eqs. 9-16) for
-    the run's collector at its site. ``ref(t)`` is the table at times ``t`` [s]."""
+    (:func:`sslfr_planner.tracking_table.evaluate`, NREL SPA + seed 000 eqs. 9-16; the
+    mirrors on the description's law) for the run's collector at its site. ``ref(t)`` is
+    the table at times ``t`` [s]; ``description`` the run's collector description (None:
+    the config names none)."""
 
     config: str                # the site config it was built from ('' for the planner's defaults)
     collector: object          # sslfr_planner.collector.Collector
     site: object               # sslfr_planner.site.Site
+    description: object = None  # sslfr_planner.description.Description or None
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """The collector's movements (the description's; every contract joint without one)."""
+        return self.description.joints if self.description is not None else JOINTS
 
     def __call__(self, t):
         from sslfr_planner import tracking_table
         return tracking_table.evaluate(np.atleast_1d(np.asarray(t, dtype=float)), self.site, self.collector)
 
     def angles(self, t) -> dict[str, np.ndarray]:
-        """Ideal angle of each axis at ``t`` [rad]."""
+        """Ideal angle of each of the collector's movements at ``t`` [rad]."""
         table = self(t)
-        return {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}
+        return {a: np.asarray(getattr(table, a), dtype=float) for a in self.joints}
 
 
 def reference(config: str | Path | None, latitude_deg: float, longitude_deg: float, elevation: float) -> Reference:
     """The one ideal reference of a run: the collector (its parameters and the collector
-    description they name, relative to the config as the planner finds it) and the site
-    parameters (pressure, temperature, delta-T) of its site config
-    (:func:`planner_config`) at the site the planner reported in ``tracker/phase``
-    [deg, deg, m]."""
-    from sslfr_bringup import nodeset
-    from sslfr_planner import description
+    description they name, :func:`run_description`) and the site parameters (pressure,
+    temperature, delta-T) of its site config (:func:`planner_config`) at the site the
+    planner reported in ``tracker/phase`` [deg, deg, m]."""
     from sslfr_planner.day_cycle import make_collector, make_site
     from sslfr_planner.site_source import SiteFix
 
     cfg = planner_config(config)
-    name = cfg.get('collector.description') or ''
-    desc = description.load(description.find(name, [str(nodeset.resolve_config(config))])) if name and config else None
+    desc = run_description(config)
     return Reference(str(config or ''), make_collector(cfg, desc),
-                     make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters')))
+                     make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters')), desc)

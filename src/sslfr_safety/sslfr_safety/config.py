@@ -57,7 +57,9 @@ class SafetyConfig:
     """Tunable limits. Units: degC, K, s, rad, W/m^2 as named.
 
     ``watchdogs`` maps a node name (:data:`WATCHABLE`) to ``(timeout [s], action)``
-    with action ``'WARN'`` or ``'STOW'``.
+    with action ``'WARN'`` or ``'STOW'``. ``present``: the watchable nodes this
+    collector's node set runs (its description's movements and boards): the axes
+    judged are theirs (:attr:`joints`) and a node absent from it is never watched.
     """
 
     temperature_limit: float = 150.0      # [degC] seed 000 section 3.5.3
@@ -99,6 +101,12 @@ class SafetyConfig:
         'irradiance': (5.0, 'WARN'),
         'gps': (5.0, 'WARN'),
     })
+    present: tuple = WATCHABLE
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """The collector's movements (contract order): those whose driver is present."""
+        return tuple(j for j in JOINTS if driver_node(j) in self.present)
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad value."""
@@ -140,7 +148,13 @@ class SafetyConfig:
         if set(self.switch_positions) != set(SWITCHES) or not all(
                 math.isfinite(v) for v in self.switch_positions.values()):
             raise ValueError(f'switch_positions needs finite angles for exactly {SWITCHES}')
+        unknown = [n for n in self.present if n not in WATCHABLE]
+        if unknown:
+            raise ValueError(f'present nodes {unknown} unknown; known: {", ".join(WATCHABLE)}')
         for node, spec in self.watchdogs.items():
+            if node not in self.present:
+                raise ValueError(f'watchdog node {node!r} is not in this collector\'s node set '
+                                 f'({", ".join(self.present)})')
             if node not in WATCHABLE:
                 raise ValueError(f'watchdog node {node!r} unknown; known: {", ".join(WATCHABLE)}')
             timeout, action = spec

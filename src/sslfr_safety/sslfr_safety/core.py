@@ -151,7 +151,7 @@ class SafetyCore:
         self.rules: dict[str, Rule] = {r.kind: r for r in rules}
         self.start = self.clock.steady()
         self.sensors = {s: _Sensor() for s in THERMOCOUPLES}
-        self.axes = {a: _Axis() for a in JOINTS}
+        self.axes = {a: _Axis() for a in self.config.joints}
         self.switch_closed: dict[str, bool | None] = {s: None for s in SWITCHES}
         self.switch_ack: set[str] = set()        # acknowledged trips, re-armed when open
         self.pending_switches: set[str] = set()   # closed while the axis position was unknown
@@ -250,6 +250,8 @@ class SafetyCore:
         now = self._now(arrival)
         self.heartbeat('absorber_board', now)
         for name in SWITCHES:
+            if SWITCH_AXIS[name] not in self.axes:    # the switches of a movement this collector lacks
+                continue
             closed = bool(states[name])
             was = self.switch_closed[name]
             self.switch_closed[name] = closed
@@ -265,7 +267,10 @@ class SafetyCore:
         """The motion part of an ``axes/<axis>/status``: homing flag, measured and
         commanded angles [rad] (NaN = unknown, e.g. no board); the driver's heartbeat."""
         now = self._now(arrival)
-        ax = self.axes[axis]
+        ax = self.axes.get(axis)
+        if ax is None:                  # a movement this collector lacks: not its axis
+            self.counters['invalid_samples'] += 1
+            return
         self.heartbeat(driver_node(axis), now)
         ax.arrival = now
         measured, commanded = float(measured), float(commanded)
@@ -288,7 +293,10 @@ class SafetyCore:
         when the driver is not active), ``link_state`` (LINK_* code), ``homed`` (the
         axis is referenced). Sets the axis' readiness for the ``axis`` rule."""
         now = self._now(arrival)
-        ax = self.axes[axis]
+        ax = self.axes.get(axis)
+        if ax is None:
+            self.counters['invalid_samples'] += 1
+            return
         gap = ax.report_arrival is None or now - ax.report_arrival > self.config.status_max_age
         ax.report_arrival, ax.driver_state, ax.link_state = now, str(state), int(link_state)
         if ax.driver_state in IDLE_DRIVER_STATES or ax.link_state != LinkState.LINK_UP:
@@ -559,7 +567,7 @@ class SafetyCore:
         conds = self.conditions(now)
         level = max((c.level for c in conds), default=Level.OK)
         reasons = tuple(c.reason for c in sorted(conds, key=lambda c: (-c.level, c.key)))
-        axes = tuple(a for a in JOINTS if any(a in c.axes for c in conds if c.level == Level.ESTOP))
+        axes = tuple(a for a in self.axes if any(a in c.axes for c in conds if c.level == Level.ESTOP))
         stowing = [c for c in conds if c.level == Level.STOW or c.stow_others]
         stow = bool(stowing)
         wind_stow = stow and all(c.key == WIND_RULE for c in stowing)
@@ -575,7 +583,7 @@ class SafetyCore:
         new, old = self.verdict(now), self._state
         self._state = new
         if new.stow_required:
-            for axis in JOINTS:
+            for axis in self.axes:
                 if axis not in new.stopped_axes:
                     self.stow_verdict_at[axis] = now
                     self.stow_verdict_pose[axis] = (WIND_STOW_POSITION if new.wind_stow else STOW_POSITION)[axis]

@@ -33,6 +33,7 @@ def config_from(values: dict) -> SafetyConfig:
                          f'{len(nodes)}/{len(timeouts)}/{len(actions)}')
     if len(set(nodes)) != len(nodes):
         raise ValueError('watchdog.nodes lists a node twice')
+    present = tuple(values['collector.nodes'])
     cfg = SafetyConfig(
         temperature_limit=values['temperature.limit'], hysteresis=values['temperature.hysteresis'],
         cool_hold=values['temperature.cool_hold'], auto_reset=values['temperature.auto_reset'],
@@ -56,7 +57,9 @@ def config_from(values: dict) -> SafetyConfig:
         wind_hold=values['wind.hold'], wind_silent_warn=values['wind.silent_warn'],
         wind_silent_stow=values['wind.silent_stow'], wind_stuck_window=values['wind.stuck_window'],
         wind_stuck_beam_swing=values['wind.stuck_beam_swing'],
-        watchdogs={n: (t, a) for n, t, a in zip(nodes, timeouts, actions)})
+        present=present,
+        # a node the collector lacks is not a fault: its watchdog is not armed
+        watchdogs={n: (t, a) for n, t, a in zip(nodes, timeouts, actions) if n in present})
     cfg.validate()
     return cfg
 
@@ -117,6 +120,9 @@ TABLE = ParamTable((
           10.0, 86400.0),
     _spec('wind.stuck_beam_swing', _D.wind_stuck_beam_swing,
           'beam irradiance max - min over stuck_window that means moving clouds', 'W/m^2', 1.0, 1500.0),
+    ParamSpec('collector.nodes', list(WATCHABLE), 'the watchable nodes this collector\'s node set runs '
+              '(set by the node set from the collector description): the axes judged are those of the '
+              'drivers listed, and the watchdog of a node not listed is not armed', read_only=True),
     _spec('watchdog.nodes', list(_D.watchdogs), 'watched nodes: ' + ', '.join(WATCHABLE)),
     _spec('watchdog.timeouts', [t for t, _ in _D.watchdogs.values()],
           'silence limit of each watched node, same order', 's'),

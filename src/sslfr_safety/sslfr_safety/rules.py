@@ -444,7 +444,7 @@ RULES: tuple[Rule, ...] = (
          'That axis driver is not driving its axis: check that it runs and is active (its '
          'diagnostics give the reason) and its board link; clears by itself once the driver is '
          'active and the axis homed.',
-         names=lambda core: JOINTS, condition=_axis_not_ready),
+         names=lambda core: core.config.joints, condition=_axis_not_ready),
 )
 
 

@@ -101,7 +101,7 @@ class SafetyNode(LeanEvents, Node):
         self._subscribe(LimitSwitches, LIMIT_SWITCHES.name, self._on_switches)
         self._subscribe(TrackerPhase, TRACKER_PHASE.name, self._on_phase)
         self._subscribe(JointTrajectory, TRACKER_TRAJECTORY.name, self._on_trajectory)
-        for axis in JOINTS:
+        for axis in config.joints:
             self._subscribe(AxisStatus, AXIS_STATUS.of(axis), lambda m, a=axis: self._on_axis(a, m))
         self._subscribe(NavSatFix, GPS_FIX.name, self._on_fix)
         self._subscribe(Irradiance, IRRADIANCE_BEAM.name, self._on_beam)

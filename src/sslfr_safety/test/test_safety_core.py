@@ -490,3 +490,38 @@ def test_property_stow_iff_a_sample_exceeded_the_limit(samples):
         core.on_temperature('outlet', outlet)
         tripped |= inlet > 150.0 or outlet > 150.0
         assert (core.evaluate().level >= Level.STOW) == tripped
+
+
+def test_a_one_movement_collector_is_judged_on_what_it_has():
+    """Issue 34: seed 004's collector has the mirrors' driver, the absorber and irradiance
+    boards and no GPS: the absent axes and the GPS are never faults; its own silent
+    driver still is, and a status of an axis it lacks is refused and counted."""
+    clock = FakeClock()
+    present = ('planner', 'mirrors_driver', 'absorber_board', 'irradiance')
+    full = SafetyConfig()
+    cfg = with_changes(full, present=present, require_site_and_time=False,
+                       watchdogs={n: s for n, s in full.watchdogs.items() if n in present})
+    core = SafetyCore(cfg, clock)
+    assert cfg.joints == ('mirrors',) and set(core.axes) == {'mirrors'}
+
+    def tick(mirrors=True):
+        clock.advance(0.1)
+        core.on_phase(TRACKING, 'parameters')
+        core.on_beam(800.0)
+        if mirrors:
+            core.on_axis_status('mirrors', False, 0.3)
+            core.on_driver_state('mirrors', 'following', LinkState.LINK_UP, True)
+        core.on_limit_switches(OPEN)
+        core.on_temperature('inlet', 60.0)
+        core.on_temperature('outlet', 80.0)
+        return core.evaluate()
+    for _ in range(150):
+        state = tick()
+    assert state.level == Level.OK, state.reasons
+    core.on_axis_status('mobile_structure', False, 0.1)
+    assert core.counters['invalid_samples'] == 1
+    for _ in range(30):                                  # its own driver falls silent: a fault
+        state = tick(mirrors=False)
+    assert state.level == Level.STOW and any('mirrors_driver silent' in r for r in state.reasons), state.reasons
+    with pytest.raises(ValueError, match='not in this collector'):
+        with_changes(cfg, watchdogs={'gps': (5.0, 'WARN')})

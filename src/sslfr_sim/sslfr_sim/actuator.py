@@ -88,6 +88,28 @@ def shipped_description(name: str = 'florianopolis_lepten'):
     return load(config_dir() / 'collectors' / f'{name}.yaml')
 
 
+def config_from_options(options: dict) -> ActuatorConfig:
+    """The actuator axis of runner options (``sim_board`` / ``fw_board --opt``):
+    ``description`` (a collector description file; default the shipped seed-004 one),
+    ``axis``, ``initial_angle_deg``, ``inclinometer_offset_deg`` (the true mounting
+    offset; the board keeps the description's as its calibration), ``max_speed_m_s``
+    (the actuator at full duty: ``./sslfr sim`` runs the board on the wall clock, so a
+    day at --speed X needs an actuator about X times faster than the description's)."""
+    from sslfr_planner.description import load
+    opts = dict(options)
+    desc = load(opts['description']) if opts.get('description') else shipped_description()
+    kw = {}
+    if 'initial_angle_deg' in opts:
+        kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
+    if 'max_speed_m_s' in opts:
+        kw['max_speed'] = float(opts['max_speed_m_s'])
+    cfg = ActuatorConfig.from_description(desc, opts.get('axis', MIRRORS), **kw)
+    if 'inclinometer_offset_deg' in opts:
+        cfg.inclinometer = dataclasses.replace(cfg.inclinometer,
+                                               offset=math.radians(float(opts['inclinometer_offset_deg'])))
+    return cfg
+
+
 class ActuatorSim(SimBoard):
     """Linear actuator axis board (see module docstring)."""
 
@@ -107,21 +129,8 @@ class ActuatorSim(SimBoard):
 
     @classmethod
     def from_options(cls, options: dict, rng: random.Random, board_id: int = 1) -> 'ActuatorSim':
-        """Build from runner options: ``description`` (a collector description file;
-        default the shipped seed-004 one), ``axis``, ``initial_angle_deg``,
-        ``inclinometer_offset_deg`` (the true mounting offset; the board keeps the
-        description's as its calibration)."""
-        from sslfr_planner.description import load
-        opts = dict(options)
-        desc = load(opts['description']) if opts.get('description') else shipped_description()
-        kw = {}
-        if 'initial_angle_deg' in opts:
-            kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
-        cfg = ActuatorConfig.from_description(desc, opts.get('axis', MIRRORS), **kw)
-        if 'inclinometer_offset_deg' in opts:
-            cfg.inclinometer = dataclasses.replace(cfg.inclinometer,
-                                                   offset=math.radians(float(opts['inclinometer_offset_deg'])))
-        return cls(cfg, board_id=board_id, rng=rng)
+        """Build from runner options (:func:`config_from_options`)."""
+        return cls(config_from_options(options), board_id=board_id, rng=rng)
 
     @property
     def angle(self) -> float:

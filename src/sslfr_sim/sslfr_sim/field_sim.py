@@ -60,6 +60,8 @@ def collector_argv(args, c: field_mod.Collector, f: field_mod.Field, domain: int
             '--out', str(out / c.id), '--no-report', '--seed', str(args.seed + 101 * int(c.id[1:]))]
     if args.end:
         argv += ['--end', args.end]
+    if getattr(args, 'flow', None) is not None:      # a collector with a flow meter pumps it
+        argv += ['--flow', f'{args.flow:g}']
     for spec in args.fault:
         argv += ['--fault', spec]
     argv += ['--set', f'web:port={c.web_port}']

@@ -7,7 +7,14 @@ that would be flashed, paced to the wall clock (the host's timeouts and the firm
 ``millis()`` agree). What the board is wired to comes from two places:
 
 * the harness's C models: stepper + mechanism (joint angle, limit switches at their
-  angles, stall, set angle), the MAX6675 / VEML7700 / NEO-6 chips on their buses;
+  angles, stall, set angle; the switchless stepper of seed 003 runs the
+  ``axis_noswitch`` build on the same model), linear actuator + lever + analogue
+  inclinometer (seed 004's ``actuator`` board: stall), the MAX6675 / VEML7700 / NEO-6
+  chips on their buses. The drives without switches take the simulators' options
+  (``description`` = a collector description file, ``axis``, ``initial_angle_deg``,
+  ``inclinometer_offset_deg``, ``max_speed``, ``accel``) and the same parsers;
+  an actuator whose drive differs from the shipped seed-004 build runs an image built
+  for it (:func:`~.fw_harness.actuator_elf`);
 * the physical world of the Python simulators (sim.sensors: sun, absorber thermal
   model, GPS receiver, and their fault commands), run as a *shadow* board whose
   samples are not sent to the host but turned into chip inputs: MAX6675 words,
@@ -34,28 +41,59 @@ from sslfr_sim import board_class
 from sslfr_sim.axis import AxisConfig
 from sslfr_sim.base import FaultInjector, _split_frames
 from sslfr_sim.runner import PtyEndpoint, Runner, board_key, build_parser, serve_until_signalled, xbee_host
-from sslfr_drivers.firmware import KIND_TO_BOARD, FirmwareError, eeprom_image
-from sslfr_sim.fw_harness import Harness, axis_mech, sensor_zero_for
+from sslfr_drivers.firmware import KIND_TO_BOARD, FirmwareError, eeprom_image, elf
+from sslfr_sim.fw_harness import Harness, actuator_elf, actuator_mech, mech_of, sensor_zero_for
 
-_KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'gps': m.BoardKind.GPS, 'absorber': m.BoardKind.ABSORBER,
+_KINDS = {'axis': m.BoardKind.AXIS_STEPPER, 'axis_noswitch': m.BoardKind.AXIS_STEPPER,
+          'actuator': m.BoardKind.AXIS_ACTUATOR, 'gps': m.BoardKind.GPS, 'absorber': m.BoardKind.ABSORBER,
           'irradiance': m.BoardKind.IRRADIANCE}
+#: the kinds whose board drives a joint (FirmwareAxis)
+AXIS_KINDS = ('axis', 'axis_noswitch', 'actuator')
+#: the name each firmware reports in INFO (core/board.h BoardDef)
+_NAMES = {'axis_noswitch': 'sslfr-axis-nosw'}
 
 
-def config_record(kind: str, options: dict, board_id: int) -> m.ConfigRecord:
+def axis_config(kind: str, options: dict):
+    """The joint a firmware axis board of ``kind`` drives, from the simulators' options
+    (the same parser: one meaning per option): ``axis`` a stepper with switches
+    (:class:`sslfr_sim.axis.AxisConfig` of the contract's axis), ``axis_noswitch`` the
+    switchless stepper and ``actuator`` the linear actuator of the collector
+    ``description`` (:func:`sslfr_sim.switchless.config_from_options`,
+    :func:`sslfr_sim.actuator.config_from_options`)."""
+    if kind == 'axis_noswitch':
+        from sslfr_sim.switchless import config_from_options
+        return config_from_options(options)
+    if kind == 'actuator':
+        from sslfr_sim.actuator import config_from_options
+        return config_from_options(options)
+    init = options.get('initial_angle_deg')
+    return AxisConfig.for_axis(options.get('axis', MIRRORS),
+                               initial_angle=math.radians(float(init)) if init not in (None, '') else None)
+
+
+def config_record(kind: str, options: dict, board_id: int, axis=None) -> m.ConfigRecord:
     """The EEPROM configuration a board gets in simulation: the firmware defaults with
-    ``board_id`` and, for axes, ``axis``, ``max_speed`` [steps/s], ``accel``
-    [steps/s^2] and the optional encoder (``sensor=1``) from the options."""
+    ``board_id`` and, for axes, ``axis`` and, for steppers, ``max_speed`` [steps/s],
+    ``accel`` [steps/s^2] (the switchless stepper: its description's axis config,
+    ``axis``) and the optional encoder (``sensor=1``, stepper with switches) from the
+    options. The record carries no drive geometry: a stepper's step angle is its
+    mechanism's (the host converts steps), the actuator's lever, range and deadband are
+    its build's (boards/actuator_params.h, :func:`sslfr_sim.fw_harness.actuator_elf`)."""
     rec = m.ConfigRecord.defaults(int(_KINDS[kind]))
     kw = {'board_id': board_id}
+    if kind in AXIS_KINDS:
+        name = axis.axis if axis is not None else options.get('axis', MIRRORS)
+        kw['axis'] = m.ConfigRecord.AXES.index(name)
     if kind == 'axis':
-        axis = options.get('axis', MIRRORS)
-        kw['axis'] = m.ConfigRecord.AXES.index(axis)
         for key in ('max_speed', 'accel'):
             if key in options:
                 kw[key] = float(options[key])
         if str(options.get('sensor', '0')).lower() in ('1', 'true', 'yes'):
             kw['flags'] = m.CFG_HAS_SENSOR
             kw['sensor_zero'] = sensor_zero_for(0.0)
+    elif kind == 'axis_noswitch':
+        cfg = axis if axis is not None else axis_config(kind, options)
+        kw['max_speed'], kw['accel'] = float(cfg.max_speed), float(cfg.accel)
     import dataclasses
     rec = dataclasses.replace(rec, **kw)
     code = rec.check(int(_KINDS[kind]))
@@ -82,20 +120,27 @@ class FirmwareBoard:
             raise ValueError(f'no firmware for board kind {kind!r} (known: {", ".join(KIND_TO_BOARD)})')
         self.kind = _KINDS[kind]
         self.board = KIND_TO_BOARD[kind]
-        self.name = f'sslfr-{self.board}'
+        self.name = _NAMES.get(kind, f'sslfr-{self.board}')
         self.rng = rng
         self.options = dict(options)
-        record = config_record(kind, options, board_id)
-        mech = sensor = None
-        if kind == 'axis':
-            axis = options.get('axis', MIRRORS)
-            init = options.get('initial_angle_deg')
-            self.cfg = AxisConfig.for_axis(axis)
-            mech = axis_mech(axis, math.radians(float(init)) if init not in (None, '') else None)
-            if record.flags & m.CFG_HAS_SENSOR:
-                sensor = record.sensor_zero
+        mech = act = sensor = elf_path = None
+        harness_board = self.board
+        if kind in AXIS_KINDS:
+            self.cfg = axis_config(kind, options)
+            record = config_record(kind, options, board_id, self.cfg)
+            if kind == 'actuator':
+                act = actuator_mech(self.cfg, self.cfg.initial_angle)
+                elf_path = str(actuator_elf(self.cfg))
+            else:
+                mech = mech_of(self.cfg)
+                if kind == 'axis_noswitch':      # the stepper's models, the switchless build
+                    harness_board, elf_path = 'axis', str(elf('axis_noswitch'))
+                if record.flags & m.CFG_HAS_SENSOR:
+                    sensor = record.sensor_zero
+        else:
+            record = config_record(kind, options, board_id)
         self.shadow = None
-        if kind != 'axis':
+        if kind not in AXIS_KINDS:
             if kind == 'gps' and options.get('framing', 'protocol') != 'protocol':
                 raise ValueError('a bare GPS module (framing raw_nmea) runs no firmware: use sim_board')
             cls = board_class(kind)
@@ -107,9 +152,9 @@ class FirmwareBoard:
             ours.setblocking(False)
             self._sock, uart_fd = ours, theirs.fileno()
             self._theirs = theirs
-        self.harness = Harness(self.board, eeprom=eeprom_image(record, key), link=link, path_file=path_file,
-                               uart_fd=uart_fd, pace=pace, mech=mech, sensor_zero=sensor,
-                               seed=rng.randrange(1, 2**31))
+        self.harness = Harness(harness_board, eeprom=eeprom_image(record, key), link=link, path_file=path_file,
+                               uart_fd=uart_fd, pace=pace, mech=mech, act=act, sensor_zero=sensor,
+                               seed=rng.randrange(1, 2**31), elf_path=elf_path)
         self._rx = bytearray()
         self._snap: dict = {}
         self._snap_t = -1.0
@@ -248,8 +293,22 @@ class FirmwareSensor(FirmwareBoard):
         return self.shadow.control(cmd)
 
 
-class FirmwareAxis(FirmwareBoard):
-    """An axis board: joint state from the mechanism model and the firmware's RAM."""
+class _DriveBoard(FirmwareBoard):
+    """An axis board of any drive: the model's stall switch (control socket ``stall``)."""
+
+    @property
+    def stalled(self) -> bool:
+        return self._get('stalled', False)
+
+    @stalled.setter
+    def stalled(self, value: bool) -> None:
+        self.harness.cmd(f'stall {1 if value else 0}')
+        self._snap_t = -1.0
+
+
+class FirmwareAxis(_DriveBoard):
+    """A stepper axis board (with or without switches): joint state from the mechanism
+    model and the firmware's RAM."""
 
     @property
     def angle(self) -> float:
@@ -261,14 +320,6 @@ class FirmwareAxis(FirmwareBoard):
         self.harness.cmd(f'set_angle {float(value):.9f}')
         self._snap_t = -1.0
 
-    @property
-    def stalled(self) -> bool:
-        return self._get('stalled', False)
-
-    @stalled.setter
-    def stalled(self, value: bool) -> None:
-        self.harness.cmd(f'stall {1 if value else 0}')
-        self._snap_t = -1.0
 
     counter = property(lambda self: self._get('counter'))
     target = property(lambda self: self._get('target'))
@@ -277,9 +328,37 @@ class FirmwareAxis(FirmwareBoard):
     faults = property(lambda self: self._get('faults'))
 
 
+class FirmwareActuator(_DriveBoard):
+    """The actuator board: line angle and actuator from the drive model, the loop's
+    state from the firmware's RAM (the attributes of sim/actuator.py's board)."""
+
+    @property
+    def angle(self) -> float:
+        """True line angle [rad] (the lever geometry at the model's actuator length);
+        read only, as the simulator's (the lines are not moved by hand)."""
+        return self._get('angle', float('nan'))
+
+
+    @property
+    def target(self) -> float | None:
+        """The move's target line angle [rad], None without a move."""
+        return self._get('act_target') if self._get('has_target', False) else None
+
+    measured = property(lambda self: self._get('measured', float('nan')))   # [rad] the firmware's
+    duty = property(lambda self: self._get('duty', 0.0))                     # signed PWM duty (model)
+    homed = property(lambda self: self._get('homed', False))
+    faults = property(lambda self: self._get('faults'))
+
+
+def board_type(kind: str) -> type:
+    """The FirmwareBoard subclass of a board ``kind``."""
+    if kind == 'actuator':
+        return FirmwareActuator
+    return FirmwareAxis if kind in AXIS_KINDS else FirmwareSensor
+
+
 def make_firmware_board(kind: str, options: dict, rng: random.Random, board_id: int, **kw) -> FirmwareBoard:
-    cls = FirmwareAxis if kind == 'axis' else FirmwareSensor
-    return cls(kind, options, rng, board_id, **kw).start()
+    return board_type(kind)(kind, options, rng, board_id, **kw).start()
 
 
 # ---------------------------------------------------------------- plain wiring
@@ -413,7 +492,7 @@ def main(argv: list[str] | None = None) -> int:
             endpoint = PtyEndpoint(args.link, args.path_file, announce)
         else:
             opts.setdefault('axis', args.axis)
-            board = (FirmwareAxis if args.kind == 'axis' else FirmwareSensor)(
+            board = board_type(args.kind)(
                 args.kind, opts, rng, 1, link=args.link, path_file=args.path_file, pace=args.pace, key=key)
             board.harness.on_pty = announce
             board.start()

@@ -49,6 +49,7 @@ Fault injection (:meth:`control` of each class, the runner's control channel):
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import fcntl
 import json
@@ -62,7 +63,7 @@ from sslfr_common.contract import (JOINT_RANGE, MIRRORS, MOBILE_STRUCTURE, STOW_
 from sslfr_common.files import atomic_write
 from sslfr_planner import raytrace
 
-from sslfr_drivers.sensors import anemometer, max6675
+from sslfr_drivers.sensors import anemometer, max6675, thermal
 from sslfr_drivers.sensors import veml7700
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.protocol import MAX_PAYLOAD
@@ -299,7 +300,13 @@ class AbsorberSim(_SensorSim):
     ``thermo_period`` [s] (0.25), ``switch_period`` [s] (0.05), ``noise`` [degC] (0.2),
     ``wind`` [m/s] (2: mean of the gusty wind at the cup anemometer, whose pulses are
     counted on the pin the host sets with SetPulseInput; the anemometer follows the
-    typical calibration of :mod:`sslfr_drivers.sensors.anemometer`).
+    typical calibration of :mod:`sslfr_drivers.sensors.anemometer`), ``flow_lph`` [L/h]
+    (a pulse flow meter on the pulse input instead of the anemometer, the fluid pumped
+    at this constant flow: the heat balance's m_dot c_p follows it, and ``flow`` with
+    it), ``flow_k_factor`` [pulses/L] (its calibration, default
+    :data:`sslfr_drivers.sensors.thermal.K_FACTOR`), ``description`` (a collector
+    description's path: its field and receiver focus the sun on the tube, instead of
+    seed 000's prototype).
     """
 
     kind = m.BoardKind.ABSORBER
@@ -314,7 +321,22 @@ class AbsorberSim(_SensorSim):
                               loss_coefficient=float(o.get('loss', 8.0)),
                               flow_capacity=float(o.get('flow', 20.0)),
                               ambient=float(o.get('ambient', 25.0)))
-        self.thermal = AbsorberThermal(p)
+        optics = None
+        if o.get('description'):
+            from sslfr_planner import description as desc_mod
+            from sslfr_planner.analysis.ideal import optical_parameters
+            desc = desc_mod.load(o['description'])
+            optics = optical_parameters(desc)
+            p = dataclasses.replace(p, cavity_half_aperture=desc.optics.receiver_width / 2.0)
+        self.thermal = AbsorberThermal(p, optics)
+        flow = o.get('flow_lph')
+        self.flow_lph = None if flow in (None, '') else float(flow)
+        self.flow_k_factor = float(o.get('flow_k_factor', thermal.K_FACTOR))
+        if self.flow_lph is not None:
+            if not (math.isfinite(self.flow_lph) and 0.0 <= self.flow_lph <= 1.0e5):
+                raise ValueError(f'flow_lph {self.flow_lph!r}: 0..100000 L/h')
+            thermal.check_k_factor(self.flow_k_factor)
+            p.flow_capacity = self._flow_capacity(self.flow_lph)
         if 'temperature' in o:
             self.thermal.temperature = float(o['temperature'])
         self.sky = Sky(self.site['latitude_deg'], self.site['longitude_deg'], self.site['elevation'])
@@ -353,8 +375,16 @@ class AbsorberSim(_SensorSim):
         return super().handle(msg, frame)
 
     def pulse_frequency(self) -> float:
-        """Pulse frequency [Hz] of the anemometer in the wind now."""
+        """Pulse frequency [Hz] on the pulse input: the flow meter's at the pumped flow
+        (``flow_lph``), else the anemometer's in the wind now."""
+        if self.flow_lph is not None:
+            return thermal.pulse_rate(self.flow_lph / 3.6e6, self.flow_k_factor)
         return anemometer.frequency(self.wind.speed)
+
+    def _flow_capacity(self, lph: float) -> float:
+        """m_dot c_p [W/K] of ``lph`` [L/h] of water at the inlet (ambient) temperature."""
+        t = self.thermal.p.ambient
+        return lph / 3.6e6 * thermal.water_density(t) * thermal.water_cp(t)
 
     def axis_angles(self) -> dict[str, float]:
         """Axis joint angles [rad] from the world file, re-read at most every 0.1 s
@@ -452,6 +482,8 @@ class AbsorberSim(_SensorSim):
             self.sky.cloud_factor = float(cmd.get('value', 1.0))
         elif kind == 'flow':
             self.thermal.p.flow_capacity = float(cmd.get('value', 20.0))
+            if self.flow_lph is not None:     # the meter sees the same flow
+                self.flow_lph = self.thermal.p.flow_capacity / self._flow_capacity(1.0)
         elif kind == WIND.name:       # the control kind is the sslfr sim fault's (faults.WIND_FAULT)
             value = float(cmd.get('value', self.calm_wind)) if active else self.calm_wind
             if not (math.isfinite(value) and 0.0 <= value <= 100.0):

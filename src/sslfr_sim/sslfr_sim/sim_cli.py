@@ -51,7 +51,7 @@ from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.liveness import LivenessWatch
 from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
 from sslfr_bringup.up import select
-from sslfr_common.contract import ABSORBER_TEMPERATURE, GPS_FIX, IRRADIANCE_BEAM
+from sslfr_common.contract import ABSORBER_TEMPERATURE, AXIS_HOME, GPS_FIX, IRRADIANCE_BEAM, DriveKind
 from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ranged_float, ros_namespace
 
 
@@ -140,6 +140,9 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
 #: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
 #: absorber). Override with nodeset.yaml sim.anchor_margin.
 ANCHOR_MARGIN = 10.0
+#: [L/h] the flow through a simulated absorber with a flow meter (seed 003 section 3.2:
+#: the hydro-dynamic tests pump the water at a constant 150 L/h)
+FLOW_LPH = 150.0
 #: [s] the same with --boards firmware: the firmware boards start in 15-30 s on a loaded
 #: 2-core machine (each sensor world tabulates the sun, then its harness starts)
 FIRMWARE_ANCHOR_MARGIN = 25.0
@@ -226,6 +229,9 @@ def parser() -> argparse.ArgumentParser:
                    help=f'wall seconds the sensor simulators get to start before the simulated clock '
                         f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
                         f'ahead of /clock, see sim.json sensor_lead_s)')
+    p.add_argument('--flow', type=ranged_float(0.0, 1.0e5, unit='L/h'), default=FLOW_LPH, metavar='LPH',
+                   help=f'water pumped through the absorber [L/h] when the site config counts a flow meter '
+                        f'(absorber_board flow_meter_pin; default {FLOW_LPH:g}: seed 003 section 3.2; 0: pump stopped)')
     p.add_argument('--no-report', action='store_true', help='skip the day report at the end')
     p.add_argument('--wall-clock', action='store_true',
                    help='run on the system clock as on the Pi: from now (UTC) to --end (default: 10 min '
@@ -283,14 +289,30 @@ def main(argv: list[str]) -> int:
             shutil.rmtree(run, ignore_errors=True)
 
 
+def operator_references(ns, ros, say) -> None:
+    """The simulated operator references each drive without switches (seed 003) once its
+    driver is active, as the installer does on site: the simulated board starts at the
+    description's sleeping position, which is its reference angle (``home`` service:
+    "the axis is now at home_position"). RuntimeError when a driver refuses."""
+    for node in ns.nodes:
+        if node.parameters.get('drive') != DriveKind.STEPPER_NO_SWITCHES.value:
+            continue
+        axis = node.parameters['axis']
+        ok, message = ros.trigger(AXIS_HOME.of(axis).lstrip('/'), 20.0)
+        if not ok:
+            raise RuntimeError(f'the operator reference of {axis} was refused: {message}')
+        say(f'sslfr sim: simulated operator referenced {axis}: {message}')
+
+
 def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequence of a simulated day
     t_wall0 = time.monotonic()
     try:
-        ns = select(nodeset_mod.load(args.nodeset), args.only, args.skip)
+        ns = nodeset_mod.load(args.nodeset)
         if args.namespace is not None:
             ns = dataclasses.replace(ns, namespace=args.namespace)
-        ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         config = nodeset_mod.resolve_config(args.config, default=ns.config)
+        ns = select(nodeset_mod.for_config(ns, config), args.only, args.skip)
+        ns.processes(args.layout)                    # an unknown layout: KeyError naming the known ones
         params = nodeset_mod.checked_params(ns, config)
         simcfg = ns.sim
         mono0 = time.monotonic()
@@ -412,7 +434,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                   'speed': f'{speed:g}', 'anchor': '{anchor}', 'axis': bname, 'config': str(config),
                   'seed': args.seed + len(board_progs), 'world': run / 'world.json', 'key_file': key_file,
                   **site}
-        board_progs[bname] = Program(name=f'sim_{bname}', argv=nodeset_mod.sim_board_argv(board, exe, values),
+        argv = nodeset_mod.sim_board_argv(board, exe, values) + _flow_options(bname, params, ns.namespace, args.flow)
+        board_progs[bname] = Program(name=f'sim_{bname}', argv=argv,
                                      start=-1, stop=3, restart=False, kind='board')
     # ---- nodes (ports = the simulators' pty links)
     extra = {name: dict(v) for name, v in (simcfg.get('node_parameters') or {}).items()}
@@ -516,6 +539,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                            ', '.join(p.name for p in lifecycle if p.lifecycle_state != 'active') or 'all',
                            ', '.join(t for t in watch if not ros.seen.get(t)) or 'all'))
             sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
+            operator_references(ns, ros, say)
         except RuntimeError as exc:
             print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
             return 1
@@ -647,6 +671,24 @@ class MemoryCensus(threading.Thread):
                 'peak_rss_sim_boards_mb': round(self.peak_boards / mb, 1),
                 'rss_pss_at_peak_mb': {k: [round(v[0] / mb, 1), round(v[1] / mb, 1)]
                                        for k, v in self.peak_detail.items()}}
+
+
+def _flow_options(board: str, params, namespace: str, lph: float) -> list[str]:
+    """The absorber simulator's flow meter options when the site config counts one
+    (``absorber_board`` ``flow_meter_pin`` >= 0): ``lph`` [L/h] at the config's K-factor,
+    and the collector description (its optics focus the sun: the thermal output is
+    measured against its aperture)."""
+    from sslfr_drivers.sensors.sensor_params import ABSORBER_BOARD
+    namespace = namespace or ''
+    if namespace.strip('/'):             # the config as its nodes get it (sslfr_bringup.nodeset.site_config)
+        params = nodeset_mod.for_namespace(params, namespace)
+    node = nodeset_mod.node_params(params, 'absorber_board', namespace)
+    if board != 'absorber' or node.get('flow_meter_pin', -1) < 0:
+        return []
+    k = node.get('flow_meter_k_factor', ABSORBER_BOARD.defaults()['flow_meter_k_factor'])
+    out = ['--opt', f'flow_lph={lph:g}', '--opt', f'flow_k_factor={float(k):g}']
+    desc = nodeset_mod.node_params(params, 'planner', namespace).get(nodeset_mod.DESCRIPTION_KEY)
+    return out + (['--opt', f'description={desc}'] if desc else [])
 
 
 def _node_programs(ns, config, sim_ports, extra, run_dir, layout=None, params=None, use_sim_time=True):

@@ -20,6 +20,31 @@ from sslfr_drivers.link import messages as m
 from sslfr_sim.axis import AxisConfig, AxisSim
 
 
+def config_from_description(desc, axis: str = MIRRORS, **kw) -> AxisConfig:
+    """The axis of a collector description's ``axis`` movement (a stepper_no_switches
+    drive): range ends, stow angle, step [rad/step] = step_deg / gear_ratio; ``kw`` sets
+    other :class:`AxisConfig` fields."""
+    mv = desc.movement(axis)
+    if mv is None or mv.drive != DriveKind.STEPPER_NO_SWITCHES:
+        raise ValueError(f'{desc.path}: {axis} is not a stepper_no_switches movement')
+    return AxisConfig(axis=axis, lo=mv.range[0], hi=mv.range[1], sleep=mv.stow,
+                      step_rad=mv.step / mv.gear_ratio, has_sensor=False, **kw)
+
+
+def config_from_options(options: dict) -> AxisConfig:
+    """The axis of runner options (``sim_board`` / ``fw_board --opt``): ``description``
+    (default the shipped seed-003 file), ``axis``, ``initial_angle_deg``, ``max_speed``
+    [steps/s], ``accel`` [steps/s^2]."""
+    from sslfr_planner.description import load
+    from sslfr_sim.actuator import shipped_description
+    opts = dict(options)
+    desc = load(opts['description']) if opts.get('description') else shipped_description('bucaramanga_single_axis')
+    kw = {k: float(opts[k]) for k in ('max_speed', 'accel') if k in opts}
+    if 'initial_angle_deg' in opts:
+        kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
+    return config_from_description(desc, opts.get('axis', MIRRORS), **kw)
+
+
 class SwitchlessAxisSim(AxisSim):
     """Stepper axis board without switches (see module docstring)."""
 
@@ -29,28 +54,13 @@ class SwitchlessAxisSim(AxisSim):
     @classmethod
     def from_description(cls, desc, axis: str = MIRRORS, board_id: int = 1,
                          rng: random.Random | None = None, **kw) -> 'SwitchlessAxisSim':
-        """From a collector description's ``axis`` movement (a stepper_no_switches
-        drive): range ends, stow angle, step [rad/step] = step_deg / gear_ratio;
-        ``kw`` sets other :class:`AxisConfig` fields."""
-        mv = desc.movement(axis)
-        if mv is None or mv.drive != DriveKind.STEPPER_NO_SWITCHES:
-            raise ValueError(f'{desc.path}: {axis} is not a stepper_no_switches movement')
-        cfg = AxisConfig(axis=axis, lo=mv.range[0], hi=mv.range[1], sleep=mv.stow,
-                         step_rad=mv.step / mv.gear_ratio, has_sensor=False, **kw)
-        return cls(cfg, board_id=board_id, rng=rng)
+        """From a collector description's ``axis`` movement (:func:`config_from_description`)."""
+        return cls(config_from_description(desc, axis, **kw), board_id=board_id, rng=rng)
 
     @classmethod
     def from_options(cls, options: dict, rng: random.Random, board_id: int = 1) -> 'SwitchlessAxisSim':
-        """Runner options: ``description`` (default the shipped seed-003 file), ``axis``,
-        ``initial_angle_deg``, ``max_speed`` [steps/s], ``accel`` [steps/s^2]."""
-        from sslfr_planner.description import load
-        from sslfr_sim.actuator import shipped_description
-        opts = dict(options)
-        desc = load(opts['description']) if opts.get('description') else shipped_description('bucaramanga_single_axis')
-        kw = {k: float(opts[k]) for k in ('max_speed', 'accel') if k in opts}
-        if 'initial_angle_deg' in opts:
-            kw['initial_angle'] = math.radians(float(opts['initial_angle_deg']))
-        return cls.from_description(desc, opts.get('axis', MIRRORS), board_id=board_id, rng=rng, **kw)
+        """Build from runner options (:func:`config_from_options`)."""
+        return cls(config_from_options(options), board_id=board_id, rng=rng)
 
     def limit_bits(self) -> int:
         """No switches wired: always 0."""

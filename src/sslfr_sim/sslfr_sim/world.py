@@ -261,12 +261,14 @@ class AbsorberThermal:
     catch nothing.
     """
 
-    def __init__(self, params: ThermalParameters | None = None):
+    def __init__(self, params: ThermalParameters | None = None, optics=None):
         self.p = params or ThermalParameters()
         self.temperature = self.p.ambient
         self.power = 0.0
         from sslfr_planner.analysis.optics import OpticalParameters
-        self._optics = OpticalParameters()
+        # the field and receiver: seed 000's prototype unless given (a described
+        # collector's: sslfr_planner.analysis.ideal.optical_parameters)
+        self._optics = optics or OpticalParameters()
 
     def focused_power(self, dni: float, transversal: float, mirror_angle: float | None) -> float:
         """Power reaching the tube [W] for DNI [W/m^2], theta_t [rad] (in the frame of the

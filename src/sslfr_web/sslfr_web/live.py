@@ -7,9 +7,10 @@ time), each with the wall time it arrived; :meth:`LiveState.snapshot` is what th
 receives. A ``version`` counter tells the server whether anything changed.
 
 :class:`DayBuffer` is the node's own buffer behind the day plots: one sample per
-``period`` of ROS time (axes measured / setpoint, the mirrors' ideal angle
-theta_t / 2 from ``tracker/sun`` (seed 000 eq. 11), absorber temperatures, beam
-irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
+``period`` of ROS time (axes measured / setpoint, the mirrors' ideal drive angle for
+the transversal angle of ``tracker/sun``: the collector's law once its description is
+known (:func:`.collector.ideal_drive`), theta_t / 2 before (seed 000 eq. 11), absorber
+temperatures, beam irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
 planner's day), so a reload of the page shows the day so far.
 
 Each axis' accuracy alarm (:class:`sslfr_common.accuracy.AccuracyAlarm`, the
@@ -99,6 +100,14 @@ def wind_dict(m) -> dict:
             'stamp': seconds_or_none(m.header.stamp)}
 
 
+def thermal_dict(m) -> dict:
+    """``absorber/thermal_power``: flow [m^3/s] and [L/h] (for people), power [W],
+    efficiency [-] (None: not computed)."""
+    return {'volume_flow': num(m.volume_flow, 9), 'lph': num(m.volume_flow * 3.6e6, 1), 'power': num(m.power, 1),
+            'efficiency': num(m.efficiency, 4), 'beam': num(m.beam, 0), 'aperture': num(m.aperture, 3),
+            'stamp': seconds_or_none(m.header.stamp)}
+
+
 def axis_dict(m) -> dict:
     link = int(m.link_state)
     return {'axis': m.axis, 'state': m.state, 'commanded': num(m.commanded), 'setpoint': num(m.setpoint),
@@ -148,7 +157,7 @@ class LiveState:
     #: key -> converter of its messages
     CONVERT: dict[str, Callable] = {'phase': phase_dict, 'safety': safety_dict, 'sun': sun_dict,
                                     'beam': beam_dict, 'gps': fix_dict, 'axes': axis_dict,
-                                    'temperatures': temperature_dict, WIND.name: wind_dict}
+                                    'temperatures': temperature_dict, WIND.name: wind_dict, 'thermal': thermal_dict}
     NESTED = ('axes', 'temperatures')
 
     def __init__(self, axes: tuple[str, ...] = JOINTS, wall: Callable[[], float] = time.time):
@@ -196,6 +205,9 @@ class LiveState:
 
     def on_wind(self, m) -> None:
         self._set(WIND.name, m)
+
+    def on_thermal(self, m) -> None:
+        self._set('thermal', m)
 
     def set_info(self, key: str, value: Any) -> None:
         with self._lock:
@@ -254,6 +266,8 @@ class DayBuffer:
         if not period > 0:
             raise ValueError('period must be > 0')
         self.period = float(period)
+        #: theta_t [rad] -> the mirrors' ideal drive angle [rad]; None: theta_t / 2 (seed 000 eq. 11)
+        self.ideal: Callable[[float], float] | None = None
         self.maxlen = int(math.ceil(86400.0 / self.period)) + 2
         self._lock = threading.Lock()
         self.t: deque = deque(maxlen=self.maxlen)
@@ -287,8 +301,7 @@ class DayBuffer:
             self.version += 1
             return True
 
-    @staticmethod
-    def _row(state: LiveState) -> dict:
+    def _row(self, state: LiveState) -> dict:
         row: dict[str, Any] = {}
         for axis in JOINTS:
             a = state.get('axes', axis) or {}
@@ -296,7 +309,8 @@ class DayBuffer:
             row[f'{axis}_setpoint'] = a.get('setpoint')
         sun = state.get('sun') or {}
         if sun.get('above_horizon') and sun.get('transversal') is not None:
-            row['mirrors_ideal'] = round(sun['transversal'] / 2.0, 6)      # seed 000 eq. 11
+            tt = sun['transversal']
+            row['mirrors_ideal'] = round(self.ideal(tt) if self.ideal is not None else tt / 2.0, 6)
         for name in TEMPERATURES:
             row[name] = (state.get('temperatures', name) or {}).get('value')
         row['beam'] = (state.get('beam') or {}).get('beam')

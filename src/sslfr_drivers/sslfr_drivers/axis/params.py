@@ -13,7 +13,7 @@ import os
 import re
 import stat as stat_mod
 
-from sslfr_common.contract import JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION, WIND_STOW_POSITION
+from sslfr_common.contract import JOINT_LIMITS, JOINT_RANGE, JOINTS, STEP_ANGLE, STOW_POSITION, WIND_STOW_POSITION
 from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_common import accuracy
@@ -106,16 +106,17 @@ _SPECS = [
 
 def cross_check(p: dict) -> list[str]:
     """Rules between parameters (each value alone is valid): soft limits ordered and
-    inside the axis' mechanical range, the stow position inside them, min_speed <=
-    max_speed."""
+    inside the joint's kinematic limits (contract JOINT_LIMITS; the collector's range
+    comes as the soft limits from its description), the stow positions inside them,
+    min_speed <= max_speed."""
     axis = p['axis']
     if not p['lower_limit'] < p['upper_limit']:
         return [f"soft limits need lower_limit < upper_limit, got {p['lower_limit']!r}..{p['upper_limit']!r} rad"]
-    mech = JOINT_RANGE[axis]
+    mech = JOINT_LIMITS[axis]
     errors = []
     if p['lower_limit'] < mech[0] - 1e-9 or p['upper_limit'] > mech[1] + 1e-9:
         errors.append(f"soft limits [{p['lower_limit']:.4f}, {p['upper_limit']:.4f}] rad exceed the "
-                      f'mechanical range [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
+                      f'kinematic limits [{mech[0]:.4f}, {mech[1]:.4f}] rad of {axis}')
     else:
         for key in ('stow_position', 'wind_stow_position', 'host_loss_stow_position'):
             if not SoftLimits(p['lower_limit'], p['upper_limit']).contains(p[key]):
@@ -137,9 +138,11 @@ def cross_check(p: dict) -> list[str]:
 PARAMS = ParamTable(_SPECS, cross_check)
 
 
-def params_for(axis: str) -> ParamTable:
+def params_for(axis: str, **_role) -> ParamTable:
     """The table of ``axis`` (defaults: its mechanical range as soft limits, its stow
-    position as stow and home position); KeyError for an unknown axis."""
+    position as stow and home position); KeyError for an unknown axis. The node set's
+    other role parameters (``_role``: the collector description's) are values, checked
+    against this table like the site config's."""
     lo, hi = JOINT_RANGE[axis]
     return PARAMS.with_defaults(axis=axis, lower_limit=lo, upper_limit=hi,
                                 stow_position=STOW_POSITION[axis], home_position=STOW_POSITION[axis],

@@ -19,7 +19,8 @@ from pathlib import Path
 #: actuator the linear actuator closed on an inclinometer (seed 004)
 BOARDS = ('axis', 'absorber', 'irradiance', 'gps', 'axis_noswitch', 'actuator')
 #: board kind name of the simulators (sim.KINDS) -> firmware board
-KIND_TO_BOARD = {'axis': 'axis', 'absorber': 'absorber', 'irradiance': 'irradiance', 'gps': 'gps'}
+KIND_TO_BOARD = {'axis': 'axis', 'absorber': 'absorber', 'irradiance': 'irradiance', 'gps': 'gps',
+                 'axis_noswitch': 'axis_noswitch', 'actuator': 'actuator'}
 ARDUINO = Path('/usr/share/arduino/hardware/arduino/avr')
 #: the bootloader Debian's arduino-core-avr ships for the Pro Mini 16 MHz ATmega328P
 #: (boards.txt pro.menu.cpu.16MHzatmega328.bootloader.file; avrdude -c arduino -b 57600)

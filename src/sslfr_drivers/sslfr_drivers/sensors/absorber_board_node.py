@@ -23,6 +23,11 @@ Publishes
     mean) and the 10 min mean [m/s] from the pulse counts
     (:mod:`sslfr_drivers.sensors.anemometer`); the board is told the pin
     (SetPulseInput) every time its link comes up.
+    ``absorber/flow`` (Flow) and ``absorber/thermal_power`` (ThermalPower), R10, 4 Hz,
+    when ``flow_meter_pin`` names the pin of a pulse flow meter instead (one pulse input
+    per board): the mean flow over ``flow_window`` [m^3/s], the useful power m_dot c_p
+    (T_out - T_in) [W] and seed 003's efficiency against ``irradiance/beam`` (then
+    subscribed) on ``aperture_area`` (:mod:`sslfr_drivers.sensors.thermal`).
     ``diagnostics``.
 """
 from __future__ import annotations
@@ -34,12 +39,13 @@ from dataclasses import dataclass
 
 from sensor_msgs.msg import Temperature
 
-from sslfr_interfaces.msg import LimitSwitches, Wind
+from sslfr_interfaces.msg import Flow, Irradiance, LimitSwitches, ThermalPower, Wind
 
-from sslfr_common.contract import ABSORBER_TEMPERATURE, LIMIT_SWITCHES, SWITCHES, THERMOCOUPLES, WIND
+from sslfr_common.contract import (ABSORBER_FLOW, ABSORBER_TEMPERATURE, IRRADIANCE_BEAM, LIMIT_SWITCHES, SWITCHES,
+                                   THERMAL_POWER, THERMOCOUPLES, WIND)
 from sslfr_common.node import qos, run_node, stamp, to_sec
 from sslfr_drivers.link.sensor_messages import PULSE_PIN_OFF, PulseSample, SetPulseInput, SwitchSample, ThermocoupleSample
-from sslfr_drivers.sensors import anemometer, max6675
+from sslfr_drivers.sensors import anemometer, max6675, thermal
 from sslfr_drivers.sensors.debounce import SwitchTracker
 from sslfr_drivers.sensors.health import RateMeter
 from sslfr_drivers.sensors.sensor_node import SensorBoardNode
@@ -73,6 +79,10 @@ class AbsorberBoardNode(SensorBoardNode):
         self._wind = anemometer.WindStats(self._values['anemometer_slope'], self._values['anemometer_offset'])
         self._wind_last: anemometer.WindReading | None = None
         self._wind_counts = {'samples': 0, 'restarts': 0, 'pin_refused': 0}
+        self._pubs_thermal = None              # (flow, thermal) publishers: made with the first flow sample
+        self._thermal = self._thermal_tracker(self._values)
+        self._beam_sub = None
+        self._subscribe_beam(self._values)
         self._start_board()
         self._sw_timer = self.create_timer(1.0 / self._values['switch_rate'], self._publish_switches,
                                            clock=self._steady)
@@ -83,15 +93,32 @@ class AbsorberBoardNode(SensorBoardNode):
         return max6675.ErrorModel(v['converter_error'], v['thermocouple_error'],
                                   v['thermocouple_error_relative'])
 
+    @staticmethod
+    def _thermal_tracker(v: dict) -> thermal.ThermalTracker:
+        return thermal.ThermalTracker(v['flow_meter_k_factor'], v['flow_window'], v['aperture_area'],
+                                      v['efficiency_min_beam'], v['beam_max_age'])
+
+    def _subscribe_beam(self, v: dict) -> None:
+        if v['flow_meter_pin'] >= 0 and self._beam_sub is None:
+            self._beam_sub = self.create_subscription(Irradiance, IRRADIANCE_BEAM.name, self._on_beam,
+                                                      qos(IRRADIANCE_BEAM))
+
+    def _on_beam(self, msg: Irradiance) -> None:
+        self._thermal.set_beam(msg.beam, self._steady.now().nanoseconds * 1e-9)
+
     def _apply(self, new: dict) -> None:
         self._model = self._error_model(new)
+        keys = ('flow_meter_k_factor', 'flow_window', 'aperture_area', 'efficiency_min_beam', 'beam_max_age')
+        if any(new[k] != self._values[k] for k in keys):
+            self._thermal = self._thermal_tracker(new)
+        self._subscribe_beam(new)
         if (new['anemometer_slope'], new['anemometer_offset']) != (self._values['anemometer_slope'],
                                                                    self._values['anemometer_offset']):
             self._wind = anemometer.WindStats(new['anemometer_slope'], new['anemometer_offset'])
-        if new['anemometer_pin'] != self._values['anemometer_pin']:
+        if self._pulse_pin(new) != self._pulse_pin(self._values):
             link = self._source.link if self._source is not None else None
             if link is not None:
-                self._set_pulse_input(link, new['anemometer_pin'])
+                self._set_pulse_input(link, self._pulse_pin(new))
         with self._sw_lock:
             self._switches.debouncer.hold_time = float(new['debounce_time'])
         if new['switch_rate'] != self._values['switch_rate']:
@@ -101,17 +128,22 @@ class AbsorberBoardNode(SensorBoardNode):
                                                clock=self._steady)
 
     def _on_link_up(self, link) -> None:
-        """Reader thread: tell the board which pin counts the anemometer."""
-        if self._values['anemometer_pin'] >= 0:
-            self._set_pulse_input(link, self._values['anemometer_pin'])
+        """Reader thread: tell the board which pin counts the anemometer or flow meter."""
+        if self._pulse_pin(self._values) >= 0:
+            self._set_pulse_input(link, self._pulse_pin(self._values))
+
+    @staticmethod
+    def _pulse_pin(v: dict) -> int:
+        """The board's one pulse input: the anemometer's or the flow meter's pin (-1: none)."""
+        return v['anemometer_pin'] if v['anemometer_pin'] >= 0 else v['flow_meter_pin']
 
     def _set_pulse_input(self, link, pin: int) -> None:
         def done(fut):
             if fut.exception() is not None:
                 self._wind_counts['pin_refused'] += 1
-                self.get_logger().error(f'anemometer: the board did not take pin {pin}: {fut.exception()}')
+                self.get_logger().error(f'pulse input: the board did not take pin {pin}: {fut.exception()}')
             else:
-                self.get_logger().info(f'anemometer: counting pulses on pin {pin}')
+                self.get_logger().info(f'pulse input: counting pulses on pin {pin}')
         link.submit(SetPulseInput(PULSE_PIN_OFF if pin < 0 else pin)).add_done_callback(done)
 
     def _on_message(self, msg) -> None:
@@ -136,7 +168,10 @@ class AbsorberBoardNode(SensorBoardNode):
                 self._publish_temperature('outlet', msg.outlet, received)
                 continue
             if isinstance(msg, PulseSample):
-                self._publish_wind(msg, received)
+                if self._values['flow_meter_pin'] >= 0:
+                    self._publish_flow(msg, received)
+                else:
+                    self._publish_wind(msg, received)
                 continue
             if not msg.first:
                 with self._sw_lock:
@@ -161,6 +196,7 @@ class AbsorberBoardNode(SensorBoardNode):
             self.get_logger().info(f'{which} thermocouple: reading again')
         self._faults[which] = r.fault
         self._last_temp[which] = r.temperature
+        self._thermal.set_temperature(which, r.temperature if r.ok else math.nan)
         self._pub_t[which].publish(msg)
 
     def _publish_wind(self, sample: PulseSample, received) -> None:
@@ -181,6 +217,28 @@ class AbsorberBoardNode(SensorBoardNode):
         msg.header.frame_id = 'anemometer'
         msg.speed, msg.gust, msg.mean, msg.window, msg.pulse_rate = r.speed, r.gust, r.mean, r.window, r.pulse_rate
         self._pub_wind.publish(msg)
+
+    def _publish_flow(self, sample: PulseSample, received) -> None:
+        """One pulse sample -> ``absorber/flow`` and ``absorber/thermal_power`` (nothing
+        for the first sample after a start, a board reset or a gap)."""
+        out = self._thermal.add(sample.board_ms, sample.count, self._steady.now().nanoseconds * 1e-9)
+        if out is None:
+            return
+        f, r = out
+        if self._pubs_thermal is None:         # a collector without a flow meter has no such topics
+            self._pubs_thermal = (self.create_publisher(Flow, ABSORBER_FLOW.name, qos(ABSORBER_FLOW)),
+                                  self.create_publisher(ThermalPower, THERMAL_POWER.name, qos(THERMAL_POWER)))
+        msg = Flow()
+        msg.header.stamp = received.to_msg()
+        msg.header.frame_id = 'flow_meter'
+        msg.volume_flow, msg.window, msg.pulse_rate = f.volume_flow, f.window, f.pulse_rate
+        self._pubs_thermal[0].publish(msg)
+        tp = ThermalPower()
+        tp.header = msg.header
+        tp.volume_flow, tp.mass_flow, tp.specific_heat, tp.power = r.volume_flow, r.mass_flow, r.cp, r.power
+        tp.inlet_temperature, tp.outlet_temperature = r.inlet, r.outlet
+        tp.beam, tp.aperture, tp.efficiency = r.beam, r.aperture, r.efficiency
+        self._pubs_thermal[1].publish(tp)
 
     def _publish_switches(self) -> None:
         with self._sw_lock:
@@ -220,6 +278,13 @@ class AbsorberBoardNode(SensorBoardNode):
                           'wind_gust_mps': 'none' if w is None else f'{w.gust:.2f}',
                           'wind_mean_mps': 'none' if w is None else f'{w.mean:.2f} over {w.window:.0f} s',
                           **{f'wind_{k}': v for k, v in self._wind_counts.items()}})
+        if self._values['flow_meter_pin'] >= 0:
+            last = self._thermal.last
+            extra.update({'flow_meter_pin': self._values['flow_meter_pin'],
+                          'flow_lph': 'none' if last is None else f'{thermal.litres_per_hour(last[0].volume_flow):.1f}',
+                          'thermal_power_W': 'none' if last is None else f'{last[1].power:.1f}',
+                          'efficiency': 'none' if last is None else f'{last[1].efficiency:.4f}',
+                          **{f'flow_{k}': v for k, v in self._thermal.counts.items()}})
         self._publish_diagnostics(faults, extra)
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from sslfr_common.params import ParamSpec, ParamTable
 
 from sslfr_drivers.link.keys import KEY_FILE_PARAM
-from sslfr_drivers.sensors import anemometer
+from sslfr_drivers.sensors import anemometer, thermal
 from sslfr_drivers.sensors.veml7700 import LUMINOUS_EFFICACY
 
 HEARTBEAT = ParamSpec('heartbeat', 0.5, 'board link PING period [s]', 's', 0.05, 5.0)
@@ -23,7 +23,7 @@ SOURCE_KEYS: tuple[str, ...] = ('port', 'framing', 'baudrate', 'heartbeat', 'key
 
 
 def _board_table(board: str, sample: str, max_age: float, *specs: ParamSpec,
-                 baudrate: str = 'serial line speed [bit/s]') -> ParamTable:
+                 baudrate: str = 'serial line speed [bit/s]', cross_check=None) -> ParamTable:
     """The board parameters every sensor node has, around the node's own ``specs``."""
     return ParamTable((
         ParamSpec('port', '', f'{board} port: device path, pyserial URL or xbee:<dev>?addr=<hex>; '
@@ -33,7 +33,7 @@ def _board_table(board: str, sample: str, max_age: float, *specs: ParamSpec,
         *specs,
         ParamSpec('max_sample_age', max_age, f'diagnostics WARN when no {sample} for this long [s]',
                   's', 0.1, 3600.0),
-        HEARTBEAT))
+        HEARTBEAT), cross_check)
 
 
 #: ``gps`` node.
@@ -52,6 +52,22 @@ GPS = _board_table(
     baudrate='serial line speed [bit/s] (board protocol: 115200; a bare NEO-6M module with '
              'framing raw_nmea: 9600)')
 
+def _pulse_pin(name: str, counts: str, none: str) -> ParamSpec:
+    """The absorber board pin counting ``counts`` (its one pulse input); -1 = none."""
+    return ParamSpec(name, -1, f'Arduino pin of the absorber board that counts {counts} (7, 8, 11, '
+                               f'14..17 = A0..A3); -1 = no {none} [-]', '-', -1, 17,
+                     validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
+                     else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}')
+
+
+def _one_pulse_input(v: dict) -> list[str]:
+    """The absorber board counts one pulse input: an anemometer or a flow meter."""
+    if v['anemometer_pin'] >= 0 and v['flow_meter_pin'] >= 0:
+        return [f'anemometer_pin {v["anemometer_pin"]} and flow_meter_pin {v["flow_meter_pin"]}: the '
+                'absorber board counts one pulse input (docs/firmware.md): set one of them to -1']
+    return []
+
+
 #: ``absorber_board`` node.
 ABSORBER_BOARD = _board_table(
     'absorber board', 'thermocouple sample', 1.5,
@@ -66,17 +82,25 @@ ABSORBER_BOARD = _board_table(
               's', 0.0, 5.0),
     ParamSpec('switch_rate', 10.0, 'limit_switches publication rate besides changes [Hz]',
               'Hz', 0.5, 100.0),
-    ParamSpec('anemometer_pin', -1, 'Arduino pin of the absorber board that counts the cup '
-                                    'anemometer pulses (7, 8, 11, 14..17 = A0..A3); -1 = no '
-                                    'anemometer, no wind topic [-]', '-', -1, 17,
-              validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
-              else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}'),
+    _pulse_pin('anemometer_pin', 'the cup anemometer pulses', 'anemometer, no wind topic'),
     ParamSpec('anemometer_slope', anemometer.SLOPE, 'anemometer calibration: wind speed per pulse '
                                                     'frequency (typical 3-cup: 0.765) [m/s/Hz]',
               'm/s/Hz', 0.01, 20.0),
     ParamSpec('anemometer_offset', anemometer.OFFSET, 'anemometer calibration: speed added while '
                                                       'the cups turn (starting threshold, typical 0.35) [m/s]',
-              'm/s', 0.0, 5.0))
+              'm/s', 0.0, 5.0),
+    _pulse_pin('flow_meter_pin', 'the flow meter pulses', 'flow meter, no flow and thermal power topics'),
+    ParamSpec('flow_meter_k_factor', thermal.K_FACTOR, 'flow meter calibration: pulses per litre '
+                                                       '(data sheet; YF-S201 type: 450) [1/L]', '1/L', 0.1, 1.0e5),
+    ParamSpec('flow_window', thermal.FLOW_WINDOW, 'the flow is the mean over this window [s]', 's', 0.5, 600.0),
+    ParamSpec('aperture_area', 0.0, 'aperture of the primary mirrors, lines x line_width x line_length '
+                                    'of the collector description (checked against it) [m^2]; 0 = '
+                                    'unknown: no efficiency', 'm^2', 0.0, 1000.0),
+    ParamSpec('efficiency_min_beam', thermal.MIN_BEAM, 'no efficiency below this beam irradiance '
+                                                       '[W/m^2]', 'W/m^2', 0.0, 1500.0),
+    ParamSpec('beam_max_age', 5.0, 'a beam irradiance older than this (steady clock) is not used '
+                                   'for the efficiency [s]', 's', 0.5, 600.0),
+    cross_check=_one_pulse_input)
 
 #: ``irradiance`` node.
 IRRADIANCE = _board_table(

@@ -41,6 +41,9 @@ function render(data) {
     tr.append(el('td', Object.entries(c.axes).map(([a, s]) => a + ' ' + deg(s.error) + ' (' + s.state + ')').join(', ') || '-'));
     tr.append(el('td', Object.entries(c.temperatures).map(([k, v]) => k + ' ' + (v === null ? '-' : v.toFixed(1))).join(', ') || '-'));
     tr.append(el('td', c.beam === null ? '-' : c.beam.toFixed(0)));
+    // where a flow meter counts (else '-'): flow [m^3/s] shown in L/h
+    tr.append(el('td', c.flow === null ? '-' : (c.flow * 3.6e6).toFixed(1) + ' L/h, ' +
+      (c.thermal_power === null ? '-' : c.thermal_power.toFixed(0) + ' W'), 'thermal'));
     const cmds = el('td');
     for (const [label, name, extra] of [['Stow', 'stow', null], ['Auto', 'mode', {mode: 'auto'}]]) {
       const b = el('button', label);
