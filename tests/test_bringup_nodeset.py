@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / 'src/sslfr_bringup'))
-from sslfr_bringup import nodeset, service, up  # noqa: E402
+from sslfr_bringup import dds_profile, nodeset, service, up  # noqa: E402
 
 LAUNCH = ROOT / 'src/sslfr_bringup/launch/tracker.launch.py'
 AXES = ('mirrors_driver', 'mobile_structure_driver', 'secondary_reflector_driver')
@@ -175,12 +175,18 @@ def test_launch_environment_defaults_env_and_arguments(monkeypatch):
     mod = _launch_module()
     monkeypatch.delenv('ROS_DOMAIN_ID', raising=False)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    monkeypatch.delenv(dds_profile.PROFILE_ENV, raising=False)
     ns = nodeset.load()
+    profile = str(nodeset.config_dir() / dds_profile.PROFILE_FILE)
     assert mod._environment('', '') == {'ROS_DOMAIN_ID': str(ns.domain_id),
-                                         'ROS_AUTOMATIC_DISCOVERY_RANGE': ns.discovery_range}
+                                         'ROS_AUTOMATIC_DISCOVERY_RANGE': ns.discovery_range,
+                                         dds_profile.PROFILE_ENV: profile}
+    # a node process is respawned after its DDS lease (3 s) + 1 s, not the 2 s of old
+    assert mod._respawn_delay(mod._environment('', '')) == 4.0
     monkeypatch.setenv('ROS_DOMAIN_ID', '7')
     assert mod._environment('', '')['ROS_DOMAIN_ID'] == '7'
-    assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+    assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
+                                               dds_profile.PROFILE_ENV: profile}
 
 
 PARAMS_KEYS = {          # every key form rcl knows, one parameter each
@@ -239,6 +245,11 @@ def test_environment_defaults_non_zero_domain_and_localhost():
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'})['ROS_DOMAIN_ID'] == '7'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'}, domain_id=9)['ROS_DOMAIN_ID'] == '9'
+    # the node set's Fast DDS profile (a 3 s participant lease), unless one is named
+    assert env[dds_profile.PROFILE_ENV] == str(nodeset.config_dir() / dds_profile.PROFILE_FILE)
+    assert dds_profile.participant_lease(env[dds_profile.PROFILE_ENV]) == 3.0
+    own = nodeset.ros_environment(ns, base={dds_profile.PROFILE_ENV: '/etc/my_fastdds.xml'})
+    assert own[dds_profile.PROFILE_ENV] == '/etc/my_fastdds.xml'
 
 
 def test_systemd_unit(tmp_path):

@@ -106,6 +106,25 @@ def test_restart_with_backoff_and_loud_critical_restart(tmp_path):
     assert sup.programs['safety'].restarts >= 2
 
 
+def test_a_dead_node_process_waits_for_its_dds_lease_before_its_restart(tmp_path):
+    """restart_wait (the DDS lease + 1 s, sslfr_bringup.dds_profile) overrides a
+    shorter backoff: the others must have forgotten the dead participant first."""
+    progs, journal = _programs(tmp_path, {'planner': 'crash'})
+    out = io.StringIO()
+    sup = Supervisor(progs, dict(os.environ), backoff=(0.1,), stable_after=30.0, out=out, restart_wait=1.0)
+    sup.start()
+    t_end = time.monotonic() + 3.5
+    while time.monotonic() < t_end:
+        sup.step()
+        time.sleep(0.02)
+    sup.stop()
+    starts = [t for t, n, e in _events(journal) if n == 'planner' and e == 'start']
+    assert len(starts) >= 2, starts
+    # each gap = 0.2 s run + the wait (1 s), not the 0.1 s backoff
+    assert all(b - a >= 1.15 for a, b in zip(starts, starts[1:])), starts
+    assert 'planner exited (code 3, up 0.' in out.getvalue() and 'restart in 1 s' in out.getvalue()
+
+
 def test_fault_kill_holds_until_released(tmp_path):
     progs, journal = _programs(tmp_path, {})
     sup = Supervisor(progs, dict(os.environ), backoff=(0.1,), out=io.StringIO())

@@ -72,7 +72,6 @@ def _stow_target(box, after):
     return list(trajs[-1].points[-1].positions) if trajs else None
 
 
-@pytest.mark.skipif(__import__('os').environ.get('SSLFR_FLAKY') != '1', reason="flaky: safety's wind-stow log lines missing from its output in 1 of 2 fresh-clone runs (cause not found; opt-in with SSLFR_FLAKY=1 until it is)")
 def test_a_gust_stows_within_2_s_to_the_wind_pose_and_the_release_waits_the_hold(plant, ros):
     from sslfr_interfaces.msg import SafetyState
     sim, box, output = plant

@@ -26,7 +26,9 @@ the same description and applies it the same way:
   and ``WATCHDOG_USEC`` (the node set's ``watchdog_timeout``) in its environment and
   beats ``WATCHDOG=1`` from its spin loop; a process whose beats stop for longer is
   SIGKILLed by the watchdog and respawned by launch (``respawn=True``), the cause
-  printed on the launch's output.
+  printed on the launch's output. A node process is respawned no sooner than its DDS
+  participant lease + 1 s after its death (``respawn_delay``; 4 s with the node set's
+  Fast DDS profile, config/fastdds_profile.xml; :mod:`sslfr_bringup.dds_profile` says why).
 
 The supervisor of `./sslfr up` adds what launch does not do: restart with backoff and
 an ordered stop (axes first); the systemd unit uses `sslfr up` for that reason
@@ -60,10 +62,12 @@ def _liveness(write_dir: str) -> tuple[list[str], dict[str, str]]:
 
 def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
     """ROS_DOMAIN_ID / ROS_AUTOMATIC_DISCOVERY_RANGE for the nodes: the launch arguments
-    when given, else the environment's, else the node set's (as `sslfr up`)."""
+    when given, else the environment's, else the node set's (as `sslfr up`); the Fast
+    DDS profile (FASTRTPS_DEFAULT_PROFILES_FILE: the node set's unless the environment
+    names one)."""
     import os
 
-    from sslfr_bringup import nodeset
+    from sslfr_bringup import dds_profile, nodeset
 
     ns = nodeset.load()
     base = {}
@@ -72,7 +76,15 @@ def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
     if discovery_range:
         base['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery_range
     env = nodeset.ros_environment(ns, base={**os.environ, **base})
-    return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
+    return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', dds_profile.PROFILE_ENV)}
+
+
+def _respawn_delay(env: dict[str, str]) -> float:
+    """[s] A node process's respawn delay: 2 s, and never less than the wait after its
+    death that its DDS participant lease asks for (sslfr_bringup.dds_profile)."""
+    from sslfr_bringup import dds_profile
+
+    return max(2.0, dds_profile.restart_wait(env))
 
 
 def generate_launch_description():
@@ -89,21 +101,22 @@ def generate_launch_description():
         namespace = arg('namespace')
         use_sim_time = arg('use_sim_time').lower() in ('true', '1', 'yes')
         write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
-        actions = [SetEnvironmentVariable(k, v) for k, v in
-                   _environment(arg('domain_id'), arg('discovery_range')).items()]
+        env = _environment(arg('domain_id'), arg('discovery_range'))
+        actions = [SetEnvironmentVariable(k, v) for k, v in env.items()]
+        respawn_delay = _respawn_delay(env)
         watchdog_args, notify_env = _liveness(write_dir)
         actions.append(Node(package='sslfr_bringup', executable='liveness_watchdog', arguments=watchdog_args,
                             output='screen', respawn=True, respawn_delay=1.0))
         for e in _entries(arg('config'), namespace or None, write_dir, use_sim_time, arg('layout') or None):
             if e['name'] is None:          # a composed process: each node's own --ros-args in arguments
                 actions.append(Node(package=e['package'], executable=e['executable'], arguments=e['arguments'],
-                                    output='screen', respawn=True, respawn_delay=2.0,
+                                    output='screen', respawn=True, respawn_delay=respawn_delay,
                                     additional_env=notify_env))
                 continue
             common = dict(package=e['package'], executable=e['executable'], name=e['name'],
                           namespace=e['namespace'], parameters=e['parameters'],
                           remappings=e['remappings'], output='screen',
-                          respawn=True, respawn_delay=2.0, additional_env=notify_env)
+                          respawn=True, respawn_delay=respawn_delay, additional_env=notify_env)
             actions.append(LifecycleNode(**common) if e['lifecycle'] else Node(**common))
         return actions
 

@@ -31,6 +31,7 @@ from sslfr_common.files import user_path
 from sslfr_common.contract import MIRRORS
 from sslfr_common.params import flatten as flatten_params
 
+from sslfr_bringup.dds_profile import with_profile
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
 #: Parameter that receives a board's serial port (pyserial URL or device path).
@@ -784,7 +785,9 @@ def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
     """Environment for the node processes: the node set's domain and discovery range
     unless the caller's environment (or ``domain_id``) sets them. With
     ``ROS_DISCOVERY_SERVER`` (a collector of a field, docs/field.md) no discovery range
-    is added: the discovery servers decide who is found."""
+    is added: the discovery servers decide who is found. The node set's Fast DDS
+    profile (config/fastdds_profile.xml: a 3 s participant lease, see
+    :mod:`sslfr_bringup.dds_profile`) unless the environment names its own."""
     env = dict(os.environ if base is None else base)
     if domain_id is not None:
         env['ROS_DOMAIN_ID'] = str(domain_id)
@@ -794,4 +797,4 @@ def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
         env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', ns.discovery_range)
     env.setdefault('PYTHONUNBUFFERED', '1')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
-    return env
+    return with_profile(env, config_dir())

@@ -6,7 +6,10 @@ only the supervisor, which then stops the set in order). The supervisor
 - starts the programs in the node set's start order;
 - restarts a program that exits with backoff (``restart_backoff`` seconds, the index
   advancing with each consecutive failure and reset once a program stayed up
-  ``stable_after`` seconds); the restart of a *critical* program (the safety
+  ``stable_after`` seconds), a node process never sooner than ``restart_wait`` after
+  its death (its DDS participant lease + a margin, :mod:`sslfr_bringup.dds_profile`:
+  until the others have forgotten the dead participant they still write to its
+  shared-memory port, and a process restarted on that port may never hear them); the restart of a *critical* program (the safety
   supervisor) is reported loudly: a banner on stderr at journal priority ``err`` and
   an ERROR status on ``diagnostics``;
 - watches lifecycle programs (the axis drivers) after every (re)start until they
@@ -229,13 +232,16 @@ class Supervisor:
     def __init__(self, programs: list[Program], env: dict, *, backoff=(1.0, 2.0, 4.0, 8.0, 16.0, 30.0),
                  stable_after: float = 60.0, stop_timeout: float = 5.0, log_dir: Path | None = None,
                  out: TextIO | None = None, ros: 'RosSide | None' = None,
-                 liveness: LivenessWatch | None = None, notifier: Notifier | None = None):
+                 liveness: LivenessWatch | None = None, notifier: Notifier | None = None,
+                 restart_wait: float = 0.0):
         names = [p.name for p in programs]
         if len(set(names)) != len(names):
             raise ValueError(f'duplicate program names: {names}')
         self.programs = {p.name: p for p in sorted(programs, key=lambda p: p.start)}
         self.env = env
         self.backoff = tuple(backoff)
+        #: [s] shortest time from a node process's death to its restart (0: no wait)
+        self.restart_wait = float(restart_wait)
         self.stable_after = stable_after
         self.stop_timeout = stop_timeout
         self.log_dir = Path(log_dir) if log_dir else None
@@ -306,7 +312,8 @@ class Supervisor:
             self._activate(p)
 
     def _delay(self, p: Program) -> float:
-        return self.backoff[min(max(p.failures - 1, 0), len(self.backoff) - 1)]
+        delay = self.backoff[min(max(p.failures - 1, 0), len(self.backoff) - 1)]
+        return max(delay, self.restart_wait) if p.kind == 'node' else delay
 
     def start(self) -> None:
         """Start every program in start order."""
@@ -416,11 +423,11 @@ class Supervisor:
                     self.say('*' * 72, 2)
                     self.say(f'*** CRITICAL: {p.name} DIED ({how if p.hang_cause else f"exit code {code}"}, '
                              f'up {up_for:.1f} s). '
-                             f'Restart #{p.restarts + 1} in {delay:.0f} s. Until it is back the axis '
+                             f'Restart #{p.restarts + 1} in {delay:g} s. Until it is back the axis '
                              f'drivers see no safety heartbeat and stow/hold.', 2)
                     self.say('*' * 72, 2)
                 else:
-                    self.say(f'{p.name} exited ({how}, up {up_for:.1f} s); restart in {delay:.0f} s', 4)
+                    self.say(f'{p.name} exited ({how}, up {up_for:.1f} s); restart in {delay:g} s', 4)
             if p.next_start is not None and now >= p.next_start and not p.held:
                 p.restarts += 1
                 self._event(p, 'restart', f'#{p.restarts}')

@@ -21,6 +21,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from sslfr_bringup import dds_profile
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
 from sslfr_bringup.liveness import LivenessWatch
@@ -142,6 +143,11 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
         print(f'sslfr up: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
+    try:
+        restart_wait = dds_profile.restart_wait(env)
+    except dds_profile.ProfileError as exc:
+        print(f'sslfr up: {exc}', file=sys.stderr)
+        return 2
     domain = int(env['ROS_DOMAIN_ID'])
     print(f'sslfr up: config {config}, ROS_DOMAIN_ID={domain}, '
           + (f'ROS_DISCOVERY_SERVER={env["ROS_DISCOVERY_SERVER"]}' if env.get('ROS_DISCOVERY_SERVER') else
@@ -171,7 +177,7 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
         sup = Supervisor(programs, env, backoff=ns.restart_backoff, stable_after=ns.stable_after,
                          stop_timeout=ns.stop_timeout, log_dir=Path(args.log_dir) if args.log_dir else None,
                          ros=ros, liveness=LivenessWatch(ns.watchdog_timeout, ns.watchdog_startup),
-                         notifier=notifier)
+                         notifier=notifier, restart_wait=restart_wait)
         why = sup.run(stop)
     finally:
         ros.shutdown()

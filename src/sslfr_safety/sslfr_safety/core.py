@@ -125,6 +125,7 @@ class _Wind:
     mean: float = math.nan             # window mean [m/s]
     stamp: float | None = None         # ROS time of the last wind message [s]
     calm_since: float | None = None    # ROS time [s] the mean went below limit - hysteresis
+    exceeding: bool = False            # the last sample had a gust or a mean over its limit
     zero_since: float | None = None    # first of the current run of 0 m/s readings
     beams: collections.deque = field(default_factory=collections.deque)   # (t, beam) during it
 
@@ -371,19 +372,23 @@ class SafetyCore:
             self._raise(WIND_RULE, '', 'mean', {'mean': mean, 'limit': cfg.wind_mean_limit, 'window': window}, now)
         if gusty or windy:
             w.calm_since = stamp if mean < threshold else None     # every exceedance restarts the hold
+            w.exceeding = True
             return self._zero_run(speed, now)
         stowed = WIND_RULE in self.faults
         if mean < threshold:
+            # the countdown's start is logged once per calm spell: the first calm sample,
+            # also when the hold already runs from the last gust (its mean was below)
+            if stowed and (w.calm_since is None or w.exceeding):
+                self._notes.append(f'wind stow: mean {mean:.1f} m/s below {threshold:.1f} m/s, '
+                                   f'release after {cfg.wind_hold:.0f} s of calm')
             if w.calm_since is None:
                 w.calm_since = stamp
-                if stowed:
-                    self._notes.append(f'wind stow: mean {mean:.1f} m/s below {threshold:.1f} m/s, '
-                                       f'release after {cfg.wind_hold:.0f} s of calm')
         else:
             if w.calm_since is not None and stowed:
                 self._notes.append(f'wind stow: mean {mean:.1f} m/s back at or above {threshold:.1f} m/s '
                                    f'after {stamp - w.calm_since:.0f} s of calm: hold restarts')
             w.calm_since = None
+        w.exceeding = False
         self._zero_run(speed, now)
 
     def _zero_run(self, speed: float, now: float) -> None:

@@ -45,6 +45,7 @@ import time
 from pathlib import Path
 
 from sslfr_sim import faults as faults_mod
+from sslfr_bringup import dds_profile
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain, find_executable
 from sslfr_bringup.liveness import LivenessWatch
@@ -388,6 +389,11 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
             return 1
     env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
+    try:
+        restart_wait = dds_profile.restart_wait(env)
+    except dds_profile.ProfileError as exc:
+        print(f'sslfr sim: {exc}', file=sys.stderr)
+        return 2
     env['SSLFR_SIM_WORLD'] = str(run / 'world.json')
     domain = int(env['ROS_DOMAIN_ID'])
     say = print
@@ -470,7 +476,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
                          stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
                          liveness=LivenessWatch(ns.watchdog_timeout, ns.watchdog_startup),
-                         ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('[sslfr up] started ', ': lifecycle active')))
+                         ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('[sslfr up] started ', ': lifecycle active')),
+                         restart_wait=restart_wait)
         schedule = faults_mod.Schedule(faults)
         fired: list[dict] = []
         end_epoch = day0 + end_s
