@@ -149,7 +149,15 @@ def _run(key, tmp_path_factory):
             'live': live, 'plan': plan, 'procs': procs, 'end': DAY0 + end, 'ns': ns}
 
 
-@pytest.fixture(scope='module', params=list(RUNS))
+#: `make test` runs the run that hangs the two processes once seen deaf after their
+#: restart (recorder, safety) within the suite's time budget; SSLFR_LIVENESS=1 runs all
+#: three (about 7.5 minutes)
+DEFAULT_RUNS = ('separate-2',)
+
+
+@pytest.fixture(scope='module', params=[pytest.param(k, marks=() if k in DEFAULT_RUNS else pytest.mark.skipif(
+    os.environ.get('SSLFR_LIVENESS') != '1', reason='the other liveness runs: SSLFR_LIVENESS=1 (7.5 min in all)'))
+    for k in RUNS])
 def run(request, tmp_path_factory):
     return _run(request.param, tmp_path_factory)
 
