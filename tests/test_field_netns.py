@@ -307,7 +307,7 @@ def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, 
         print(f'c1 cut off for {CUT_S:.0f} s, heard again {t_again - t_up:.1f} s after its link came back')
         snap = page()['c1']
         assert snap['phase'] == 'TRACKING' and snap['safety_level'] in ('OK', 'WARN'), \
-            (snap['phase'], snap['safety_level'], snap['safety_reasons'])
+            (snap['phase'], snap['safety_level'], snap['safety_reasons'], show())
     finally:
         for p in procs.values():
             p.stop(timeout=30)
@@ -318,17 +318,26 @@ def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, 
         (bag,) = [b for b in (tmp_path / cid / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
         assert bag.name.startswith(f'{cid}_')
         reader = BagReader(bag)
-        states, levels = [], []
+        states, levels, why = [], [], {}
         for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
             if t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
                 m = reader.decoder(raw.type)(raw.data)
-                (states if raw.topic.endswith('status') else levels).append(
-                    m.state if raw.topic.endswith('status') else m.level)
-        return states, levels
+                if raw.topic.endswith('status'):
+                    states.append(m.state)
+                else:
+                    levels.append(m.level)
+                    if m.level > 1:              # the rule that stowed: its reasons, first time seen
+                        why.setdefault('; '.join(m.reasons), f'{raw.log_time * 1e-9 - t_cut:.1f} s after the cut')
+        return states, levels, why
+
+    def safety_log(cid):
+        log = tmp_path / cid / 'logs' / 'safety.log'
+        return '\n'.join(ln for ln in log.read_text(errors='replace').splitlines() if 'transition' in ln)[-3000:]
     for cid in f.ids:
-        states, levels = during_cut(cid)
+        states, levels, why = during_cut(cid)
         # 'waiting': a new horizon whose first point is still ahead (each republication)
-        assert states and set(states) <= {'following', 'waiting'}, (cid, set(states))
-        assert levels and max(levels) <= 1, (cid, sorted(set(levels)))      # OK or WARN: no stow
+        assert states and set(states) <= {'following', 'waiting'}, (cid, set(states), safety_log(cid))
+        # OK or WARN: no stow (else: the reasons of each stow, and the safety log's transitions)
+        assert levels and max(levels) <= 1, (cid, sorted(set(levels)), why, safety_log(cid))
         print(f'{cid} during the cut: mirrors following {states.count("following") / len(states):.0%} of '
               f'{len(states)} status messages, else waiting for the next horizon; safety levels {sorted(set(levels))}')
