@@ -94,7 +94,8 @@ def bench_station(n: int, window: float, out: Path) -> dict:
     t0 = time.monotonic()
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'sim', '--collectors', str(n), '--end', _end(window / 60 + 15),
                              '--out', str(out / f'field-{n}')], stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True, env={**os.environ, 'ROS_DOMAIN_ID': str(100 + n)})
+                            start_new_session=True,      # no ROS_DOMAIN_ID: sim takes a free one
+                            env={k: v for k, v in os.environ.items() if k != 'ROS_DOMAIN_ID'})
     try:
         url, seen = None, {}
         deadline = time.monotonic() + 300
