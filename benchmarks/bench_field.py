@@ -28,6 +28,7 @@ while other jobs load the machine must say so.
 
     python benchmarks/bench_field.py station [--collectors 1 4] [--window 60]
     sudo python benchmarks/bench_field.py discovery [--ns-collectors 2] [--window 60]
+    python benchmarks/bench_field.py            # both (discovery only as root)
 """
 from __future__ import annotations
 
@@ -262,7 +263,8 @@ def bench_discovery(k: int, window: float, out: Path, mode: str) -> dict:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('part', choices=('station', 'discovery'))
+    ap.add_argument('part', nargs='?', choices=('station', 'discovery', 'all'), default='all',
+                    help='all (default): station, then discovery where root')
     ap.add_argument('--collectors', type=int, nargs='+', default=[1, 4])
     ap.add_argument('--ns-collectors', type=int, default=2)
     ap.add_argument('--window', type=float, default=60.0)
@@ -271,7 +273,7 @@ def main() -> int:
     out = Path(tempfile.mkdtemp(prefix='bench-field-'))
     print(f'load average at start: {_load()}; logs in {out}')
     results = []
-    if args.part == 'station':
+    if args.part in ('station', 'all'):
         for n in args.collectors:
             r = bench_station(n, args.window, out)
             results.append(r)
@@ -285,10 +287,11 @@ def main() -> int:
             dn = b['n'] - a['n']
             print(f'per collector (N={a["n"]} -> N={b["n"]}): CPU {(b["cpu_total"] - a["cpu_total"]) / dn:+.2f} % of '
                   f'one core, PSS {(b["pss_total"] - a["pss_total"]) / dn:+.1f} MB')
-    else:
-        if os.geteuid() != 0:
-            print('discovery: needs root (network namespaces, packet counter)', file=sys.stderr)
+    if args.part in ('discovery', 'all') and os.geteuid() != 0:
+        print('discovery: SKIPPED, needs root (network namespaces, packet counter)', file=sys.stderr)
+        if args.part == 'discovery':
             return 1
+    elif args.part in ('discovery', 'all'):
         for mode in ('server', 'simple'):
             r = bench_discovery(args.ns_collectors, args.window, out, mode)
             results.append(r)
