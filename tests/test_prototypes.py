@@ -12,8 +12,8 @@ import subprocess
 
 import numpy as np
 import pytest
-import yaml
 
+from collectors_testutil import write_fourth_collector
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
@@ -161,33 +161,8 @@ def test_seed004_every_line_within_the_uncertainty_budget_while_tracking(tmp_pat
           + ' (budget 0.085-0.12 deg, seed 004 Tables 3-4)')
 
 
-def _fourth_collector(tmp_path):
-    """A collector no seed describes (thirteen 0.2 m lines with a central one, one
-    stepper without switches, seed 000's half-angle law, at Barcelona): a description
-    and a site config, nothing else."""
-    col = {
-        'name': 'fourth_rooftop', 'source': 'test: a collector from its description only',
-        'movements': {'mirrors': {
-            'drive': 'stepper_no_switches', 'feedback': 'steps', 'law': 'half_transversal',
-            'range_deg': [-50.0, 60.0], 'sleep_deg': 0.0, 'stow_deg': 60.0, 'reference_deg': 0.0,
-            'step_deg': 0.05, 'gear_ratio': 1.0}},
-        'boards': [{'name': 'mirrors', 'kind': 'axis', 'movement': 'mirrors'},
-                   {'name': 'absorber', 'kind': 'absorber'}, {'name': 'irradiance', 'kind': 'irradiance'}],
-        'sensors': [{'name': 'inlet', 'kind': 'thermocouple', 'board': 'absorber'},
-                    {'name': 'outlet', 'kind': 'thermocouple', 'board': 'absorber'},
-                    {'name': 'dni', 'kind': 'pyrheliometer', 'board': 'irradiance'}],
-        'optics': {'lines': 13, 'central_line': True, 'line_width': 0.2, 'line_length': 2.0, 'gap': 0.03,
-                   'receiver_height': 1.2, 'receiver_width': 0.1, 'tube_diameter': 0.04, 'tube_count': 1,
-                   'receiver_length': 2.0, 'azimuth_deg': 0.0}}
-    (tmp_path / 'fourth.yaml').write_text(yaml.safe_dump(col))
-    site = {'/**': {'ros__parameters': {'site.latitude_deg': 41.39, 'site.longitude_deg': 2.17, 'site.elevation': 12.0}},
-            'planner': {'ros__parameters': {'collector.description': 'fourth.yaml'}}}
-    (tmp_path / 'site.yaml').write_text(yaml.safe_dump(site))
-    return tmp_path / 'site.yaml'
-
-
 def test_a_fourth_collector_runs_from_its_description_alone(tmp_path):
-    config = _fourth_collector(tmp_path)
+    config = write_fourth_collector(tmp_path)
     text, day = run_sim(config, '11:00', '11:10', tmp_path / 'out', speed=30.0, timeout=200.0)
     assert 'simulated operator referenced mirrors' in text, text[-3000:]
     assert not any(t.startswith('/axes/') and 'mirrors' not in t for t in day.topics), day.topics

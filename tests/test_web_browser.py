@@ -15,6 +15,7 @@ without them this test skips with the command to run, and fails under CI=true.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import time
@@ -63,15 +64,13 @@ def browser(tmp_path):
     driver.quit()
 
 
-@pytest.fixture
-def sim(ros_env, tmp_path):
-    """`./sslfr sim` from 04:30 UTC at 30x (PRE_DAWN 04:40:45, TRACKING 04:50:45 at Almeria:
-    21 s and 41 s of wall time after the simulated clock starts)."""
+@contextlib.contextmanager
+def _sim(ros_env, tmp_path, *args: str):
+    """`./sslfr sim` with ``args`` (window, config); yields (page url, tmp_path)."""
     _require_browser()
     pw = auth.write_password_file(tmp_path / 'pw', PASSWORD)
     out = tmp_path / 'sim'
-    cmd = [str(ROOT / 'sslfr'), 'sim', '--date', '2026-06-21', '--start', '04:30', '--end', '05:40',
-           '--speed', '30', '--no-report', '--anchor-margin', '4', '--out', str(out),
+    cmd = [str(ROOT / 'sslfr'), 'sim', *args, '--no-report', '--anchor-margin', '4', '--out', str(out),
            '--set', f'web:password_file={pw}', '--set', f'web:audit_file={tmp_path / "audit.jsonl"}',
            '--set', f'web:report_dir={tmp_path / "reports"}']
     proc = NodeProcess(cmd, ros_env, tmp_path / 'sim.out')       # own session; SIGINT then SIGKILL at the end
@@ -87,6 +86,14 @@ def sim(ros_env, tmp_path):
         yield url, tmp_path
     finally:
         proc.stop(timeout=30)
+
+
+@pytest.fixture
+def sim(ros_env, tmp_path):
+    """`./sslfr sim` from 04:30 UTC at 30x (PRE_DAWN 04:40:45, TRACKING 04:50:45 at Almeria:
+    21 s and 41 s of wall time after the simulated clock starts)."""
+    with _sim(ros_env, tmp_path, '--date', '2026-06-21', '--start', '04:30', '--end', '05:40', '--speed', '30') as s:
+        yield s
 
 
 def _wait(driver, predicate, timeout, what):
@@ -201,3 +208,35 @@ def test_operator_page_in_chromium_against_the_simulated_tracker(browser, sim):
     audit = (tmp / 'audit.jsonl').read_text()
     assert '"command": "stow"' in audit and '127.0.0.1' in audit
     print(f'browser test took {time.monotonic() - t0:.0f} s after the page address was known')
+
+
+def test_operator_page_draws_the_described_collector(browser, ros_env, tmp_path):
+    """Seed 004's site config (its collector description: one movement, ten lines): the
+    page lists and jogs the mirrors only, draws ten lines at the measured drive plus
+    Table 1's offsets, and the rows and receiver fixed in the side view. Screenshot:
+    out/test-artifacts/web-operator-page-lepten.png."""
+    import math
+    with _sim(ros_env, tmp_path, '--config', 'florianopolis_lepten.yaml', '--date', '2026-06-21',
+              '--start', '15:00', '--end', '15:20', '--speed', '30') as (url, _):
+        browser.get(url)
+        _wait(browser, lambda: browser.execute_script(
+            'return !!(page.last && page.last.info.collector && page.last.axes && page.last.axes.mirrors)'),
+            60, "the collector's description and the mirrors' status")
+        time.sleep(1.0)       # one more render with both
+        # read in one script turn: the drawings are redrawn at every live state
+        got = browser.execute_script("""
+            const q = (sel) => Array.from(document.querySelectorAll(sel));
+            const name = document.getElementById('south-name');
+            return {rows: q('#axes tbody tr').map((r) => r.id), jog: q('#jog-axis option').map((o) => o.textContent),
+                    angles: q('#view-south line.mirror').map((l) => parseFloat(l.getAttribute('data-angle'))),
+                    drive: page.last.axes.mirrors.measured, fixed: !!document.getElementById('side-structure-fixed'),
+                    tilting: !!document.getElementById('side-structure'), name: name ? name.textContent : ''};""")
+        assert got['rows'] == ['axis-mirrors'] and got['jog'] == ['mirrors'], got
+        assert len(got['angles']) == 10, got
+        b1 = math.radians(15.8311)                  # Table 1's b of line 1 (east end)
+        assert abs(got['angles'][0] - got['drive'] - b1) < 0.01, got   # the drawing may be one state behind
+        assert got['fixed'] and not got['tilting'] and got['name'] == 'florianopolis_lepten', got
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        shot = ARTIFACTS / 'web-operator-page-lepten.png'
+        assert browser.save_screenshot(str(shot))
+        print(f'screenshot: {shot}')

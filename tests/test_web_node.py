@@ -129,6 +129,27 @@ def test_live_view_follows_the_topics_within_one_second_and_shows_the_nodes_limi
     assert info['temperature_limit'] == 150.0 and info['n_per_side'] == 12 and info['receiver_height'] == 1.5
 
 
+def test_page_takes_the_collector_the_planner_names(launch, ros, tmp_path):
+    """The planner of seed 004's site config (collector description relative to the
+    config): the page's info holds the described collector, one movement and ten lines
+    at Table 1's offsets, for the drawing, the axes table and the jog list."""
+    import math
+    from pathlib import Path
+    config = Path(__file__).resolve().parents[1] / 'src' / 'sslfr_bringup' / 'config' / 'florianopolis_lepten.yaml'
+    launch('sslfr_planner', 'planner', params={'state_dir': str(tmp_path / 'state')},
+           ros_args=['--params-file', str(config)])
+    web = launch('sslfr_web', 'web', params={'port': 0, 'password_file': str(tmp_path / 'none'),
+                                             'audit_file': str(tmp_path / 'audit.jsonl'),
+                                             'bag_dir': str(tmp_path / 'bags')},
+                 ros_args=['--params-file', str(config)])
+    assert web.wait_for_output('operator page at', 30), web.output()
+    page = Page(re.search(r'operator page at (http://\S+/)', web.output()).group(1))
+    assert ros.spin_until(lambda: 'collector' in page.get('/api/state')['info'], 30), web.output()
+    c = page.get('/api/state')['info']['collector']
+    assert c['name'] == 'florianopolis_lepten' and c['joints'] == ['mirrors'] and not c['tilting']
+    assert len(c['lines']) == 10 and math.degrees(c['lines'][0]['offset']) == pytest.approx(15.8311, abs=1e-6)
+
+
 def test_commands_go_through_the_services_and_refusals_change_nothing(graph, ros, tmp_path):
     from sslfr_interfaces.msg import SafetyState, TrackerPhase
     web, page = graph

@@ -27,7 +27,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
+from sslfr_common.files import user_path
 from sslfr_common.contract import MIRRORS
+from sslfr_common.params import flatten as flatten_params
 
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
@@ -193,7 +195,7 @@ def resolve_config(name: str | os.PathLike | None, default: str = 'almeria_sslfr
             return path.is_file()
         except (OSError, ValueError):
             return False
-    p = Path(name).expanduser()
+    p = user_path(name)
     if is_file(p):
         return p.resolve()
     for cand in (config_dir() / name, config_dir() / f'{name}.yaml'):
@@ -409,7 +411,7 @@ def node_params(params: Mapping[str, Any], node: str, namespace: str = '') -> di
     fqn = f'/{namespace.strip("/")}/{node}' if namespace.strip('/') else f'/{node}'
     for key, section in params.items():
         if isinstance(section, Mapping) and section_matches(str(key), fqn):
-            out.update(_flatten(section.get('ros__parameters') or {}))
+            out.update(flatten_params(section.get('ros__parameters') or {}))
     return out
 
 
@@ -479,7 +481,7 @@ def check_config(ns: NodeSet, params: Mapping[str, Any], namespace: str | None =
         known = [tables[n.name] for n in matched]
         if any(t is None for t in known):
             continue                  # a node without a table: cannot judge its keys
-        for name in _flatten(section.get('ros__parameters') or {}):
+        for name in flatten_params(section.get('ros__parameters') or {}):
             if name in ROS_PARAMETERS or name.startswith(ROS_PARAMETER_PREFIXES) or any(name in t for t in known):
                 continue
             names = sorted({k for t in known for k in t.names})
@@ -582,17 +584,6 @@ def description_value(desc, key: str):
     return float(v) if isinstance(v, float) and math.isfinite(v) else v
 
 
-def _flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
-    out = {}
-    for k, v in d.items():
-        key = f'{prefix}{k}'
-        if isinstance(v, Mapping):
-            out.update(_flatten(v, key + '.'))
-        else:
-            out[key] = v
-    return out
-
-
 # ---------------------------------------------------------------------------------
 # what to run
 
@@ -625,7 +616,7 @@ def absolute_description(params: Mapping[str, Any], config: str | os.PathLike) -
     for key, section in params.items():
         values = section.get('ros__parameters') if isinstance(section, Mapping) else None
         name = values.get(DESCRIPTION_KEY) if isinstance(values, Mapping) else None
-        if isinstance(name, str) and name and not Path(name).expanduser().is_absolute():
+        if isinstance(name, str) and name and not user_path(name).is_absolute():
             section = {**section, 'ros__parameters': {**values, DESCRIPTION_KEY: str(
                 (Path(config).resolve().parent / name).resolve())}}
         out[key] = section

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, TextIO
 
+from sslfr_common.cliargs import CliError, one_line
 from sslfr_common.contract import CLOCK, DIAGNOSTICS
 from sslfr_common.sdnotify import Notifier, NotifyListener
 
@@ -99,6 +100,23 @@ class StopSignals:
         """Sleep up to ``seconds``, then :meth:`check`."""
         self.requested.wait(seconds)
         self.check()
+
+
+def supervised_main(prog: str, body: Callable[[StopSignals, Path], int]) -> int:
+    """Run ``body(stop, run_dir)``, a command that starts processes (``sslfr up``,
+    ``sslfr station``): stop signals caught throughout, ``run_dir`` a fresh directory
+    removed afterwards; a :class:`CliError` is one line and exit 2, a stop signal exit 0."""
+    with StopSignals() as stop:
+        run_dir = Path(tempfile.mkdtemp(prefix=f'sslfr-{prog}-'))
+        try:
+            return body(stop, run_dir)
+        except CliError as exc:
+            print(f'sslfr {prog}: error: {one_line(exc)}', file=sys.stderr)
+            return 2
+        except Interrupted:
+            return 0
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
 
 
 def _orphan_guard(argv: list[str]) -> list[str]:

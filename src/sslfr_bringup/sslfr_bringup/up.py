@@ -18,17 +18,15 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
 from sslfr_bringup.liveness import LivenessWatch
-from sslfr_bringup.supervisor import Interrupted, Program, RosSide, StopSignals, Supervisor
+from sslfr_bringup.supervisor import Program, RosSide, StopSignals, Supervisor, supervised_main
 from sslfr_common.sdnotify import Notifier
-from sslfr_planner.cli_input import CliError, OneLineParser, bounded_int, one_line, output_dir, ros_namespace
+from sslfr_planner.cli_input import OneLineParser, bounded_int, one_line, output_dir, ros_namespace
 
 
 def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
@@ -130,17 +128,7 @@ def main(argv: list[str]) -> int:
     refused its configuration, the ROS side failed), 2 for bad arguments or configs.
     Every child started is ended whatever signal arrives and whenever (start-up
     included), and the run directory is removed."""
-    with StopSignals() as stop:
-        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-up-'))
-        try:
-            return _run(parser().parse_args(argv), stop, run_dir)
-        except CliError as exc:
-            print(f'sslfr up: error: {one_line(exc)}', file=sys.stderr)
-            return 2
-        except Interrupted:
-            return 0
-        finally:
-            shutil.rmtree(run_dir, ignore_errors=True)
+    return supervised_main('up', lambda stop, run_dir: _run(parser().parse_args(argv), stop, run_dir))
 
 
 def _run(args, stop: StopSignals, run_dir: Path) -> int:

@@ -18,7 +18,7 @@ LAYERS = {
     'sslfr_safety': {'sslfr_common'},
     'sslfr_bringup': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety'},
     'sslfr_recording': {'sslfr_common', 'sslfr_planner', 'sslfr_bringup'},
-    'sslfr_web': {'sslfr_common', 'sslfr_safety', 'sslfr_recording'},
+    'sslfr_web': {'sslfr_common', 'sslfr_planner', 'sslfr_safety', 'sslfr_recording'},
     'sslfr_gateway': {'sslfr_common', 'sslfr_recording'},
     'sslfr_field': {'sslfr_common', 'sslfr_planner', 'sslfr_drivers', 'sslfr_safety', 'sslfr_bringup',
                     'sslfr_recording', 'sslfr_web'},

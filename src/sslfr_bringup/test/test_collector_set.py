@@ -5,6 +5,7 @@ import math
 
 import pytest
 import yaml
+from collectors_testutil import write_fourth_collector
 from sslfr_bringup import nodeset
 from sslfr_bringup.collector_set import driver_parameters
 from sslfr_planner.description import load
@@ -71,33 +72,8 @@ def test_an_invalid_description_stops_the_node_set_before_anything_starts(tmp_pa
         nodeset.for_config(nodeset.load(), tmp_path / 'site.yaml')
 
 
-def fourth_collector(tmp_path):
-    """A collector no seed describes: twelve lines (a central one) on one stepper without
-    switches, seed 000's half-angle law, its own site; written as a description and a
-    site config only."""
-    col = {
-        'name': 'fourth_rooftop', 'source': 'test: a fourth collector from its description only',
-        'movements': {'mirrors': {
-            'drive': 'stepper_no_switches', 'feedback': 'steps', 'law': 'half_transversal',
-            'range_deg': [-50.0, 60.0], 'sleep_deg': 0.0, 'stow_deg': 60.0, 'reference_deg': 0.0,
-            'step_deg': 0.05, 'gear_ratio': 1.0}},
-        'boards': [{'name': 'mirrors', 'kind': 'axis', 'movement': 'mirrors'},
-                   {'name': 'absorber', 'kind': 'absorber'}, {'name': 'irradiance', 'kind': 'irradiance'}],
-        'sensors': [{'name': 'inlet', 'kind': 'thermocouple', 'board': 'absorber'},
-                    {'name': 'outlet', 'kind': 'thermocouple', 'board': 'absorber'},
-                    {'name': 'dni', 'kind': 'pyrheliometer', 'board': 'irradiance'}],
-        'optics': {'lines': 13, 'central_line': True, 'line_width': 0.2, 'line_length': 2.0, 'gap': 0.03,
-                   'receiver_height': 1.2, 'receiver_width': 0.1, 'tube_diameter': 0.04, 'tube_count': 1,
-                   'receiver_length': 2.0, 'azimuth_deg': 0.0}}
-    (tmp_path / 'fourth.yaml').write_text(yaml.safe_dump(col))
-    site = {'/**': {'ros__parameters': {'site.latitude_deg': 41.39, 'site.longitude_deg': 2.17, 'site.elevation': 12.0}},
-            'planner': {'ros__parameters': {'collector.description': 'fourth.yaml'}}}
-    (tmp_path / 'site.yaml').write_text(yaml.safe_dump(site))
-    return tmp_path / 'site.yaml'
-
-
 def test_a_fourth_collector_needs_only_a_description(tmp_path):
-    cfg = fourth_collector(tmp_path)
+    cfg = write_fourth_collector(tmp_path)
     ns = nodeset.for_config(nodeset.load(), cfg)
     assert [n.name for n in ns.nodes if n.parameters.get('axis')] == ['mirrors_driver']
     p = ns.node('mirrors_driver').parameters

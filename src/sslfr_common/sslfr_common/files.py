@@ -72,3 +72,14 @@ def atomic_write(path: str | os.PathLike, data: str | bytes | None = None, *,
         except OSError:
             pass
     return path
+
+
+def user_path(text) -> Path:
+    """``text`` as a path with a leading ``~`` / ``~user`` expanded; left as written when
+    that home cannot be found (``~0``: no such user), so a bad name is refused later as
+    a file that does not exist, never with a RuntimeError."""
+    p = Path(text)
+    try:
+        return p.expanduser()
+    except RuntimeError:
+        return p

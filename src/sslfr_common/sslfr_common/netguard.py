@@ -163,6 +163,33 @@ class Limits:
     idle_timeout: float = 60.0                # [s] a connection with nothing in work is closed after this silence
 
 
+def limit_params(defaults: Limits = Limits()) -> tuple:
+    """The :class:`Limits` of a service as its node's parameters (read-only), with one
+    description for every network face; :func:`limits_from` reads them back."""
+    from .params import ParamSpec
+    d = defaults
+    return (
+        ParamSpec('max_connections_per_address', d.max_connections_per_address,
+                  'Open connections one client address may hold; more are refused [-]', '-', 1, 1000,
+                  read_only=True),
+        ParamSpec('max_connections', d.max_connections,
+                  'Open connections in all; when full, the oldest idle connection of the address '
+                  'holding the most is closed for a new one [-]', '-', 2, 10000, read_only=True),
+        ParamSpec('header_timeout', d.header_timeout,
+                  'A request head must be complete within this time of its first byte, else the '
+                  'connection is closed (slow clients) [s]', 's', 0.5, 120.0, read_only=True),
+        ParamSpec('idle_timeout', d.idle_timeout,
+                  'A connection with no request for this long is closed [s]', 's', 1.0, 3600.0,
+                  read_only=True),
+    )
+
+
+def limits_from(cfg: dict) -> Limits:
+    """The :class:`Limits` of a node's parameters (:func:`limit_params`)."""
+    return Limits(int(cfg['max_connections_per_address']), int(cfg['max_connections']),
+                  float(cfg['header_timeout']), float(cfg['idle_timeout']))
+
+
 @dataclass(eq=False)
 class _Conn:
     addr: str

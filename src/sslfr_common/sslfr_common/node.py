@@ -42,6 +42,7 @@ import time
 from typing import Callable
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, \
     ParameterException
@@ -542,6 +543,18 @@ class ParameterGuard:
         self.node.get_logger().error(
             f'parameter change refused, keeping the last good configuration: {reason}')
         return SetParametersResult(successful=False, reason=reason)
+
+
+def diagnostics_msg(name: str, level: int | bytes, message: str, hardware_id: str, values: dict,
+                    now) -> DiagnosticArray:
+    """One DiagnosticStatus (``level`` 0 OK, 1 WARN, 2 ERROR; every value as text) in an
+    array stamped ``now`` (a builtin Time)."""
+    st = DiagnosticStatus(level=level if isinstance(level, bytes) else bytes([level]), name=name,
+                          message=message, hardware_id=hardware_id,
+                          values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    arr = DiagnosticArray(status=[st])
+    arr.header.stamp = now
+    return arr
 
 
 def message_class(type_name: str):

@@ -20,7 +20,7 @@ import os
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 
 @dataclass(frozen=True)
@@ -271,3 +271,17 @@ def writable_directory(value: str, *, empty_ok: bool = True) -> str | None:
         what = 'cannot write in' if probe == path else 'cannot write there: cannot create directories in'
         return f'{value!r}: {what} {probe} ({exc.strerror or exc})'
     return None
+
+
+def flatten(d: Mapping[str, Any], prefix: str = '') -> dict:
+    """A nested parameter mapping (a params file's ``ros__parameters``) -> one level
+    with dotted names, as ROS 2 names grouped parameters (``{'a': {'b': 1}}`` ->
+    ``{'a.b': 1}``)."""
+    out = {}
+    for k, v in d.items():
+        key = f'{prefix}{k}'
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + '.'))
+        else:
+            out[key] = v
+    return out

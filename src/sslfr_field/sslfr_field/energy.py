@@ -5,12 +5,11 @@ collectors' bags, ``<id>_YYYY-MM-DD``) by trapezoids; a gap longer than ``max_ga
 adds nothing (the station did not hear the collector then) and an unknown (NaN) sample
 ends the running trapezoid. The field page keeps two per collector:
 
-- **absorbed** [kWh]: the power absorbed by the receiver as the day report computes it
-  (sslfr_recording.report_energy: seed 000 eqs. 18, 20, 25 on the 3-D ray trace,
-  :func:`sslfr_planner.analysis.optics.power`) from the collector's beam irradiance
-  (``irradiance/beam``), the sun it publishes (``tracker/sun``) and its axes' measured
-  angles (``axes/<axis>/status``), on the optical parameters of its site config
-  (:func:`absorbed_model`);
+- **absorbed** [kWh]: the power absorbed by the receiver as the day report computes its
+  achieved energy (sslfr_recording.report_energy: seed 000 eqs. 18, 20, 25 on the 3-D
+  ray trace, on the collector description its site config names) from the collector's
+  beam irradiance (``irradiance/beam``), the sun it publishes (``tracker/sun``) and its
+  axes' measured angles (``axes/<axis>/status``): :class:`AbsorbedModel`;
 - **thermal** [kWh]: the useful thermal energy delivered, the integral of
   ``absorber/thermal_power`` (m_dot c_p (T_out - T_in)), for a collector with a flow meter.
 
@@ -64,31 +63,56 @@ class DayIntegral:
         return self.joules / 3.6e6
 
 
-def absorbed_model(config: str | None):
-    """``power(beam, zenith, azimuth, mirrors, mobile_structure, secondary_reflector) -> W``
-    for the collector of site config ``config`` (its planner's ``collector.*`` geometry and
-    azimuth, as the day report takes them: :func:`sslfr_recording.day.reference`).
+class AbsorbedModel:
+    """The absorbed power [W] of one collector, as the day report computes its achieved
+    energy (sslfr_recording.report_energy): with the collector description its site
+    config names, the described optics with every line riding on the measured mirror
+    drive and the measured longitudinal tilts (0 for a movement it does not have:
+    :func:`sslfr_planner.analysis.ideal.held_absorbed_power`); without one, seed 000's
+    model on the planner's collector parameters (:func:`sslfr_planner.analysis.optics.power`).
 
-    ``beam`` [W/m^2], sun ``zenith`` and ``azimuth`` [rad] (clockwise from north), the
-    three axes' measured angles [rad]. The sun below the horizon gives 0 W. Raises
-    ValueError (or the node set's NodeSetError) for a config it cannot use."""
-    import numpy as np
-    from sslfr_planner import raytrace
-    from sslfr_planner.analysis.optics import OpticalParameters
-    from sslfr_planner.analysis.optics import power as optics_power
-    from sslfr_planner.day_cycle import make_collector
-    from sslfr_recording.day import planner_config
+    ``joints``: the axes whose measured angle it needs."""
 
-    c = make_collector(planner_config(config or None))
-    params = OpticalParameters(geometry=c.geometry)
+    def __init__(self, config: str | None):
+        from sslfr_common.contract import JOINTS
+        from sslfr_planner.analysis.optics import OpticalParameters
+        from sslfr_planner.day_cycle import make_collector
+        from sslfr_recording.day import planner_config, run_description
 
-    def power(beam: float, zenith: float, azimuth: float, mirrors: float, mobile: float, secondary: float) -> float:
-        if not all(math.isfinite(x) for x in (beam, zenith, azimuth, mirrors, mobile, secondary)):
+        self.description = run_description(config or None)
+        c = make_collector(planner_config(config or None), self.description)
+        self.azimuth = c.azimuth
+        if self.description is None:
+            self.params = OpticalParameters(geometry=c.geometry)
+            self.joints = tuple(JOINTS)
+        else:
+            self.joints = tuple(j for j in JOINTS if j in self.description.movements)
+
+    def __call__(self, beam: float, zenith: float, azimuth: float, angles: dict) -> float:
+        """``beam`` [W/m^2], sun ``zenith`` and ``azimuth`` [rad] (clockwise from north),
+        ``angles`` axis -> measured angle [rad] (each of :attr:`joints`); NaN when one is
+        unknown, 0 W with the sun below the horizon."""
+        import numpy as np
+        from sslfr_common.contract import MIRRORS, MOBILE_STRUCTURE, SECONDARY_REFLECTOR
+        values = [beam, zenith, azimuth] + [angles.get(j) for j in self.joints]
+        if not all(x is not None and math.isfinite(x) for x in values):
             return math.nan
         if zenith >= math.pi / 2 or beam <= 0.0:
             return 0.0
-        sun = raytrace.sun_vector(np.float64(zenith), np.float64(azimuth), c.azimuth)
-        q = float(optics_power(np.float64(beam), sun, np.float64(mirrors), np.float64(mobile), np.float64(secondary),
-                               params))
+        z, a, g = np.float64(zenith), np.float64(azimuth), np.float64(beam)
+        bm, ba = np.float64(angles.get(MOBILE_STRUCTURE, 0.0)), np.float64(angles.get(SECONDARY_REFLECTOR, 0.0))
+        if self.description is None:
+            from sslfr_planner import raytrace
+            from sslfr_planner.analysis.optics import power
+            q = power(g, raytrace.sun_vector(z, a, self.azimuth), np.float64(angles[MIRRORS]), bm, ba, self.params)
+        else:
+            from sslfr_planner.analysis import ideal
+            q = ideal.held_absorbed_power(self.description, z, a, g, np.float64(angles[MIRRORS]), bm, ba)
+        q = float(q)
         return q if math.isfinite(q) else 0.0
-    return power
+
+
+def absorbed_model(config: str | None) -> AbsorbedModel:
+    """The :class:`AbsorbedModel` of the collector of site config ``config``; raises
+    ValueError (a DescriptionError, the node set's NodeSetError) for a config it cannot use."""
+    return AbsorbedModel(config)

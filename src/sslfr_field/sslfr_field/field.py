@@ -30,6 +30,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from sslfr_common.files import user_path
 from typing import Any, Mapping
 
 #: Fast DDS Discovery Server's default UDP port (eProsima documentation)
@@ -224,7 +225,7 @@ def parse(doc: Any, path: str | os.PathLike, *, check_config=None) -> Field:
         if not isinstance(cfg, str) or not cfg:
             bad(f'{key}.config', 'missing: the path of the collector\'s site config')
         else:
-            p = Path(cfg).expanduser()
+            p = user_path(cfg)
             p = p if p.is_absolute() else path.resolve().parent / p
             if not p.is_file():
                 bad(f'{key}.config', f'{cfg!r}: no such file ({p})')

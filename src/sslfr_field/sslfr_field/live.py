@@ -62,8 +62,9 @@ class FieldState:
 
     def __init__(self, collectors, lost_after: float = DEFAULT_LOST_AFTER, models: dict | None = None):
         """``collectors``: (id, namespace, page URL) triples; ``models``: id ->
-        absorbed-power function (:func:`sslfr_field.energy.absorbed_model`) of the
-        collectors whose absorbed energy can be computed."""
+        absorbed-power model (:class:`sslfr_field.energy.AbsorbedModel`: ``joints`` and
+        ``model(beam, zenith, azimuth, {axis: angle}) -> W``) of the collectors whose
+        absorbed energy can be computed."""
         self.views = {cid: CollectorView(cid, nsp, page) for cid, nsp, page in collectors}
         self.models = dict(models or {})
         self.lost_after = float(lost_after)
@@ -103,11 +104,11 @@ class FieldState:
         model = self.models.get(cid)
         if model is None:
             return
-        angles = [(v.axes.get(a) or {}).get('measured') for a in JOINTS]
-        if v.sun is None or v.beam is None or any(x is None for x in angles):
+        angles = {a: (v.axes.get(a) or {}).get('measured') for a in model.joints}
+        if v.sun is None or v.beam is None or any(x is None for x in angles.values()):
             watts = math.nan
         else:
-            watts = model(v.beam, v.sun[0], v.sun[1], *angles)
+            watts = model(v.beam, v.sun[0], v.sun[1], angles)
         v.absorbed.add(stamp, watts)
 
     def on_sun(self, cid: str, now: float, zenith: float, azimuth: float) -> None:

@@ -13,21 +13,18 @@ and serves :class:`sslfr_field.page.FieldApp`. Commands call the collector's own
 """
 from __future__ import annotations
 
-import asyncio
 import sys
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from sensor_msgs.msg import Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, ThermalPower, TrackerPhase
 from sslfr_interfaces.srv import SetMode
-from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, IRRADIANCE_BEAM, JOINTS,
-                                   LEVEL_NAMES, PHASE_NAMES, SAFETY_STATE, THERMAL_POWER, THERMOCOUPLES,
-                                   TRACKER_PHASE, TRACKER_SUN, collector_id)
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, IRRADIANCE_BEAM, JOINTS, LEVEL_NAMES,
+                                   PHASE_NAMES, SAFETY_STATE, THERMAL_POWER, THERMOCOUPLES, TRACKER_PHASE,
+                                   TRACKER_SUN)
+from sslfr_common.node import CONFIG_ERRORS, declare_parameters, qos, run_node, steady_now, to_sec
 from sslfr_web import commands
-from sslfr_web.app import Server
+from sslfr_web.page_host import PageHost
 
 from .live import FieldState
 from .page import FieldApp, field_page_params
@@ -36,7 +33,7 @@ from .page import FieldApp, field_page_params
 DISCOVERY_WAIT = 3.0
 
 
-class FieldPageNode(LeanEvents, Node):
+class FieldPageNode(PageHost):
     """Live state of every collector, the field page, commands through each collector's services."""
 
     def __init__(self, **kwargs):
@@ -69,11 +66,8 @@ class FieldPageNode(LeanEvents, Node):
                 sub(AxisStatus, f'{ns}/{AXIS_STATUS.of(axis)}', lambda m, c=cid, a=axis: st.on_axis(
                     c, now(), a, m.state, m.error, m.measured), qos(AXIS_STATUS))
         self.clients_: dict = {}
-        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
+        self.serve(FieldApp(self.cfg, self, self.namespaces))   # OSError (address in use ...) -> main
         self.create_timer(1.0, self._publish_diagnostics, clock=self.steady)
-        self.op = FieldApp(self.cfg, self, self.namespaces)
-        self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))
-        self.url = self.server.start()                 # OSError (address in use ...) -> main
         self.get_logger().info(f'field page at {self.url} ({len(nsp)} collectors: {", ".join(nsp)}; commands need '
                                f'the operator password{"" if self.op.passwords.line() else ": NONE SET"})')
 
@@ -95,61 +89,25 @@ class FieldPageNode(LeanEvents, Node):
     def snapshot(self) -> dict:
         return self.state.snapshot(steady_now(self.steady), self.ros_time())
 
-    def ros_time(self) -> float | None:
-        t = self.get_clock().now().nanoseconds * 1e-9
-        return t if t > 0 else None
-
-    def log(self, level: str, text: str) -> None:
-        logger = self.get_logger()
-        if level == 'error':
-            logger.error(text)
-        elif level == 'warn':
-            logger.warning(text)
-        else:
-            logger.info(text)
-
     async def call(self, cid: str, cmd: commands.Command) -> dict:
         """Call ``cmd`` (a planner/set_mode command) on collector ``cid``'s own service."""
         service = f'{self.namespaces[cid]}/{cmd.service}'
         client = self.clients_.get(service)
         if client is None:
             client = self.clients_[service] = self.create_client(SetMode, service)
-        for _ in range(int(DISCOVERY_WAIT / 0.05)):
-            if client.service_is_ready():
-                break
-            await asyncio.sleep(0.05)
-        else:
-            return {'success': False, 'message': f'service {service} is not available (collector lost?)'}
-        loop = asyncio.get_running_loop()
-        done = loop.create_future()
-        fut = client.call_async(SetMode.Request(**cmd.request))
-        fut.add_done_callback(lambda f: loop.call_soon_threadsafe(lambda: done.done() or done.set_result(f)))
-        try:
-            f = await asyncio.wait_for(done, float(self.cfg['service_timeout']))
-        except asyncio.TimeoutError:
-            client.remove_pending_request(fut)
-            return {'success': False, 'message': f'no answer from {service} within {self.cfg["service_timeout"]:g} s'}
-        resp = f.result()
-        return {k: getattr(resp, k) for k in resp.get_fields_and_field_types()}
+        return await self.call_service(client, SetMode.Request(**cmd.request),
+                                       timeout=float(self.cfg['service_timeout']), discovery_wait=DISCOVERY_WAIT,
+                                       missing='collector lost?')
 
     # ------------------------------------------------------------------ diagnostics (ROS thread)
     def _publish_diagnostics(self) -> None:
         snap = self.snapshot()
         lost = [c['id'] for c in snap['collectors'] if c['link'] != 'ok']
         password = self.op.passwords.line() is not None
-        s = DiagnosticStatus(name=f'{self.get_name()}: field page', hardware_id=collector_id(self.get_namespace()),
-                             level=DiagnosticStatus.OK if password and not lost else DiagnosticStatus.WARN,
-                             message=(f'not heard: {", ".join(lost)}; ' if lost else '')
-                             + (f'serving {self.url}' if password else self.op.passwords.problem))
-        s.values = [KeyValue(key=k, value=str(v)) for k, v in
-                    {**self.op.counters, 'sessions': len(self.op.sessions), 'url': self.url,
-                     **{f'link.{c["id"]}': c['link'] for c in snap['collectors']}}.items()]
-        arr = DiagnosticArray(status=[s])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self._diag.publish(arr)
-
-    def on_exit(self) -> None:
-        self.server.stop()
+        self.publish_page_status('field page', password and not lost,
+                                 (f'not heard: {", ".join(lost)}; ' if lost else '')
+                                 + (f'serving {self.url}' if password else self.op.passwords.problem),
+                                 {f'link.{c["id"]}': c['link'] for c in snap['collectors']})
 
 
 def main(args=None) -> int:

@@ -24,8 +24,8 @@ import shlex
 import shutil
 import socket
 import sys
-import tempfile
 from pathlib import Path
+from sslfr_common.files import user_path
 
 from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
 from sslfr_field import field as field_mod
@@ -225,7 +225,7 @@ def station_params(specs) -> dict:
 
 def resolve_field(name: str) -> Path:
     """A field file: a path as given, else a name in sslfr_bringup's config/fields."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if p.is_file():
         return p
     from sslfr_bringup.nodeset import config_dir
@@ -238,26 +238,18 @@ def resolve_field(name: str) -> Path:
 def main(argv: list[str]) -> int:
     """``sslfr station``: 0 after a stop signal, 1 when it cannot run, 2 for a bad
     field description or arguments."""
-    from sslfr_bringup.supervisor import Interrupted, StopSignals
-    from sslfr_common.cliargs import CliError, one_line
-    with StopSignals() as stop:
-        run_dir = Path(tempfile.mkdtemp(prefix='sslfr-station-'))
+    from sslfr_bringup.supervisor import supervised_main
+
+    def body(stop, run_dir) -> int:
+        args = parser().parse_args(argv)
+        args.params = station_params(args.set)
         try:
-            args = parser().parse_args(argv)
-            args.params = station_params(args.set)
-            try:
-                f = load_checked(str(resolve_field(args.field)))
-            except field_mod.FieldError as exc:
-                print(f'sslfr station: {exc.one_line()}', file=sys.stderr)
-                return 2
-            return run(f, args, stop, run_dir)
-        except CliError as exc:
-            print(f'sslfr station: error: {one_line(exc)}', file=sys.stderr)
+            f = load_checked(str(resolve_field(args.field)))
+        except field_mod.FieldError as exc:
+            print(f'sslfr station: {exc.one_line()}', file=sys.stderr)
             return 2
-        except Interrupted:
-            return 0
-        finally:
-            shutil.rmtree(run_dir, ignore_errors=True)
+        return run(f, args, stop, run_dir)
+    return supervised_main('station', body)
 
 
 def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say=None, tick=None,

@@ -11,9 +11,9 @@ from aiohttp.test_utils import TestClient, TestServer
 
 from sslfr_field import page
 from sslfr_field.live import FieldState
+from field_fixtures import PASSWORD, Backend
 from sslfr_web import auth
 
-PASSWORD = 'field-pass-123'
 
 
 def test_live_state_link_health_and_values():
@@ -50,30 +50,11 @@ def test_parameters_are_checked():
     assert page._check_lists({**ok, 'collector_pages': ['http://x/']})
 
 
-class Backend:
-    def __init__(self):
-        self.state = FieldState([('c1', '/c1', ''), ('c2', '/c2', '')])
-        self.calls, self.logs = [], []
-
-    def snapshot(self):
-        return self.state.snapshot(1.0)
-
-    def ros_time(self):
-        return 1.0
-
-    def log(self, level, text):
-        self.logs.append((level, text))
-
-    async def call(self, cid, cmd):
-        self.calls.append((cid, cmd.service, dict(cmd.request)))
-        return {'success': cid != 'c2', 'message': 'refused: maintenance' if cid == 'c2' else ''}
-
-
 def run(tmp_path, body, **cfg):
     pw = auth.write_password_file(tmp_path / 'pw', PASSWORD)
     conf = {**page.field_page_params().defaults(), 'collectors': ['/c1', '/c2'], 'collector_ids': ['c1', 'c2'],
             'password_file': str(pw), 'audit_file': str(tmp_path / 'audit.jsonl'), **cfg}
-    backend = Backend()
+    backend = Backend(('c2',))
     op = page.FieldApp(conf, backend, {'c1': '/c1', 'c2': '/c2'})
 
     async def main():

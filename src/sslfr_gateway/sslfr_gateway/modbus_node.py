@@ -12,13 +12,13 @@ import concurrent.futures
 import math
 import sys
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from sslfr_common.contract import (AXIS_STATUS, DIAGNOSTICS, IRRADIANCE_BEAM, JOINT_STATES, MIRRORS,
                                    PLANNER_SET_MODE, TRACKER_PHASE)
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node
+from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, diagnostics_msg, qos, run_node
 from sslfr_interfaces.msg import AxisStatus, Irradiance, TrackerPhase
 from sslfr_interfaces.srv import SetMode
 
@@ -142,12 +142,8 @@ class ModbusGatewayNode(LeanEvents, Node):
         return out
 
     def _diagnostics(self) -> None:
-        st = DiagnosticStatus(name=f'{self.get_name()}: modbus', hardware_id='modbus_gateway',
-                              level=DiagnosticStatus.OK, message='serving')
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in self.gateway.counters.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self._diag.publish(arr)
+        self._diag.publish(diagnostics_msg(f'{self.get_name()}: modbus', 0, 'serving', 'modbus_gateway',
+                                           self.gateway.counters, self.get_clock().now().to_msg()))
 
     def on_exit(self) -> None:
         self.gateway.stop()

@@ -8,7 +8,7 @@ from __future__ import annotations
 import ipaddress
 import re
 
-from sslfr_common.netguard import ip_address_error
+from sslfr_common.netguard import Limits, ip_address_error, limit_params
 from sslfr_common.params import ParamSpec, ParamTable
 
 _NAMESPACE = re.compile(r'^(/[A-Za-z][A-Za-z0-9_]*)+$')
@@ -113,6 +113,15 @@ FOXGLOVE_PARAMS = ParamTable((
               read_only=True),
     ParamSpec('discovery_period', 2.0, 'Topic discovery period [s, wall]', 's', 0.2, 60.0,
               read_only=True),
-    ParamSpec('max_connections', 16, 'Most simultaneous client connections [-]', '-', 1, 1024,
-              read_only=True),
+    *limit_params(Limits(max_connections_per_address=4, max_connections=16, header_timeout=10.0,
+                         idle_timeout=10.0)),
+    ParamSpec('max_message_bytes', 65536,
+              'Largest client message (a subscribe list); a larger one closes the connection '
+              '(WebSocket close 1009) [bytes]', 'bytes', 1024, 16777216, read_only=True),
+    ParamSpec('max_messages_per_s', 50.0,
+              'Client messages per second sustained (bursts of twice this); more close the '
+              'connection (WebSocket close 1008) [1/s]', '1/s', 1.0, 10000.0, read_only=True),
+    ParamSpec('message_backlog', 256,
+              'Messages queued per client by the server; a client that does not read loses the '
+              'oldest [-]', '-', 16, 4096, read_only=True),
 ), integers_for_floats=True)

@@ -1,7 +1,8 @@
-"""The allow-list relay in front of the Foxglove server, over real sockets: admitted
-clients are piped both ways, others (by address, or beyond max_connections) are closed
-at once and counted, and a flood from other loopback addresses leaves an admitted
-client served."""
+"""The relay in front of the Foxglove server, over real sockets with an echo server
+behind it: admitted clients are piped both ways, others (by address, or beyond the
+connection caps) are closed at once and counted, and a flood from other loopback
+addresses leaves an admitted client served. (WebSocket hostile clients against the
+real server: test_foxglove_hostile.py.)"""
 from __future__ import annotations
 
 import socket
@@ -11,7 +12,10 @@ import time
 import pytest
 
 from gateway_fixtures import extra_loopbacks  # noqa: F401 - a fixture
+from sslfr_common.netguard import Limits, OneLineLog
 from sslfr_gateway.allow_relay import AllowRelay, client_ip
+
+HEAD = b'GET / HTTP/1.1\r\nHost: x\r\n\r\n'
 
 
 @pytest.fixture
@@ -53,8 +57,8 @@ def _roundtrip(port: int, source: str = '127.0.0.1') -> bytes:
         s.bind((source, 0))
         s.connect(('127.0.0.1', port))
         try:
-            s.sendall(b'ping')
-            return s.recv(16)
+            s.sendall(HEAD)
+            return s.recv(64)
         except (ConnectionResetError, BrokenPipeError):
             return b''
 
@@ -68,11 +72,12 @@ def test_client_ip_normalises_mapped_addresses():
 def test_allowed_clients_are_relayed_others_closed_and_a_flood_does_not_starve_them(echo, extra_loopbacks):
     if '127.0.0.2' not in extra_loopbacks:
         pytest.skip('no 127.0.0.2 on this machine')
-    relay = AllowRelay('127.0.0.1', 0, echo, ('127.0.0.1',), max_connections=3, log=lambda s: None)
+    relay = AllowRelay('127.0.0.1', 0, echo, ('127.0.0.1',), Limits(max_connections=3, max_connections_per_address=3),
+                       OneLineLog(lambda level, text: None))
     port = relay.start()
     held = []
     try:
-        assert _roundtrip(port) == b'ping'
+        assert _roundtrip(port) == HEAD
         assert _roundtrip(port, '127.0.0.2') == b''
         for addr in extra_loopbacks * 20:
             s = socket.socket()
@@ -83,7 +88,7 @@ def test_allowed_clients_are_relayed_others_closed_and_a_flood_does_not_starve_t
         while relay.counters['refused_address'] < 21 and time.monotonic() < deadline:
             time.sleep(0.05)
         assert relay.counters['refused_address'] >= 21
-        assert _roundtrip(port) == b'ping'
+        assert _roundtrip(port) == HEAD
         # admitted connections beyond max_connections are closed too
         deadline = time.monotonic() + 5
         while relay.active > 0 and time.monotonic() < deadline:    # the round trips above are over
@@ -98,13 +103,13 @@ def test_allowed_clients_are_relayed_others_closed_and_a_flood_does_not_starve_t
         while relay.active < 3 and time.monotonic() < deadline:
             time.sleep(0.05)
         assert _roundtrip(port) == b''
-        assert relay.counters['refused_full'] >= 1
+        assert relay.guard.counters['connections_refused'] >= 1
         for s in keep:
             s.close()
         deadline = time.monotonic() + 5
         while relay.active > 0 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert _roundtrip(port) == b'ping'
+        assert _roundtrip(port) == HEAD
     finally:
         for s in held:
             s.close()

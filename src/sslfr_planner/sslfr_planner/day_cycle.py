@@ -57,9 +57,13 @@ def make_site(cfg: dict, fix: SiteFix) -> Site:
 def make_collector(cfg: dict, description=None) -> Collector:
     """Core :class:`Collector` from the collector.* parameters (SI, radians).
 
-    ``description`` (:class:`sslfr_planner.description.Description`): the mirrors follow
-    its law, within its mirror range and sleeping at its sleep position; the range is
-    kept inside the contract's mirror range, which the axis drivers enforce today.
+    ``description`` (:class:`sslfr_planner.description.Description`): the collector it
+    describes wins over the parameters (``sslfr up`` refuses a site config whose values
+    contradict it; a value left out would otherwise be seed 000's default): its field
+    geometry (:func:`sslfr_planner.prototype.field_geometry`), axis azimuth and
+    longitudinal law ('horizontal' without longitudinal movements), seed 003's step
+    (``law_params.step_s``); the mirrors follow its law, within its mirror range (kept
+    inside the contract's kinematic limits) and sleeping at its sleep position.
     """
     geometry = FieldGeometry(n_per_side=int(cfg['collector.n_per_side']),
                              mirror_width=float(cfg['collector.mirror_width']),
@@ -67,18 +71,21 @@ def make_collector(cfg: dict, description=None) -> Collector:
                              receiver_height=float(cfg['collector.receiver_height']),
                              tube_diameter=float(cfg['collector.tube_diameter']),
                              central_mirror=bool(cfg['collector.central_mirror']))
-    extra = {}
+    extra = {'geometry': geometry, 'azimuth': float(cfg['collector.azimuth']), 'law': cfg['collector.law'],
+             'tracking_step': float(cfg['collector.tracking_step'])}
     if description is not None:
+        from .prototype import field_geometry
         m = description.movements[JOINTS[0]]
         lo = max(m.range[0], JOINT_LIMITS[JOINTS[0]][0])
         hi = min(m.range[1], JOINT_LIMITS[JOINTS[0]][1])
-        extra = dict(description=description, mirror_min=lo, mirror_max=hi, sleeping=min(max(m.sleep, lo), hi))
-    return Collector(geometry=geometry, **extra,
-                     azimuth=float(cfg['collector.azimuth']),
-                     law=cfg['collector.law'],
+        extra.update(description=description, mirror_min=lo, mirror_max=hi, sleeping=min(max(m.sleep, lo), hi),
+                     geometry=field_geometry(description), azimuth=description.optics.azimuth,
+                     law=description.longitudinal_law)
+        if 'step_s' in m.law_params:
+            extra['tracking_step'] = float(m.law_params['step_s'])
+    return Collector(**extra,
                      pre_dawn_lead=float(cfg['collector.pre_dawn_lead']),
-                     stow_duration=float(cfg['collector.stow_duration']),
-                     tracking_step=float(cfg['collector.tracking_step']))
+                     stow_duration=float(cfg['collector.stow_duration']))
 
 
 @dataclass

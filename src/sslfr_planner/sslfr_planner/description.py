@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import yaml
+from sslfr_common.files import user_path
 
 from sslfr_common.contract import DRIVE_KINDS, JOINT_LIMITS, DriveKind, JOINTS, LONGITUDINAL_JOINTS, SWITCHES
 from sslfr_common.drives import LeverGeometry
@@ -610,7 +611,7 @@ def parse(data: Any, where: str = 'description') -> Description:
 def resolve(name: str, base: str | os.PathLike | None = None) -> Path:
     """The description file ``name``: absolute, or relative to ``base`` (the directory of
     the site config that names it)."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if not p.is_absolute() and base is not None:
         p = Path(base) / p
     return p
@@ -621,7 +622,7 @@ def find(name: str, params_files=(), cwd: str | os.PathLike | None = None) -> Pa
     the last of ``params_files`` (the node's ``--params-file`` arguments, later wins, as
     rcl) that has it, else in ``cwd`` (the current directory). When none has it, the
     path beside the last params file (or in cwd): :func:`load` then says it is missing."""
-    p = Path(name).expanduser()
+    p = user_path(name)
     if p.is_absolute():
         return p
     candidates = [Path(f).parent / p for f in reversed(list(params_files))]

@@ -16,9 +16,28 @@ line positions x_i west positive, east to west). All angles radians, lengths met
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import lepten
+
+#: seed 004 section 3 (eq. 10): the largest mirror positioning error of the LEPTEN tracker,
+#: 0.085 deg while |theta_T| <= 45 deg (its main operating period) and 0.12 deg up to 80 deg [rad]
+POSITIONING_BUDGET = (math.radians(0.085), math.radians(0.12))
+#: |theta_T| up to which the smaller budget applies [rad]
+POSITIONING_BUDGET_SPLIT = math.radians(45.0)
+#: |theta_T| up to which seed 004 states a budget (its analysis spans -80..80 deg) [rad]
+POSITIONING_BUDGET_RANGE = math.radians(80.0)
+
+
+def positioning_budget(theta_t):
+    """Seed 004's mirror positioning budget at transversal angles ``theta_t`` [rad]:
+    0.085 deg for |theta_T| <= 45 deg, 0.12 deg up to 80 deg (section 3, eq. 10), NaN
+    beyond (no budget: the seed's analysis stops at 80 deg) [rad]."""
+    tt = np.abs(np.asarray(theta_t, dtype=float))
+    return np.where(tt <= POSITIONING_BUDGET_SPLIT, POSITIONING_BUDGET[0],
+                    np.where(tt <= POSITIONING_BUDGET_RANGE, POSITIONING_BUDGET[1], np.nan))
 
 
 def half_transversal(theta_t, positions, height: float):

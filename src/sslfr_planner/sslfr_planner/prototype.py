@@ -3,7 +3,10 @@
 :func:`field_geometry` is the :class:`~sslfr_planner.collector.FieldGeometry` of a
 :class:`~sslfr_planner.description.Description` (2n lines without a central line);
 :func:`commanded_lines` the angles its law gives the drive and every line;
-:func:`exact_lines` the angles every line would need with its own drive (the ideal).
+:func:`exact_lines` the angles every line would need with its own drive (the ideal);
+:func:`held_lines` every line's angle with the drive at a measured angle (the lines ride
+on the drive at the law's offsets) and :func:`line_errors` their error against
+:func:`exact_lines`.
 Angles radians, lengths metres, theta_t the transversal angle (afternoon positive).
 """
 from __future__ import annotations
@@ -57,3 +60,26 @@ def exact_lines(desc: Description, theta_t):
     radius r (exactly seed 000 eqs. 11-14 / seed 003 eqs. 5-6 when r = 0)."""
     o = desc.optics
     return mirror_laws.lepten_exact(theta_t, line_positions(desc), o.receiver_height, o.rotation_radius)
+
+
+def law_offsets(desc: Description, theta_t):
+    """Each line's offset from the drive under the description's law [rad], (..., n_lines):
+    the angle the mechanism keeps between line i and the drive (seed 004 Table 1's b_i,
+    seed 003's -phi_i / 2, seed 000's psi_i / 2), fixed at assembly."""
+    drive, lines = commanded_lines(desc, theta_t)
+    return lines - np.asarray(drive)[..., None]
+
+
+def held_lines(desc: Description, theta_t, drive):
+    """Every line's angle [rad], (..., n_lines), with the common drive held at ``drive``
+    [rad] (e.g. the measured ``mirrors`` joint) at transversal angles ``theta_t`` [rad]."""
+    return np.asarray(drive, dtype=float)[..., None] + law_offsets(desc, theta_t)
+
+
+def line_errors(desc: Description, theta_t, drive):
+    """Tracking error of every line [rad], (..., n_lines): :func:`held_lines` minus the
+    exact angle of seed 004 eqs. 3-4 (:func:`exact_lines`), positive = the line turned
+    too far west. With ``drive`` the law's own command this is the law's systematic
+    error (seed 004 section 3, the linearisation); with a measured drive it adds the
+    drive's tracking error."""
+    return held_lines(desc, theta_t, drive) - exact_lines(desc, theta_t)

@@ -191,8 +191,23 @@ def test_planner_commands_the_seed004_table1_drive():
     assert track.sum() > 30
     assert tab.mirrors[track] == pytest.approx(0.4962 * tab.transversal[track], abs=1e-12)
     ref, _ = _table('florianopolis_lepten.yaml', None)               # without a description: theta_T / 2
-    assert ref.mirrors[track] == pytest.approx(tab.transversal[track] / 2, abs=1e-12)
+    assert ref.mirrors[track] == pytest.approx(ref.transversal[track] / 2, abs=1e-12)
     assert c.sleeping == pytest.approx(DEG(40.0)) and c.mirror_max == pytest.approx(DEG(40.0))
+    # the description's collector, whatever the parameters left out: its azimuth (the
+    # config's 0.0802851 rad is it to 7 digits), 12 m rows, no longitudinal law
+    assert c.azimuth == DEG(4.6) and c.geometry.mirror_length == 12.0 and c.law == 'horizontal'
+
+
+def test_a_description_wins_over_parameters_left_at_seed_000_defaults():
+    """A site config naming a description and no collector.* values (the planner's
+    defaults are seed 000's: 25 lines, the 'continuous' law): the planner tracks the
+    described collector, seed 003's rows flat and its 15-minute steps."""
+    from sslfr_planner.day_cycle import make_collector
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    c = make_collector(PLANNER_PARAMS.defaults(), S003)
+    assert c.law == 'horizontal' and c.geometry.n_mirrors == 10 and not c.geometry.central_mirror
+    assert c.geometry.aim_height == pytest.approx(0.75) and c.tracking_step == 900.0
+    assert make_collector(PLANNER_PARAMS.defaults()).law == 'continuous'
 
 
 def test_planner_commands_the_seed003_linkage_in_steps():
@@ -221,3 +236,42 @@ def test_a_node_finds_its_description_beside_its_params_file(tmp_path):
     with pytest.raises(ValueError, match='cannot read'):
         d.for_node('collectors/missing.yaml', args)
     assert d.find(str(tmp_path / 'collectors' / 'x.yaml')) == tmp_path / 'collectors' / 'x.yaml'
+
+
+# ------------------------------------------------------------------ lines riding on a held drive
+def test_held_lines_ride_on_the_drive_at_the_laws_offsets():
+    """The day report's model of a measured drive: with the law's own drive the lines
+    are the law's (seeds 000, 003, 004); a drive off by e puts every line off by e; the
+    line errors against eqs. 3-4 are then the law's plus e; the power with the law's
+    drive is the law's power (seed 000: the ideal, mirrors focused)."""
+    from sslfr_planner.prototype import held_lines, line_errors
+    tt = np.radians([-60.0, -20.0, 0.0, 35.0, 70.0])
+    for desc in (S000, S003, S004):
+        drive, lines = commanded_lines(desc, tt)
+        assert held_lines(desc, tt, drive) == pytest.approx(lines, abs=1e-12)
+        assert held_lines(desc, tt, drive + 0.01) == pytest.approx(lines + 0.01, abs=1e-12)
+    drive, lines = commanded_lines(S004, tt)
+    law = ml.line_errors(tt, lines, line_positions(S004), 3.75, 0.065)
+    assert line_errors(S004, tt, drive) == pytest.approx(law, abs=1e-12)
+    assert line_errors(S004, tt, drive + DEG(0.05)) == pytest.approx(law + DEG(0.05), abs=1e-12)
+    z, az = np.radians([30.0, 50.0]), np.radians([60.0, 300.0])
+    theta = raytrace.transversal_angle(raytrace.sun_vector(z, az, S004.optics.azimuth))
+    d4, _ = commanded_lines(S004, theta)
+    assert ideal.held_absorbed_power(S004, z, az, 900.0, d4) == pytest.approx(
+        ideal.law_absorbed_power(S004, z, az, 900.0), rel=1e-12)
+    sun = raytrace.sun_vector(z, az)
+    bm, ba = laws.continuous(sun, FieldGeometry())
+    d0 = raytrace.central_mirror_tilt(sun, bm)
+    assert ideal.held_absorbed_power(S000, z, az, 900.0, d0) == pytest.approx(
+        ideal.ideal_absorbed_power(S000, z, az, 900.0), rel=1e-12)
+    # flat 0.45 m lines: each beam is wider than the 0.15 m receiver, so the power has a
+    # plateau of about +/-0.5 deg of drive error and falls off beyond: 2 deg loses most
+    q = ideal.held_absorbed_power(S004, z, az, 900.0, d4)
+    for e in (2.0, -2.0):
+        assert np.all(ideal.held_absorbed_power(S004, z, az, 900.0, d4 + DEG(e)) < 0.2 * q)
+
+
+def test_positioning_budget_is_seed004_section3():
+    b = np.degrees(ml.positioning_budget(np.radians([-80.0, -45.0, 0.0, 45.0, 45.01, 80.0])))
+    assert b == pytest.approx([0.12, 0.085, 0.085, 0.085, 0.12, 0.12])
+    assert np.all(np.isnan(ml.positioning_budget(np.radians([-85.0, 80.01]))))    # beyond the seed's range

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from sslfr_common.files import user_path
 
 from sslfr_planner.cli_input import CliError, OneLineParser, run
 
@@ -24,7 +25,7 @@ from .bag.metadata import BagError
 
 
 def _existing(text: str) -> Path:
-    path = Path(text).expanduser()
+    path = user_path(text)
     if not path.exists():
         raise CliError(f'bag {text}: no such file or directory')
     if not (path.is_dir() or path.is_file()):

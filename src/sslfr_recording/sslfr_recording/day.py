@@ -5,7 +5,9 @@ schemas.
 The day report (:mod:`.report`), the what-if comparison (:mod:`.bag.whatif`) and the
 simulated-day tests read a bag through :func:`read_day`, and build the ideal axis
 angles with :func:`reference`: the collector and site parameters of the run's own site
-config (:func:`planner_config`, read once) at the site the planner reported.
+config (:func:`planner_config`, read once) and the collector description it names
+(:func:`run_description`: the movements the collector has, their laws, its optics) at
+the site the planner reported.
 
 Times are ROS time [s since the Unix epoch]: each message's ``header.stamp``, or its
 log time when the stamp is zero or the type has no header; angles [rad].
@@ -321,39 +323,59 @@ def planner_config(config: str | Path | None) -> dict:
     return cfg
 
 
+def run_description(config: str | Path | None):
+    """The collector description the run's site config names (``collector.description``
+    of its planner section, relative to the config as the planner finds it), or None
+    when the config names none (or no config: the planner's defaults).
+    :class:`sslfr_planner.description.DescriptionError` (a ValueError) when it is broken."""
+    from sslfr_bringup import nodeset
+    from sslfr_planner import description
+
+    if not config:
+        return None
+    name = planner_config(config).get('collector.description') or ''
+    if not name:
+        return None
+    return description.load(description.find(name, [str(nodeset.resolve_config(config))]))
+
+
 @dataclass(frozen=True)
 class Reference:
     """The ideal of a run: the ephemeris core's tracking table
-    (:func:`sslfr_planner.tracking_table.evaluate`, NREL SPA + seed 000 eqs. 9-16) for
-    the run's collector at its site. ``ref(t)`` is the table at times ``t`` [s]."""
+    (:func:`sslfr_planner.tracking_table.evaluate`, NREL SPA + seed 000 eqs. 9-16; the
+    mirrors on the description's law) for the run's collector at its site. ``ref(t)`` is
+    the table at times ``t`` [s]; ``description`` the run's collector description (None:
+    the config names none)."""
 
     config: str                # the site config it was built from ('' for the planner's defaults)
     collector: object          # sslfr_planner.collector.Collector
     site: object               # sslfr_planner.site.Site
+    description: object = None  # sslfr_planner.description.Description or None
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """The collector's movements (the description's; every contract joint without one)."""
+        return self.description.joints if self.description is not None else JOINTS
 
     def __call__(self, t):
         from sslfr_planner import tracking_table
         return tracking_table.evaluate(np.atleast_1d(np.asarray(t, dtype=float)), self.site, self.collector)
 
     def angles(self, t) -> dict[str, np.ndarray]:
-        """Ideal angle of each axis at ``t`` [rad]."""
+        """Ideal angle of each of the collector's movements at ``t`` [rad]."""
         table = self(t)
-        return {a: np.asarray(getattr(table, a), dtype=float) for a in JOINTS}
+        return {a: np.asarray(getattr(table, a), dtype=float) for a in self.joints}
 
 
 def reference(config: str | Path | None, latitude_deg: float, longitude_deg: float, elevation: float) -> Reference:
     """The one ideal reference of a run: the collector (its parameters and the collector
-    description they name, relative to the config as the planner finds it) and the site
-    parameters (pressure, temperature, delta-T) of its site config
-    (:func:`planner_config`) at the site the planner reported in ``tracker/phase``
-    [deg, deg, m]."""
-    from sslfr_bringup import nodeset
-    from sslfr_planner import description
+    description they name, :func:`run_description`) and the site parameters (pressure,
+    temperature, delta-T) of its site config (:func:`planner_config`) at the site the
+    planner reported in ``tracker/phase`` [deg, deg, m]."""
     from sslfr_planner.day_cycle import make_collector, make_site
     from sslfr_planner.site_source import SiteFix
 
     cfg = planner_config(config)
-    name = cfg.get('collector.description') or ''
-    desc = description.load(description.find(name, [str(nodeset.resolve_config(config))])) if name and config else None
+    desc = run_description(config)
     return Reference(str(config or ''), make_collector(cfg, desc),
-                     make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters')))
+                     make_site(cfg, SiteFix(latitude_deg, longitude_deg, elevation, 'parameters')), desc)

@@ -1,7 +1,10 @@
 """The figures of the day report (``sslfr report``, :mod:`.report_cli`), computed from a
-recorded day decoded once (:class:`~.day.Day`): time in each phase, per-axis tracking
+recorded day decoded once (:class:`~.day.Day`) for the run's own collector (the
+movements its description names, :func:`.day.run_description`; without one, the axes
+recorded): time in each phase, per-axis tracking
 error while tracking (vs the setpoint and vs the run's ideal reference, outside the
-axis' deliberate moves: :func:`axis_moves`), moves, safety and commanded stows,
+axis' deliberate moves: :func:`axis_moves`), every mirror line's error against its
+exact angle (:func:`line_tracking`), moves, safety and commanded stows,
 temperatures, irradiance and irradiation, link faults, the absorbed-energy estimate
 (:mod:`.report_energy`), each axis' time above the accuracy alarm's thresholds (the
 driver's own filter, :class:`sslfr_common.accuracy.AccuracyAlarm`, replayed on the
@@ -17,9 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from sslfr_common import accuracy as accuracy_mod
 from sslfr_common.accuracy import MOVE_CAP, MOVE_RATE, SETTLE  # noqa: F401 - one definition (the alarm's)
-from sslfr_common.contract import JOINTS, LEVEL_NAMES, PHASE_NAMES, TRACKER_TRAJECTORY, LinkState
+from sslfr_common.contract import JOINTS, LEVEL_NAMES, MIRRORS, PHASE_NAMES, TRACKER_TRAJECTORY, LinkState
 
-from .day import TOPICS, Day, read_day, reference
+from .day import TOPICS, Day, read_day, reference, run_description
 from .report_energy import energy_estimate
 from .report_thermal import thermal_of
 
@@ -76,7 +79,10 @@ class DayReport:
     temperatures: dict = field(default_factory=dict)      # name -> {'max', 't_max', 'nan_samples'}
     irradiance: dict = field(default_factory=dict)
     links: dict = field(default_factory=dict)             # axis -> dict
-    energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'achieved_kwh', 'note'
+    energy: dict = field(default_factory=dict)            # 'ideal_kwh', 'law_kwh', 'achieved_kwh', 'note'
+    collector: str = ''                                   # the collector description's name ('' without one)
+    joints: tuple = ()                                    # the movements reported
+    lines: dict = field(default_factory=dict)             # line_tracking() or {'note': why not}
     thermal: dict = field(default_factory=dict)           # report_thermal.thermal_of (a flow meter only)
     accuracy: dict = field(default_factory=dict)          # axis -> accuracy_of() dict
     timeline: list = field(default_factory=list)          # (t, kind, text, repeats, last_t), time order
@@ -130,7 +136,10 @@ def axis_moves(t: np.ndarray, setpoint: np.ndarray, measured: np.ndarray) -> lis
 
     A move starts where the setpoint changes faster than :data:`MOVE_RATE` (a jump of
     the setpoint: PRE_DAWN's slew from the sleeping position, a stow, a law's
-    repositioning; sun tracking moves the setpoints at most ~0.004 deg/s) and ends at
+    repositioning; sun tracking moves the setpoints at most ~0.004 deg/s), or at the
+    first sample when the axis is not within :data:`SETTLE` of its setpoint there (a
+    recording that starts with the axis elsewhere: a run started in daytime from the
+    sleeping position), and ends at
     the first sample, after the setpoint has stopped jumping, where the axis is within
     :data:`SETTLE` of it, or :data:`MOVE_CAP` seconds after it started (an axis that
     never arrives is then judged as tracking, so a fault is never hidden). Returns
@@ -149,6 +158,8 @@ def axis_moves(t: np.ndarray, setpoint: np.ndarray, measured: np.ndarray) -> lis
     moves = []
     k = 0
     starts = np.flatnonzero(jump) + 1    # sample i is the first at the new setpoint
+    if off[0] and (starts.size == 0 or starts[0] != 1):
+        starts = np.concatenate([[1], starts])   # the recording starts mid-move
     while k < starts.size:
         i0 = int(starts[k]) - 1
         i = i0 + 1
@@ -193,8 +204,57 @@ def _ideal(day: Day, config: str | None):
         return None, 'ideal unavailable (sslfr_planner.tracking_table not installed)'
     except Exception as exc:  # noqa: BLE001 - any failure of the optional reference is reported
         return None, f'ideal unavailable ({type(exc).__name__}: {exc})'
+    desc = ref.description
     return ref, ('ideal = sslfr_planner.tracking_table.evaluate at the same instants, collector and site '
-                 'parameters from ' + (str(config) if config else 'the planner defaults') + ', site from the bag')
+                 'parameters from ' + (str(config) if config else 'the planner defaults')
+                 + (f', collector description {desc.name} (its laws)' if desc is not None else '')
+                 + ', site from the bag')
+
+
+def collector_joints(day: Day, config: str | None) -> tuple[tuple[str, ...], str, str]:
+    """The movements to report: the run's collector description's (its name), else the
+    axes the bag recorded; and a note when the description cannot be read."""
+    try:
+        desc = run_description(config)
+    except ImportError:
+        desc = None
+    except Exception as exc:  # noqa: BLE001 - a broken description is reported, the recorded axes used
+        recorded = tuple(a for a in JOINTS if len(day.axes.get(a, ())) or a in day.joints)
+        return recorded, '', f'collector description unavailable ({type(exc).__name__}: {exc})'
+    if desc is not None:
+        return desc.joints, desc.name, ''
+    return tuple(a for a in JOINTS if len(day.axes.get(a, ())) or a in day.joints), '', ''
+
+
+def line_tracking(desc, t: np.ndarray, zenith, azimuth, measured, commanded) -> dict:
+    """Every mirror line's error against its exact angle (seed 004 eqs. 3-4), rows horizontal.
+
+    ``t`` [s] the samples judged (tracking, outside moves), the sun's ``zenith`` and
+    ``azimuth`` [rad] there, the drive's ``measured`` angle and the law's ``commanded``
+    drive [rad]. Each line rides on the drive at the law's offset
+    (:func:`sslfr_planner.prototype.held_lines`). Returns 'lines': per line (1-based,
+    east to west) 'x' [m], 'held' (:class:`ErrorStats` of held - exact), 'law_max' (the
+    law's own largest error [rad]) and 'within' (share of the samples with |theta_T| <=
+    80 deg within seed 004's positioning budget at that instant's theta_T,
+    :func:`sslfr_planner.mirror_laws.positioning_budget`; NaN when none); 'budget' (the
+    two budgets [rad]); 'samples'; 'judged' (the samples with a budget); 't' and 'errors'
+    (samples x lines [rad]).
+    """
+    from sslfr_planner import mirror_laws, raytrace
+    from sslfr_planner.prototype import line_errors, line_positions
+
+    theta_t = raytrace.transversal_angle(raytrace.sun_vector(zenith, azimuth, desc.optics.azimuth))
+    held = line_errors(desc, theta_t, measured)
+    law = line_errors(desc, theta_t, commanded)
+    budget = mirror_laws.positioning_budget(theta_t)
+    judged = np.isfinite(budget)                 # |theta_T| <= 80 deg: where the seed states one
+    within = (np.mean(np.abs(held[judged]) <= budget[judged][:, None], axis=0) if judged.any()
+              else np.full(held.shape[-1], np.nan))
+    lines = [{'line': i + 1, 'x': float(x), 'held': ErrorStats.of(held[:, i]),
+              'law_max': float(np.max(np.abs(law[:, i]))) if len(t) else float('nan'), 'within': float(within[i])}
+             for i, x in enumerate(line_positions(desc))]
+    return {'lines': lines, 'budget': mirror_laws.POSITIONING_BUDGET, 'samples': int(len(t)),
+            'judged': int(judged.sum()), 't': np.asarray(t, dtype=float), 'errors': held}
 
 
 def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfig:
@@ -299,9 +359,11 @@ def analyse(source, config: str | None = None) -> DayReport:
             rep.stows.append({'start': st[i], 'end': t1, 'duration': t1 - st[i],
                               'level': LEVEL_NAMES.get(int(sv['level'][i:j].max()), '?'),
                               'reasons': reasons, 'ongoing': j >= len(st)})
-    # -- tracking error
+    # -- tracking error, for the collector's own movements
+    joints, rep.collector, desc_note = collector_joints(day, config)
+    rep.joints = joints
     ref = note = None
-    for axis in JOINTS:
+    for axis in joints:
         s = day.axes[axis]
         if not len(s):
             continue
@@ -328,6 +390,8 @@ def analyse(source, config: str | None = None) -> DayReport:
             else:
                 entry['ideal'] = ErrorStats.of((v['measured'] - ideal)[mask])
                 rep.series[f'ideal_{axis}'] = (t, ideal)
+                if axis == MIRRORS:
+                    rep.lines = _lines(ref, t[mask], v['measured'][mask], ideal[mask])
         rep.tracking[axis] = entry
         rep.series[f'status_{axis}'] = (t, v)
         lk = v['link_state']
@@ -342,8 +406,11 @@ def analyse(source, config: str | None = None) -> DayReport:
         rep.accuracy[axis] = accuracy_of(axis, t, v, phases, config)
     if not rep.tracking:
         for axis, s in day.joints.items():
-            rep.series[f'joint_{axis}'] = (s.t, s.cols)
+            if axis in joints:
+                rep.series[f'joint_{axis}'] = (s.t, s.cols)
         rep.ideal_note = rep.ideal_note or 'no axes/<axis>/status: tracking error not computed'
+    if desc_note:
+        rep.ideal_note = f'{rep.ideal_note}; {desc_note}' if rep.ideal_note else desc_note
     # -- temperatures, irradiance
     for name, s in (('inlet_temperature', day.inlet), ('outlet_temperature', day.outlet)):
         if not len(s):
@@ -370,6 +437,27 @@ def analyse(source, config: str | None = None) -> DayReport:
     rep.has_rosout = day.has_rosout
     rep.thermal = thermal_of(day, gap_limit(day.thermal.t)) if len(day.thermal) else {}
     if len(bt) > 1:
-        rep.energy = energy_estimate(rep.site, bt, day.beam['g'].astype(float),
-                                     {a: (s.t, s.cols) for a, s in day.axes.items() if len(s)}, config)
+        try:
+            rep.energy = energy_estimate(rep.site, bt, day.beam['g'].astype(float),
+                                         {a: (s.t, s.cols) for a, s in day.axes.items() if len(s) and a in joints},
+                                         config, ref=ref)
+        except Exception as exc:  # noqa: BLE001 - any failure of the optional estimate is reported
+            rep.energy = {'note': f'energy estimate unavailable ({type(exc).__name__}: {exc})'}
     return rep
+
+
+def _lines(ref, t: np.ndarray, measured: np.ndarray, commanded: np.ndarray) -> dict:
+    """:func:`line_tracking` of the run's collector, or {'note': why not}."""
+    desc = ref.description
+    if desc is None:
+        return {'note': 'no collector description: the lines\' offsets are unknown'}
+    if desc.longitudinal_law != 'horizontal':
+        return {'note': 'the rows tilt (longitudinal movements): seed 004 eqs. 3-4 hold for horizontal rows; '
+                        'the mirrors\' error is the drive\'s (vs ideal above)'}
+    if not len(t):
+        return {'note': 'no tracking samples'}
+    try:
+        table = ref(t)
+        return line_tracking(desc, t, table.zenith, table.azimuth, measured, commanded)
+    except Exception as exc:  # noqa: BLE001 - an optional figure: its failure is reported, not fatal
+        return {'note': f'unavailable ({type(exc).__name__}: {exc})'}

@@ -3,9 +3,10 @@
 A summary a person reads in a minute, as text on stdout and as ``report.md`` with
 PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 
-- site and date; sunrise / solar noon / sunset (from ``tracker/phase``);
+- site and date; the collector (the collector description ``--config`` names) and its
+  movements, the only ones reported; sunrise / solar noon / sunset (from ``tracker/phase``);
 - time spent in each phase (a phase holds until the next tracker/phase message);
-- per-axis tracking error, RMS / max / 95th percentile [mrad], only while the axis is
+- per-movement tracking error, RMS / max / 95th percentile [mrad], only while the axis is
   tracking: phase TRACKING and not inside one of the axis' deliberate moves (see
   :func:`.report.axis_moves`): measured vs the commanded setpoint (``axes/<axis>/status``)
   and measured vs the ideal command of :func:`sslfr_planner.tracking_table.evaluate` at the
@@ -17,9 +18,11 @@ PNG plots (matplotlib, Agg) in ``--out`` (default: ``<bag>/report``):
 - max absorber temperatures; max beam irradiance and the day's beam irradiation
   H = integral of G_b dt [kWh/m^2] (trapezoids, gaps > 120 s not bridged);
 - link faults per axis (time not LINK_UP, frames lost / bad, fault bits);
-- the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25;
-  :func:`sslfr_planner.analysis.performance.day_energy`) fed with the recorded beam irradiance and
-  once with the ideal axis angles, once with the measured ones (ideal vs achieved).
+- rows that do not tilt: every mirror line's error against its exact angle (seed 004
+  eqs. 3-4) and seed 004's 0.085 / 0.12 deg budget (:func:`.report.line_tracking`);
+- the day's absorbed energy estimate: the optical model of seed 000 (eqs. 18, 20, 25) on
+  the collector's optics (:mod:`.report_energy`) fed with the recorded beam irradiance:
+  every line exact (ideal), the collector's law, and the measured angles (achieved).
 
 The bag is decoded once (:func:`.day.read_day`); the ideal is the run's reference
 (:func:`.day.reference`) built from ``--config``, the run's site config (default: the

@@ -35,6 +35,8 @@ def render_text(rep: DayReport) -> str:
                      f'{s["altitude"]:.0f} m ({s["source"]})')
     else:
         lines.append('site            unknown (no tracker/phase, no gps/fix)')
+    lines.append(f'collector       {rep.collector or "no collector description"}: '
+                 + (', '.join(rep.joints) if rep.joints else 'no movement recorded'))
     if 'sunrise' in rep.events:
         e = rep.events
         lines.append(f'sun             sunrise {utc(e["sunrise"])}, noon {utc(e["solar_noon"])}, '
@@ -54,6 +56,7 @@ def render_text(rep: DayReport) -> str:
         lines.append(f'  {axis:<20} vs setpoint  {e["setpoint"].text()}')
         if e['ideal'] is not None:
             lines.append(f'  {"":<20} vs ideal     {e["ideal"].text()}')
+    lines += render_lines(rep)
     if rep.moves:
         lines.append('moves (setpoint jumps: pre-dawn slew, stows, repositioning)')
     for axis, moves in rep.moves.items():
@@ -85,9 +88,15 @@ def render_text(rep: DayReport) -> str:
         lines.append('irradiance      no irradiance/beam in the bag')
     en = rep.energy
     if 'ideal_kwh' in en:
-        share = 100.0 * en['achieved_kwh'] / en['ideal_kwh'] if en['ideal_kwh'] > 0 else float('nan')
+        def share(x):
+            return f'{100.0 * x / en["ideal_kwh"]:.1f} %' if en['ideal_kwh'] > 0 else 'no ideal energy'
+        law = ''
+        if 'law_kwh' in en:
+            law = (f'; the collector\'s law gives {en["law_kwh"]:.3f} kWh ({share(en["law_kwh"])} of ideal), '
+                   'achieved ' + (f'{100.0 * en["achieved_kwh"] / en["law_kwh"]:.1f} %' if en['law_kwh'] > 0
+                                  else '-') + ' of it')
         lines.append(f'absorbed energy {en["achieved_kwh"]:.3f} kWh achieved vs {en["ideal_kwh"]:.3f} kWh with ideal '
-                     f'angles ({share:.1f} %) ({en["note"]})')
+                     f'angles ({share(en["achieved_kwh"])}){law} ({en["note"]})')
     elif en:
         lines.append(f'absorbed energy {en["note"]}')
     lines += report_thermal.render(rep.thermal, utc)
@@ -105,6 +114,27 @@ def render_text(rep: DayReport) -> str:
                      + (f' ({loss_text(a["peak"], axis)})' if a['peak'] > a['warn'] else ''))
     lines += render_timeline(rep)
     return '\n'.join(lines)
+
+
+def render_lines(rep: DayReport) -> list[str]:
+    """Every mirror line's error against its exact angle and seed 004's budget
+    (:func:`.report.line_tracking`), or why it is not computed."""
+    ln = rep.lines
+    if not ln:
+        return []
+    if 'lines' not in ln:
+        return [f'line errors     not computed: {ln["note"]}']
+    lo, hi = (math.degrees(b) for b in ln['budget'])
+    out = ['line errors     each mirror line on the measured drive vs its exact angle (seed 004 eqs. 3-4), '
+           f'while tracking ({ln["samples"]} samples); budget {lo:.3f} deg for |theta_T| <= 45 deg, '
+           f'{hi:.2f} deg up to 80 deg (seed 004 section 3; {ln["judged"]} samples there)',
+           '  line   x [m]  RMS [deg]  max [deg]  law max [deg]  within budget']
+    for r in ln['lines']:
+        h = r['held']
+        within = f'{100.0 * r["within"]:11.1f} %' if math.isfinite(r['within']) else f'{"-":>13}'
+        out.append(f'  {r["line"]:>4} {r["x"]:7.3f} {math.degrees(h.rms):10.4f} {math.degrees(h.max):10.4f} '
+                   f'{math.degrees(r["law_max"]):14.4f}   {within}')
+    return out
 
 
 def render_timeline(rep: DayReport) -> list[str]:
@@ -155,7 +185,7 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
         plt.close(fig)
         files.append(path)
 
-    axes_present = [a for a in JOINTS if f'status_{a}' in rep.series or f'joint_{a}' in rep.series]
+    axes_present = [a for a in (rep.joints or JOINTS) if f'status_{a}' in rep.series or f'joint_{a}' in rep.series]
     if axes_present:
         fig, axs = plt.subplots(len(axes_present), 1, figsize=(10, 2.6 * len(axes_present)),
                                 sharex=True, squeeze=False)
@@ -188,6 +218,20 @@ def make_plots(rep: DayReport, out: Path) -> list[Path]:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         save(fig, 'tracking_error.png')
+    if rep.lines.get('samples'):
+        fig, ax = plt.subplots(figsize=(10, 3.5))
+        ln = rep.lines
+        for k, r in enumerate(ln['lines']):
+            ax.plot(*_decimate(hours(ln['t']), np.degrees(ln['errors'][:, k])), label=f'line {r["line"]}', lw=0.8)
+        for b in ln['budget']:
+            ax.axhline(math.degrees(b), color='#dc2626', ls='--', lw=0.8)
+            ax.axhline(-math.degrees(b), color='#dc2626', ls='--', lw=0.8)
+        ax.set_ylabel('line - exact (eqs. 3-4) [deg]')
+        ax.set_xlabel('hour of the day [UTC]')
+        ax.set_title("each line's error while tracking; dashed: seed 004's 0.085 / 0.12 deg budget")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=5)
+        save(fig, 'line_errors.png')
     temps = [k for k in rep.series if k.startswith('temp_')]
     if temps:
         fig, ax = plt.subplots(figsize=(10, 3.5))

@@ -57,3 +57,16 @@ def test_repeated_steps_and_a_fast_ramp():
     ramp = np.clip((t - 100) * 0.01, 0, 1.0)                        # a stow ramp at 0.01 rad/s
     (mv,) = axis_moves(t, ramp, ramp)
     assert mv['duration'] == pytest.approx(100.0, abs=1.5)
+
+
+def test_a_recording_that_starts_mid_move_counts_the_arrival_as_a_move():
+    """A run started in daytime: the first samples have the axis still slewing from the
+    sleeping position to a setpoint already on the sun; the arrival is a move, not
+    tracking error. An axis on its setpoint at the first sample has none."""
+    t = np.arange(0.0, 600.0, 1.0)
+    sp = -0.6 + SUN_RATE * t
+    me = np.maximum(_slew(t, 0.0, math.pi / 2, -0.6, 0.05), sp + 1e-4)
+    (mv,) = axis_moves(t, sp, me)
+    assert mv['i0'] == 0 and mv['settled'] and mv['duration'] == pytest.approx((math.pi / 2 + 0.6) / 0.05, abs=2.0)
+    assert np.all(np.abs(me - sp)[mv['i1']:] <= SETTLE)
+    assert axis_moves(t, sp, sp + 1e-4) == []

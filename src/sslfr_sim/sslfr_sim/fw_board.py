@@ -293,7 +293,20 @@ class FirmwareSensor(FirmwareBoard):
         return self.shadow.control(cmd)
 
 
-class FirmwareAxis(FirmwareBoard):
+class _DriveBoard(FirmwareBoard):
+    """An axis board of any drive: the model's stall switch (control socket ``stall``)."""
+
+    @property
+    def stalled(self) -> bool:
+        return self._get('stalled', False)
+
+    @stalled.setter
+    def stalled(self, value: bool) -> None:
+        self.harness.cmd(f'stall {1 if value else 0}')
+        self._snap_t = -1.0
+
+
+class FirmwareAxis(_DriveBoard):
     """A stepper axis board (with or without switches): joint state from the mechanism
     model and the firmware's RAM."""
 
@@ -307,14 +320,6 @@ class FirmwareAxis(FirmwareBoard):
         self.harness.cmd(f'set_angle {float(value):.9f}')
         self._snap_t = -1.0
 
-    @property
-    def stalled(self) -> bool:
-        return self._get('stalled', False)
-
-    @stalled.setter
-    def stalled(self, value: bool) -> None:
-        self.harness.cmd(f'stall {1 if value else 0}')
-        self._snap_t = -1.0
 
     counter = property(lambda self: self._get('counter'))
     target = property(lambda self: self._get('target'))
@@ -323,7 +328,7 @@ class FirmwareAxis(FirmwareBoard):
     faults = property(lambda self: self._get('faults'))
 
 
-class FirmwareActuator(FirmwareBoard):
+class FirmwareActuator(_DriveBoard):
     """The actuator board: line angle and actuator from the drive model, the loop's
     state from the firmware's RAM (the attributes of sim/actuator.py's board)."""
 
@@ -333,14 +338,6 @@ class FirmwareActuator(FirmwareBoard):
         read only, as the simulator's (the lines are not moved by hand)."""
         return self._get('angle', float('nan'))
 
-    @property
-    def stalled(self) -> bool:
-        return self._get('stalled', False)
-
-    @stalled.setter
-    def stalled(self, value: bool) -> None:
-        self.harness.cmd(f'stall {1 if value else 0}')
-        self._snap_t = -1.0
 
     @property
     def target(self) -> float | None:

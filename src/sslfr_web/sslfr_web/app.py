@@ -46,6 +46,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from sslfr_common.files import user_path
 from typing import Any, Callable, Protocol
 
 from aiohttp import web
@@ -74,7 +75,7 @@ class SlowBody(commands.CommandError):
 def unlock_path(password_file: str | os.PathLike) -> Path:
     """The file ``./sslfr web-password --unlock`` writes: when it changes, the page
     ends every login lockout (only someone with a shell on the collector can)."""
-    p = Path(password_file).expanduser()
+    p = user_path(password_file)
     return p.with_name(p.name + '.unlock')
 
 
@@ -103,9 +104,11 @@ class Backend(Protocol):
 
     def ros_time(self) -> float | None: ...
 
-    def jog_limits(self) -> dict[str, commands.JogLimits]: ...
+    def jog_limits(self) -> dict[str, commands.JogLimits]: ...   # the collector's movements only
 
     def bag_dir(self) -> str | None: ...
+
+    def site_config(self) -> str | None: ...
 
     async def call(self, cmd: commands.Command) -> dict: ...
 
@@ -131,14 +134,12 @@ class OperatorApp:
         self.limiter = LoginLimiter(int(cfg['login_max_failures']), float(cfg['login_window']), clock,
                                     lockout=float(cfg['login_lockout']), lockout_max=float(cfg['login_lockout_max']),
                                     trusted=lambda a: netguard.in_networks(a, self.trusted))
-        self.audit_path = Path(cfg['audit_file']).expanduser() if cfg.get('audit_file') else None
+        self.audit_path = user_path(cfg['audit_file']) if cfg.get('audit_file') else None
         self.counters = {'commands': 0, 'commands_refused': 0, 'logins': 0, 'login_failures': 0,
                          'login_rate_limited': 0, 'events_sent': 0, 'clients': 0, 'bad_requests': 0,
                          'streams_evicted': 0, 'errors': 0, 'unlocks': 0}
         self.oneline = netguard.OneLineLog(lambda level, text: self.backend.log(level, text), LOG_INTERVAL, clock)
-        self.guard = netguard.ConnectionGuard(netguard.Limits(
-            int(cfg['max_connections_per_address']), int(cfg['max_connections']),
-            float(cfg['header_timeout']), float(cfg['idle_timeout'])), self.oneline)
+        self.guard = netguard.ConnectionGuard(netguard.limits_from(cfg), self.oneline)
         self.streams = netguard.StreamSlots(int(cfg['max_streams_per_address']), int(cfg['max_streams']))
         self._clients: set[asyncio.Queue] = set()
         self._report_lock = asyncio.Lock()
@@ -469,7 +470,8 @@ class OperatorApp:
         origin = self.origin(request, s)
         try:
             body = await self._read_json(request)
-            cmd = commands.validate(name, body, self.backend.jog_limits())
+            limits = self.backend.jog_limits()          # one per movement of the collector
+            cmd = commands.validate(name, body, limits, axes=tuple(limits))
         except commands.CommandError as exc:
             self.counters['commands_refused'] += 1
             self.counters['bad_requests'] += 1
@@ -504,7 +506,7 @@ class OperatorApp:
         return _json({'bag_dir': str(root), 'bags': [e.to_json() for e in entries]})
 
     def _report_dir(self, bag: Path) -> Path:
-        return Path(self.cfg['report_dir']).expanduser() / bag.name
+        return user_path(self.cfg['report_dir']) / bag.name
 
     async def report(self, request: web.Request) -> web.Response:
         refused = self._view_refused(request)
@@ -524,8 +526,11 @@ class OperatorApp:
 
     async def _make_report(self, bag: Path, out: Path) -> tuple[int, str]:
         out.mkdir(parents=True, exist_ok=True)
+        # the run's site config: the report's collector (its description) and site parameters
+        config = getattr(self.backend, 'site_config', lambda: None)()
         proc = await asyncio.create_subprocess_exec(
             sys.executable, '-m', 'sslfr_bringup.cli', 'report', str(bag), '--out', str(out),
+            *(['--config', str(config)] if config else []),
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
             env={**os.environ, 'MPLBACKEND': 'Agg'})
         try:

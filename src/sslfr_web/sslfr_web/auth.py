@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from sslfr_common.files import atomic_write
+from sslfr_common.files import atomic_write, user_path
 
 SCRYPT_N, SCRYPT_R, SCRYPT_P, KEY_LEN, SALT_LEN = 2 ** 14, 8, 1, 32, 16
 MIN_PASSWORD_LEN = 8
@@ -96,7 +96,7 @@ def verify_password(password: str, stored: str) -> bool:
 def write_password_file(path: str | os.PathLike, password: str) -> Path:
     """Hash ``password`` and write it to ``path`` atomically with mode 0600."""
     line = hash_password(password)
-    p = Path(path).expanduser()
+    p = user_path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write(p, line + '\n', mode=0o600)
 
@@ -105,7 +105,7 @@ class PasswordFile:
     """The operator password file, re-read when its mtime or size changes."""
 
     def __init__(self, path: str | os.PathLike):
-        self.path = Path(path).expanduser()
+        self.path = user_path(path)
         self._stamp: tuple | None = None
         self._line: str | None = None
         self.problem = ''

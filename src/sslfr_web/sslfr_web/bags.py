@@ -15,6 +15,7 @@ import re
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from sslfr_common.files import user_path
 from typing import Iterator
 
 from sslfr_common.timeconv import to_sec
@@ -47,7 +48,7 @@ def _bag_files(d: Path) -> list[Path]:
 def list_bags(root: str | os.PathLike) -> list[BagEntry]:
     """Every bag directory directly under ``root``, newest first."""
     from sslfr_recording.bag.metadata import BagError, read_metadata   # here: the node imports it only when asked (-5 MB)
-    root = Path(root).expanduser()
+    root = user_path(root)
     out: list[BagEntry] = []
     try:
         children = list(root.iterdir())
@@ -82,7 +83,7 @@ def find_bag(root: str | os.PathLike, name: str) -> Path | None:
         return None
     for e in list_bags(root):
         if e.name == name:
-            return Path(root).expanduser() / e.name
+            return user_path(root) / e.name
     return None
 
 

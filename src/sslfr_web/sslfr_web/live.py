@@ -7,9 +7,10 @@ time), each with the wall time it arrived; :meth:`LiveState.snapshot` is what th
 receives. A ``version`` counter tells the server whether anything changed.
 
 :class:`DayBuffer` is the node's own buffer behind the day plots: one sample per
-``period`` of ROS time (axes measured / setpoint, the mirrors' ideal angle
-theta_t / 2 from ``tracker/sun`` (seed 000 eq. 11), absorber temperatures, beam
-irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
+``period`` of ROS time (axes measured / setpoint, the mirrors' ideal drive angle for
+the transversal angle of ``tracker/sun``: the collector's law once its description is
+known (:func:`.collector.ideal_drive`), theta_t / 2 before (seed 000 eq. 11), absorber
+temperatures, beam irradiance), cleared at local mean solar midnight (UTC - longitude / 15 h, the
 planner's day), so a reload of the page shows the day so far.
 
 Each axis' accuracy alarm (:class:`sslfr_common.accuracy.AccuracyAlarm`, the
@@ -265,6 +266,8 @@ class DayBuffer:
         if not period > 0:
             raise ValueError('period must be > 0')
         self.period = float(period)
+        #: theta_t [rad] -> the mirrors' ideal drive angle [rad]; None: theta_t / 2 (seed 000 eq. 11)
+        self.ideal: Callable[[float], float] | None = None
         self.maxlen = int(math.ceil(86400.0 / self.period)) + 2
         self._lock = threading.Lock()
         self.t: deque = deque(maxlen=self.maxlen)
@@ -298,8 +301,7 @@ class DayBuffer:
             self.version += 1
             return True
 
-    @staticmethod
-    def _row(state: LiveState) -> dict:
+    def _row(self, state: LiveState) -> dict:
         row: dict[str, Any] = {}
         for axis in JOINTS:
             a = state.get('axes', axis) or {}
@@ -307,7 +309,8 @@ class DayBuffer:
             row[f'{axis}_setpoint'] = a.get('setpoint')
         sun = state.get('sun') or {}
         if sun.get('above_horizon') and sun.get('transversal') is not None:
-            row['mirrors_ideal'] = round(sun['transversal'] / 2.0, 6)      # seed 000 eq. 11
+            tt = sun['transversal']
+            row['mirrors_ideal'] = round(self.ideal(tt) if self.ideal is not None else tt / 2.0, 6)
         for name in TEMPERATURES:
             row[name] = (state.get('temperatures', name) or {}).get('value')
         row['beam'] = (state.get('beam') or {}).get('beam')

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 
 from sslfr_common.netguard import parse_networks
-from sslfr_common.netguard import ip_address_error
+from sslfr_common.netguard import Limits, ip_address_error, limit_params
 from sslfr_common.params import ParamSpec, ParamTable, writable_directory
 
 #: The password file `./sslfr web-password` writes and the node reads.
@@ -61,18 +61,7 @@ WEB_PARAMS = ParamTable((
               "interface bind_address is on; or comma-separated networks, e.g. "
               "'192.168.1.0/24' (loopback is always trusted). The per-address limit applies to all",
               read_only=True, validator=networks_error),
-    ParamSpec('max_connections_per_address', 16,
-              'Open connections one client address may hold; more are refused [-]', '-', 1, 1000,
-              read_only=True),
-    ParamSpec('max_connections', 128,
-              'Open connections in all; when full, the oldest idle connection of the address '
-              'holding the most is closed for a new one [-]', '-', 2, 10000, read_only=True),
-    ParamSpec('header_timeout', 10.0,
-              'A request head must be complete within this time of its first byte, else the '
-              'connection is closed (slow clients) [s]', 's', 0.5, 120.0, read_only=True),
-    ParamSpec('idle_timeout', 60.0,
-              'A connection with no request for this long is closed [s]', 's', 1.0, 3600.0,
-              read_only=True),
+    *limit_params(Limits(16, 128, 10.0, 60.0)),
     ParamSpec('body_timeout', 10.0,
               'A request body must arrive within this time, else the request is refused (408) [s]',
               's', 0.5, 120.0, read_only=True),

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from sslfr_common.cliargs import CliError, OneLineParser, one_line
-from sslfr_common.files import atomic_write
+from sslfr_common.files import atomic_write, user_path
 
 from .auth import PasswordError, check_new_password, write_password_file
 from .params import DEFAULT_PASSWORD_FILE
@@ -28,7 +28,7 @@ from .params import DEFAULT_PASSWORD_FILE
 
 def unlock(password_file: str) -> Path:
     """Write the unlock file of ``password_file`` (its content: the time, UTC)."""
-    p = Path(password_file).expanduser()
+    p = user_path(password_file)
     target = p.with_name(p.name + '.unlock')
     target.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write(target, dt.datetime.now(dt.timezone.utc).isoformat() + '\n', mode=0o600)

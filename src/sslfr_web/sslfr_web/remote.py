@@ -1,7 +1,8 @@
 """Facts the page takes from the other nodes' own parameters (pure Python).
 
 The page shows the absorber against the safety node's ``temperature.limit``, draws
-the collector with the planner's geometry, bounds a jog by each driver's ``max_jog``
+the collector with the planner's geometry and the collector description it names
+(:mod:`.collector`), bounds a jog by each driver's ``max_jog``
 and soft limits, judges each axis' accuracy with the driver's ``accuracy.*`` thresholds,
 and lists the bags in the recorder's ``output_dir``. Rather than a
 second copy of those values in the web node's configuration, it asks each node over
@@ -23,7 +24,8 @@ REMOTE_PARAMS: dict[str, dict[str, str]] = {
                'temperature.cool_hold': 'temperature_cool_hold'},
     'planner': {'collector.n_per_side': 'n_per_side', 'collector.mirror_width': 'mirror_width',
                 'collector.gap': 'gap', 'collector.receiver_height': 'receiver_height',
-                'collector.central_mirror': 'central_mirror', 'collector.azimuth': 'collector_azimuth'},
+                'collector.central_mirror': 'central_mirror', 'collector.azimuth': 'collector_azimuth',
+                'collector.description': 'collector_description'},
     'recorder': {'output_dir': 'bag_dir'},
     **{f'{axis}_driver': {'max_jog': f'{axis}.max_jog', 'lower_limit': f'{axis}.lower_limit',
                           'upper_limit': f'{axis}.upper_limit', 'jog_speed': f'{axis}.jog_speed',

@@ -9,24 +9,22 @@ Contract: docs/architecture.md, section "Operator page"; for people: docs/operat
 """
 from __future__ import annotations
 
-import asyncio
 import importlib
 import sys
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix, Temperature
 from sslfr_interfaces.msg import AxisStatus, Irradiance, SafetyState, SunPosition, ThermalPower, TrackerPhase, Wind
-from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, DIAGNOSTICS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
+from sslfr_common.contract import (ABSORBER_TEMPERATURE, AXIS_STATUS, GPS_FIX, IRRADIANCE_BEAM, JOINTS,
                                    SAFETY_ESTOP, SAFETY_STATE, THERMAL_POWER, THERMOCOUPLES, TRACKER_PHASE,
-                                   TRACKER_SUN, WIND, collector_id)
-from sslfr_common.node import CONFIG_ERRORS, LeanEvents, declare_parameters, qos, run_node, steady_now, to_sec
+                                   TRACKER_SUN, WIND)
+from sslfr_common.node import CONFIG_ERRORS, declare_parameters, qos, run_node, steady_now
 
-from . import commands, remote
-from .app import OperatorApp, Server
+from . import collector, commands, remote
+from .app import OperatorApp
 from .live import DayBuffer, LiveState
+from .page_host import PageHost
 from .params import WEB_PARAMS
 
 REMOTE_RETRY, REMOTE_REFRESH = 2.0, 60.0       # [s, steady] get_parameters: until answered / then
@@ -39,11 +37,12 @@ def _srv_class(type_name: str):
     return getattr(importlib.import_module(f'{pkg}.srv'), name)
 
 
-class WebNode(LeanEvents, Node):
+class WebNode(PageHost):
     """Live view, day plots, commands through services, recorded days."""
 
     def __init__(self, **kwargs):
         super().__init__('web', **kwargs)
+        self._ros_args = list(kwargs.get('cli_args') or sys.argv)     # composed: the node's own arguments
         self.cfg = declare_parameters(self, WEB_PARAMS)       # every one read-only; ValueError: exit 2
         self.state = LiveState(JOINTS)
         self.buffer = DayBuffer(float(self.cfg['plot_period']))
@@ -69,78 +68,48 @@ class WebNode(LeanEvents, Node):
         self._param_clients: dict = {}
         self._remote_asked: dict = {}
         self._remote_due = {n: 0.0 for n in remote.REMOTE_PARAMS}
+        self._description = None              # the planner's collector.description loaded (or refused)
         self._steady = steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(SAMPLE_PERIOD, self._sample, clock=steady)
         self.create_timer(1.0, self._steady_tick, clock=steady)
-        self._diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos(DIAGNOSTICS))
-        self.op = OperatorApp(self.cfg, self)
-        self.server = Server(self.op, self.cfg['bind_address'], int(self.cfg['port']))
-        self.url = self.server.start()                 # OSError (address in use ...) -> main
+        self.serve(OperatorApp(self.cfg, self))        # OSError (address in use ...) -> main
         self.get_logger().info(
             f'operator page at {self.url} (bind {self.cfg["bind_address"]}; view '
             f'{"open" if self.cfg["open_view"] else "after login"}; commands need the operator password'
             f'{"" if self.op.passwords.line() else ": NONE SET, run ./sslfr web-password"})')
 
     # ------------------------------------------------------------------ Backend (web thread)
-    def ros_time(self) -> float | None:
-        t = to_sec(self.get_clock().now())
-        return t if t > 0 else None
-
     def bag_dir(self) -> str | None:
         return self.cfg['bag_dir'] or self.state.info.get('bag_dir')
 
+    def site_config(self) -> str | None:
+        """The site config this node set runs with (the first ``--params-file`` of the
+        node's arguments, as ``sslfr up`` and the launch file pass it), for the day
+        reports of the recorded days: their collector and site parameters."""
+        files = collector.description_mod.params_files(self._ros_args)
+        return files[0] if files else None
+
     def jog_limits(self) -> dict[str, commands.JogLimits]:
+        """The jog bounds of each movement of the collector (its description's, once
+        known; the page's commands name no other axis)."""
         info = self.state.info
         out = {}
-        for axis in JOINTS:
+        for axis in (info.get('collector') or {}).get('joints') or JOINTS:
             measured = (self.state.get('axes', axis) or {}).get('measured')
             out[axis] = commands.JogLimits(float(self.cfg['max_jog']), info.get(f'{axis}.max_jog'),
                                            info.get(f'{axis}.lower_limit'), info.get(f'{axis}.upper_limit'),
                                            measured)
         return out
 
-    def log(self, level: str, text: str) -> None:
-        logger = self.get_logger()       # one call site per severity (rclpy refuses to mix them)
-        if level == 'error':
-            logger.error(text)
-        elif level == 'warn':
-            logger.warning(text)
-        else:
-            logger.info(text)
-
     async def call(self, cmd: commands.Command) -> dict:
         client = self.clients_.get(cmd.service)
         if client is None:        # first use (from the web thread; rclpy's node calls are locked)
             client = self.clients_[cmd.service] = self.create_client(
                 _srv_class(self._service_types[cmd.service][1]), cmd.service)
-        for _ in range(int(DISCOVERY_WAIT / 0.05)):       # let discovery match the client
-            if client.service_is_ready():
-                break
-            await asyncio.sleep(0.05)
-        else:
-            return {'success': False, 'message': f'service {cmd.service} is not available (is its node running?)'}
-        loop = asyncio.get_running_loop()
-        sent: list = []
-
-        def send() -> asyncio.Future:
-            done = loop.create_future()
-            fut = client.call_async(client.srv_type.Request(**cmd.request))
-            fut.add_done_callback(lambda f: loop.call_soon_threadsafe(lambda: done.done() or done.set_result(f)))
-            sent.append(fut)
-            return done
-
-        timeout = float(self.cfg['service_timeout'])
-        f, n = await commands.first_answer(send, timeout, commands.RESEND_S if cmd.resend else None)
-        for fut in sent:
-            if not fut.done():
-                client.remove_pending_request(fut)
-        if f is None:
-            return {'success': False, 'message': f'no answer from {cmd.service} within {timeout:g} s'
-                                                 + (f' ({n} requests)' if n > 1 else '')}
-        if n > 1:
-            self.get_logger().warning(f'{cmd.service}: answered after {n} requests (a response lost or late)')
-        resp = f.result()
-        return {k: getattr(resp, k) for k in resp.get_fields_and_field_types()}
+        return await self.call_service(client, client.srv_type.Request(**cmd.request),
+                                       timeout=float(self.cfg['service_timeout']), discovery_wait=DISCOVERY_WAIT,
+                                       resend_every=commands.RESEND_S if cmd.resend else None,
+                                       missing='is its node running?')
 
     # ------------------------------------------------------------------ timers (ROS thread)
     def _sample(self) -> None:
@@ -150,8 +119,13 @@ class WebNode(LeanEvents, Node):
 
     def _steady_tick(self) -> None:
         now = steady_now(self._steady)
+        joints = (self.state.info.get('collector') or {}).get('joints')
         for node, due in self._remote_due.items():    # client made -> ready -> asked -> answered
             client = self._param_clients.get(node)
+            if joints is not None and node.endswith('_driver') and node[:-len('_driver')] not in joints:
+                if client is not None:                # a driver of a movement the collector lacks
+                    self._drop_param_client(node)
+                continue
             if now < due:
                 continue
             if client is None:
@@ -183,25 +157,31 @@ class WebNode(LeanEvents, Node):
         for key, value in remote.apply(node, names, values).items():
             self.state.set_info(key, value)
         self._remote_due[node] = asked + REMOTE_REFRESH
+        if node == 'planner':
+            self._load_collector(self.state.info.get('collector_description') or '')
+
+    def _load_collector(self, name: str) -> None:
+        """The collector description the planner names, once per name: the page draws it."""
+        if name == self._description:
+            return
+        self._description = name
+        try:
+            desc = collector.load(name, self._ros_args)
+        except ValueError as exc:          # DescriptionError: the planner refused it too
+            self.get_logger().warning(f'collector description {name!r}: {exc}; the page draws the '
+                                      "planner's geometry")
+            return
+        if desc is not None:
+            self.buffer.ideal = collector.ideal_drive(desc)
+            self.state.set_info('collector', collector.page_collector(desc))
 
     def _publish_diagnostics(self) -> None:
-        c = self.op.counters
-        s = DiagnosticStatus(name=f'{self.get_name()}: operator page', hardware_id=collector_id(self.get_namespace()),
-                             level=DiagnosticStatus.OK if self.op.passwords.line() else DiagnosticStatus.WARN,
-                             message=f'serving {self.url}' if self.op.passwords.line()
-                             else self.op.passwords.problem)
-        s.values = [KeyValue(key=k, value=str(v)) for k, v in
-                    {**c, **self.op.guard.counters, 'streams': self.op.streams.count(),
-                     'locked_out_addresses': len(self.op.limiter.locked()),
-                     'sessions': len(self.op.sessions), 'url': self.url,
-                     'day_samples': len(self.buffer.t)}.items()]
-        arr = DiagnosticArray(status=[s])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self._diag.publish(arr)
-
-    def on_exit(self) -> None:
-        """Stop the HTTP server; called by run_node once spinning ends."""
-        self.server.stop()
+        password = self.op.passwords.line() is not None
+        self.publish_page_status('operator page', password, f'serving {self.url}' if password
+                                 else self.op.passwords.problem,
+                                 {**self.op.guard.counters, 'streams': self.op.streams.count(),
+                                  'locked_out_addresses': len(self.op.limiter.locked()),
+                                  'day_samples': len(self.buffer.t)})
 
 
 def main(args=None) -> int:

@@ -10,6 +10,8 @@ import io
 import json
 import zipfile
 
+from pathlib import Path
+
 import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
@@ -112,6 +114,9 @@ def test_commands_need_login_and_csrf_and_refusals_call_nothing(tmp_path, pwfile
             ('mode', b'[1]', 400, 'JSON object'),
             ('jog', b'{"axis": "mirrors", "delta": 0.5}', 400, 'beyond the jog limit'),
             ('jog', b'{"axis": "mirrors", "delta": 1e400}', 400, 'finite'),
+            # a movement the collector lacks (the backend's jog limits: mirrors only)
+            ('jog', b'{"axis": "mobile_structure", "delta": 0.01}', 400, "unknown axis 'mobile_structure'"),
+            ('home', b'{"axis": "secondary_reflector"}', 400, 'expected one of mirrors'),
             ('selfdestruct', b'{}', 400, 'unknown command'),
             ('mode', b'{"mode": "' + b'a' * 20000 + b'"}', 413, 'too large'),
         ]:
@@ -238,3 +243,22 @@ def test_recorded_day_listed_and_its_report_made_once_and_served(tmp_path, pwfil
         assert again['text'] == rep['text']
         assert (tmp_path / 'reports' / 'sslfr_2026-06-21' / 'report.txt').stat().st_mtime_ns == made  # cached
     run(tmp_path, pwfile, body, backend=RecordingBackend(bag_dir=str(root)))
+
+
+def test_recorded_day_report_is_of_the_running_collector(tmp_path, pwfile):
+    """The page's report of a recorded day takes the node set's site config (the web
+    node's params file): its collector description's movements, not seed 000's."""
+    from daybag import SUNRISE, write_day
+    root = tmp_path / 'bags'
+    write_day(root / 'sslfr_2026-06-21', SUNRISE - 900, SUNRISE + 600)
+    config = Path(__file__).resolve().parents[2] / 'sslfr_bringup' / 'config' / 'florianopolis_lepten.yaml'
+    backend = RecordingBackend(bag_dir=str(root))
+    backend.site_config = lambda: str(config)
+
+    async def body(client, backend, op):
+        r = await client.get('/api/bags/sslfr_2026-06-21/report')
+        rep = await r.json()
+        assert r.status == 200, rep
+        assert 'collector       florianopolis_lepten: mirrors' in rep['text'], rep['text']
+        assert 'mobile_structure' not in rep['text'].split('timeline (UTC)')[0]
+    run(tmp_path, pwfile, body, backend=backend)

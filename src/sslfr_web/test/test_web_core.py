@@ -525,6 +525,40 @@ def test_wind_stow_release_and_wind_shown_on_the_page():
     assert snap['wind'] == {'speed': 21.0, 'gust': 22.5, 'mean': 9.0, 'window': 600.0, 'stamp': None}
 
 
+# ------------------------------------------------------------------ the described collector
+def test_page_draws_the_described_collector_lines_and_movements():
+    """Seed 004: one movement, ten lines at Table 1's offsets from the drive, the aim
+    3.75 m up, no tilting; seed 000: three movements, 25 lines at psi_i / 2 (eq. 14);
+    the day plots' ideal is the law's drive (seed 004: 0.4962 theta_T)."""
+    from sslfr_planner import description
+    from sslfr_web import collector
+    cfg = Path(__file__).resolve().parents[2] / 'sslfr_bringup' / 'config'
+    s004 = description.load(cfg / 'collectors' / 'florianopolis_lepten.yaml')
+    c = collector.page_collector(s004)
+    assert c['joints'] == ['mirrors'] and not c['tilting'] and c['aim_height'] == 3.75
+    assert len(c['lines']) == 10 and c['lines'][0]['x'] < 0 < c['lines'][-1]['x']
+    assert [math.degrees(line['offset']) for line in c['lines']] == pytest.approx(
+        [15.8311, 12.8113, 9.4542, 5.8066, 1.9593, -1.9594, -5.8066, -9.4543, -12.8113, -15.8312], abs=1e-6)
+    assert collector.ideal_drive(s004)(math.radians(30.0)) == pytest.approx(0.4962 * math.radians(30.0))
+    s000 = description.load(cfg / 'collectors' / 'almeria_three_movement.yaml')
+    c0 = collector.page_collector(s000)
+    assert c0['joints'] == ['mirrors', 'mobile_structure', 'secondary_reflector'] and c0['tilting']
+    assert len(c0['lines']) == 25 and c0['lines'][12] == {'x': 0.0, 'offset': 0.0}
+    x1 = c0['lines'][13]['x']
+    assert c0['lines'][13]['offset'] == pytest.approx(-math.atan(x1 / 1.5243) / 2, abs=1e-9)
+    assert json.loads(json.dumps(c)) == c                     # JSON-ready
+    # the day buffer's ideal follows the law once the description is known
+    from sslfr_interfaces.msg import SunPosition
+    s = live.LiveState()
+    s.on_phase(_phase(longitude=-48.5))
+    s.on_sun(SunPosition(zenith=0.5, transversal=0.4, above_horizon=True))
+    buf = live.DayBuffer(period=30.0)
+    buf.ideal = collector.ideal_drive(s004)
+    assert buf.maybe_sample(1782000000.0, s)
+    assert buf.to_json()['columns']['mirrors_ideal'] == [pytest.approx(0.4962 * 0.4, abs=1e-6)]
+    assert remote.REMOTE_PARAMS['planner']['collector.description'] == 'collector_description'
+
+
 def test_thermal_output_shown_on_the_page():
     """Issue 34: a collector with a flow meter: flow [L/h], thermal power [W] and the
     efficiency on the page (None when not computed: JSON has no NaN); none otherwise."""

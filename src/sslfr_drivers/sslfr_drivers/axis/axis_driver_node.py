@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from sslfr_common.contract import (AXIS_HOME, AXIS_JOG, AXIS_STATUS, DIAGNOSTICS, JOINT_STATES, SAFETY_STATE,
                                    TRACKER_PHASE, TRACKER_TRAJECTORY, collector_id)
 from sslfr_common.accuracy import AccuracyAlarm, AccuracyConfig
-from sslfr_common.node import ParameterGuard, declare_parameters, qos, run_node, steady_now, to_sec
+from sslfr_common.node import ParameterGuard, declare_parameters, diagnostics_msg, qos, run_node, steady_now, to_sec
 from sslfr_common.params import ParamTable
 from sslfr_interfaces.msg import AxisStatus, SafetyState, TrackerPhase
 from sslfr_interfaces.srv import Jog
@@ -37,7 +37,7 @@ from sslfr_drivers.axis.operator_input import operator_mode
 from sslfr_drivers.axis.rates import TimeRate
 from sslfr_drivers.axis.supervisor import AxisSupervisor, Snapshot
 from sslfr_drivers.axis.managed_node import ManagedNode
-from sslfr_drivers.axis.msgs import diagnostics_msg, joint_msg, status_msg, trajectory_msg
+from sslfr_drivers.axis.msgs import joint_msg, status_msg, trajectory_msg
 from sslfr_drivers.axis.params import PARAMS, board_port, params_for, port_problem, tuning_from
 from sslfr_drivers.link.keys import KeyFileError
 

@@ -3,7 +3,6 @@ joint state and diagnostics built from one control step's
 :class:`~sslfr_drivers.axis.supervisor.Snapshot` (no node, no lock, no board I/O)."""
 from __future__ import annotations
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sensor_msgs.msg import JointState
 from sslfr_common.contract import LinkState
 from sslfr_common.node import stamp, to_sec
@@ -18,15 +17,6 @@ def trajectory_msg(msg: JointTrajectory) -> TrajectoryMsg:
     return TrajectoryMsg(tuple(msg.joint_names), to_sec(msg.header.stamp), tuple(
         TrajectoryPoint(to_sec(p.time_from_start), tuple(p.positions), tuple(p.velocities),
                         tuple(p.accelerations)) for p in msg.points))
-
-
-def diagnostics_msg(name: str, level: int, message: str, hardware_id: str, values: dict, now) -> DiagnosticArray:
-    """One DiagnosticStatus (every value as text) in an array stamped ``now``."""
-    st = DiagnosticStatus(level=bytes([level]), name=name, message=message, hardware_id=hardware_id,
-                          values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-    arr = DiagnosticArray(status=[st])
-    arr.header.stamp = now
-    return arr
 
 
 def status_msg(axis: str, snap, lifecycle: str, session, refused: bool, now, last_error: str = '') -> AxisStatus:

@@ -19,6 +19,7 @@ import os
 import stat
 import tempfile
 from pathlib import Path
+from sslfr_common.files import user_path
 
 from sslfr_common.params import ParamSpec
 from sslfr_drivers.link.auth import NULL_KEY, key_id
@@ -44,7 +45,7 @@ def default_key_path() -> Path:
     ``~/.config/sslfr/installation.key``)."""
     env = os.environ.get(KEY_FILE_ENV)
     if env:
-        return Path(env).expanduser()
+        return user_path(env)
     base = os.environ.get('XDG_CONFIG_HOME') or os.path.join(os.path.expanduser('~'), '.config')
     return Path(base) / 'sslfr' / 'installation.key'
 
@@ -105,7 +106,7 @@ def load_key(path: str | os.PathLike) -> bytes:
         Missing or unreadable file, permissions open to others (the message gives
         the ``chmod 600``), or not exactly one non-null 128-bit key.
     """
-    path = Path(path).expanduser()
+    path = user_path(path)
     try:
         fd = os.open(path, os.O_RDONLY)
     except FileNotFoundError:
@@ -137,7 +138,7 @@ def write_key_file(path: str | os.PathLike, key: bytes, force: bool = False) -> 
     """Write ``key`` to ``path`` with mode 0600 (parent directories made 0700).
     Refuses to replace an existing file unless ``force`` (KeyFileError): a replaced
     key locks out every board provisioned with it. Returns the path."""
-    path = Path(path).expanduser()
+    path = user_path(path)
     if path.exists() and not force:
         raise KeyFileError(f'{path} exists: refusing to overwrite an installation key (boards provisioned '
                            'with it would no longer answer); use --force to replace it')

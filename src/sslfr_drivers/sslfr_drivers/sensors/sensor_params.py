@@ -52,6 +52,14 @@ GPS = _board_table(
     baudrate='serial line speed [bit/s] (board protocol: 115200; a bare NEO-6M module with '
              'framing raw_nmea: 9600)')
 
+def _pulse_pin(name: str, counts: str, none: str) -> ParamSpec:
+    """The absorber board pin counting ``counts`` (its one pulse input); -1 = none."""
+    return ParamSpec(name, -1, f'Arduino pin of the absorber board that counts {counts} (7, 8, 11, '
+                               f'14..17 = A0..A3); -1 = no {none} [-]', '-', -1, 17,
+                     validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
+                     else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}')
+
+
 def _one_pulse_input(v: dict) -> list[str]:
     """The absorber board counts one pulse input: an anemometer or a flow meter."""
     if v['anemometer_pin'] >= 0 and v['flow_meter_pin'] >= 0:
@@ -74,22 +82,14 @@ ABSORBER_BOARD = _board_table(
               's', 0.0, 5.0),
     ParamSpec('switch_rate', 10.0, 'limit_switches publication rate besides changes [Hz]',
               'Hz', 0.5, 100.0),
-    ParamSpec('anemometer_pin', -1, 'Arduino pin of the absorber board that counts the cup '
-                                    'anemometer pulses (7, 8, 11, 14..17 = A0..A3); -1 = no '
-                                    'anemometer, no wind topic [-]', '-', -1, 17,
-              validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
-              else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}'),
+    _pulse_pin('anemometer_pin', 'the cup anemometer pulses', 'anemometer, no wind topic'),
     ParamSpec('anemometer_slope', anemometer.SLOPE, 'anemometer calibration: wind speed per pulse '
                                                     'frequency (typical 3-cup: 0.765) [m/s/Hz]',
               'm/s/Hz', 0.01, 20.0),
     ParamSpec('anemometer_offset', anemometer.OFFSET, 'anemometer calibration: speed added while '
                                                       'the cups turn (starting threshold, typical 0.35) [m/s]',
               'm/s', 0.0, 5.0),
-    ParamSpec('flow_meter_pin', -1, 'Arduino pin of the absorber board that counts the flow meter '
-                                    'pulses (7, 8, 11, 14..17 = A0..A3); -1 = no flow meter, no flow '
-                                    'and thermal power topics [-]', '-', -1, 17,
-              validator=lambda v: None if v == -1 or v in anemometer.FREE_PINS
-              else f'not a free pin of the absorber board: -1 or one of {anemometer.FREE_PINS}'),
+    _pulse_pin('flow_meter_pin', 'the flow meter pulses', 'flow meter, no flow and thermal power topics'),
     ParamSpec('flow_meter_k_factor', thermal.K_FACTOR, 'flow meter calibration: pulses per litre '
                                                        '(data sheet; YF-S201 type: 450) [1/L]', '1/L', 0.1, 1.0e5),
     ParamSpec('flow_window', thermal.FLOW_WINDOW, 'the flow is the mean over this window [s]', 's', 0.5, 600.0),

@@ -8,10 +8,13 @@ Subcommands::
     sslfr analyse tilts --config FILE [--grid 11] [--out tilts.png]
 
 The config is a tracker config (ROS params-file YAML, src/sslfr_bringup/config/):
-the site from ``/**: ros__parameters: site.*``, the collector from ``collector.*`` and,
-optionally, an ``analysis`` section (``analysis: ros__parameters: {optics.*,
-tube.<law>.left/right, costs.<law>.*}``); missing values default to seed 000 Table 3
-and section 5. Bad input exits 2 with one line naming the argument or key.
+the site from ``/**: ros__parameters: site.*``, the collector from the collector
+description its planner's ``collector.description`` names (docs/collectors.md: lines,
+widths, gap, central line or not, receiver height, width and tube, row length, axis
+azimuth, its longitudinal law), else from ``collector.*``, and, optionally, an
+``analysis`` section (``analysis: ros__parameters: {optics.*, tube.<law>.left/right,
+costs.<law>.*}``); missing values default to seed 000 Table 3 and section 5. Bad input
+exits 2 with one line naming the argument or key.
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
+from sslfr_common.params import flatten as flatten_params
 
 from ..cli_input import (CliError, OneLineParser, ranged_float, bounded_int, load_yaml_file, output_file, run,
                          time_step, write_atomically)
@@ -45,17 +49,6 @@ MAX_YEAR_SAMPLES = 527_040
 MAX_TILT_SAMPLES = 105_408
 
 _YEAR_SPAN = 366 * 86400.0
-
-
-def _flatten(d: dict, prefix: str = '') -> dict:
-    out = {}
-    for key, value in d.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + '.'))
-        else:
-            out[name] = value
-    return out
 
 
 def default_config() -> Path | None:
@@ -92,7 +85,7 @@ def load_config(path: str | None) -> tuple[AnalysisSite, OpticalParameters, dict
     for node, section in raw.items():
         if not isinstance(section, dict) or not isinstance(section.get('ros__parameters', {}), dict):
             raise CliError(f'config {where}: section {node!r} must be a mapping with a ros__parameters mapping')
-        flat = _flatten(section.get('ros__parameters') or {})
+        flat = flatten_params(section.get('ros__parameters') or {})
         if node in ('/**', 'planner'):
             params.update({k: v for k, v in flat.items() if k.startswith(('site.', 'collector.'))})
         if node == 'analysis':
@@ -100,21 +93,29 @@ def load_config(path: str | None) -> tuple[AnalysisSite, OpticalParameters, dict
     lat = _number(params, 'site.latitude_deg', 36 + 50 / 60 + 7 / 3600, -90.0, 90.0, where)
     lon = _number(params, 'site.longitude_deg', -(2 + 24 / 60 + 8 / 3600), -180.0, 180.0, where)
     elev = _number(params, 'site.elevation', 22.0, -500.0, 9000.0, where)
-    azi = _number(params, 'collector.azimuth', 0.0, -math.pi / 2, math.pi / 2, where)
-    site = AnalysisSite(lat, lon, elev, azi)
-    geo = {'n_per_side': _number(params, 'collector.n_per_side', 12, 0, 100, where, integer=True)}
-    for name, lo, hi in (('mirror_width', 1e-3, 5.0), ('gap', 0.0, 5.0), ('receiver_height', 0.05, 50.0),
-                         ('tube_diameter', 1e-3, 1.0), ('mirror_length', 0.01, 1000.0)):
-        key = f'collector.{name}'
-        if key in params:
-            geo[name] = _number(params, key, None, lo, hi, where)
-    if 'collector.central_mirror' in params:                 # seeds 003, 004: no central line
-        if not isinstance(params['collector.central_mirror'], bool):
-            raise CliError(f'config {where}: collector.central_mirror must be true or false, '
-                           f'got {params["collector.central_mirror"]!r}')
-        geo['central_mirror'] = params['collector.central_mirror']
-    known = {f.name for f in fields(OpticalParameters)} - {'geometry'}
+    desc = _description(params, where)
+    params['__description__'] = desc
     optic = {}
+    if desc is not None:        # the described collector: its geometry, receiver and azimuth
+        from ..prototype import field_geometry
+        azi = desc.optics.azimuth
+        geo = {f.name: getattr(field_geometry(desc), f.name) for f in fields(FieldGeometry)}
+        optic['cavity_aperture'] = desc.optics.receiver_width
+    else:
+        azi = _number(params, 'collector.azimuth', 0.0, -math.pi / 2, math.pi / 2, where)
+        geo = {'n_per_side': _number(params, 'collector.n_per_side', 12, 0, 100, where, integer=True)}
+        for name, lo, hi in (('mirror_width', 1e-3, 5.0), ('gap', 0.0, 5.0), ('receiver_height', 0.05, 50.0),
+                             ('tube_diameter', 1e-3, 1.0), ('mirror_length', 0.01, 1000.0)):
+            key = f'collector.{name}'
+            if key in params:
+                geo[name] = _number(params, key, None, lo, hi, where)
+        if 'collector.central_mirror' in params:                 # seeds 003, 004: no central line
+            if not isinstance(params['collector.central_mirror'], bool):
+                raise CliError(f'config {where}: collector.central_mirror must be true or false, '
+                               f'got {params["collector.central_mirror"]!r}')
+            geo['central_mirror'] = params['collector.central_mirror']
+    site = AnalysisSite(lat, lon, elev, azi)
+    known = {f.name for f in fields(OpticalParameters)} - {'geometry'}
     for key, value in params.items():
         if key.startswith('analysis.optics.'):
             name = key.split('.', 2)[2]
@@ -133,6 +134,21 @@ def load_config(path: str | None) -> tuple[AnalysisSite, OpticalParameters, dict
         return site, OpticalParameters(geometry=FieldGeometry(**geo), **optic), params
     except (TypeError, ValueError) as exc:
         raise CliError(f'config {where}: {exc}') from None
+
+
+def _description(params: dict, where: str):
+    """The collector description the config's ``collector.description`` names (relative
+    to the config, as the planner finds it), or None; CliError naming the file and keys."""
+    name = params.get('collector.description')
+    if name is None or name == '':
+        return None
+    if not isinstance(name, str):
+        raise CliError(f'config {where}: collector.description must be a file name, got {name!r}')
+    from ..description import DescriptionError, find, load
+    try:
+        return load(find(name, [where]))
+    except DescriptionError as exc:
+        raise CliError(f'config {where}: collector.description: ' + '; '.join(exc.problems)) from None
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -161,14 +177,16 @@ def _days(text: str) -> list[date]:
 
 
 def cmd_error(args) -> int:
-    site, optic, _ = load_config(args.config)
+    site, optic, params = load_config(args.config)
     errors = _floats(args.errors, 'errors')
     if any(e < 0 or e > 10 for e in errors):
         raise CliError('--errors: tracking errors must be within 0..10 deg')
     hours = _floats(args.hours, 'hours')
     if any(h < 0 or h > 24 for h in hours):
         raise CliError('--hours: solar hours must be within 0..24')
-    rows = performance.error_table(site, optic, np.radians(errors), _days(args.days), hours, law=args.mode)
+    desc = params.get('__description__')
+    law = args.mode or (desc.longitudinal_law if desc is not None else 'eq16')
+    rows = performance.error_table(site, optic, np.radians(errors), _days(args.days), hours, law=law)
     labels = optic.geometry.mirror_labels()
     out = sys.stdout
     out.write('day,solar_hour,error_deg,transversal_deg,total_loss_pct,' + ','.join(labels) + '\n')
@@ -179,8 +197,17 @@ def cmd_error(args) -> int:
 
 
 def law_tube(law: str, params: dict) -> tuple[float, float]:
-    """(L_a^r, L_a^l) [m] of ``law``: the config's ``analysis.tube.<law>.*`` or seed 000 section 5.1."""
-    right, left = SEED_TUBES['horizontal' if law == 'horizontal' else 'tilting']
+    """(L_a^r, L_a^l) [m] of ``law``: the config's ``analysis.tube.<law>.*``; else, for a
+    described collector, its receiver (the description's tube ends, or its receiver
+    length centred) under every law but 'horizontal' on a collector that tilts (seed
+    000 section 5.1's classic LFR, the horizontal variant of its design study); without
+    a description seed 000 section 5.1's placements."""
+    desc = params.get('__description__')
+    if desc is not None and not (law == 'horizontal' and desc.longitudinal_law != 'horizontal'):
+        from ..prototype import field_geometry
+        right, left = field_geometry(desc).tube
+    else:
+        right, left = SEED_TUBES['horizontal' if law == 'horizontal' else 'tilting']
     key, where = f'analysis.tube.{law}.', params.get('__config__', '')
     return (_number(params, key + 'right', right, -100.0, 100.0, where),
             _number(params, key + 'left', left, -100.0, 100.0, where))
@@ -310,8 +337,9 @@ def parser() -> OneLineParser:
     e.add_argument('--errors', default='0.03,0.06,0.12,0.24,0.36', help='tracking errors [deg]')
     e.add_argument('--days', default='2024-03-21,2024-06-21,2024-09-21,2024-12-21')
     e.add_argument('--hours', default='9,12,15', help='local solar hours')
-    e.add_argument('--mode', choices=LAWS, default='eq16',
-                   help='longitudinal law of the structure during the study (default eq16, seed 000)')
+    e.add_argument('--mode', choices=LAWS, default=None,
+                   help="longitudinal law of the structure during the study (default: the collector "
+                        "description's, else eq16 as seed 000)")
     e.set_defaults(func=cmd_error)
     y = sub.add_parser('year', help='annual energy, area, EAR, LCOE per longitudinal law (seed 000 5.3-5.5)')
     y.add_argument('--config')

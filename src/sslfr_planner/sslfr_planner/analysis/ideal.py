@@ -19,7 +19,7 @@ from sslfr_common.contract import MIRRORS, MOBILE_STRUCTURE
 
 from .. import laws, raytrace
 from ..description import Description
-from ..prototype import commanded_lines, exact_lines, field_geometry
+from ..prototype import commanded_lines, exact_lines, field_geometry, held_lines
 from .optics import OpticalParameters, incidence_factor, optical_yield, power
 
 
@@ -58,10 +58,7 @@ def absorbed_power(desc: Description, zenith, azimuth, dni, lines, beta_m=None, 
     """
     o = desc.optics
     sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
-    if beta_m is None or beta_a is None:
-        bm, ba = longitudinal(desc, sun)
-        beta_m = bm if beta_m is None else beta_m
-        beta_a = ba if beta_a is None else beta_a
+    beta_m, beta_a = _tilts(desc, sun, beta_m, beta_a)
     lines = np.asarray(lines, dtype=float)
     drive = lines.mean(axis=-1)
     p = replace(optical_parameters(desc), mirror_aim='fixed')
@@ -73,21 +70,48 @@ def absorbed_power(desc: Description, zenith, azimuth, dni, lines, beta_m=None, 
     return q.sum(axis=-1)
 
 
-def ideal_absorbed_power(desc: Description, zenith, azimuth, dni):
+def _tilts(desc: Description, sun, beta_m, beta_a):
+    """The longitudinal tilts given, else the description's law's (:func:`longitudinal`)."""
+    if beta_m is None or beta_a is None:
+        bm, ba = longitudinal(desc, sun)
+        beta_m = bm if beta_m is None else beta_m
+        beta_a = ba if beta_a is None else beta_a
+    return np.asarray(beta_m, dtype=float), np.asarray(beta_a, dtype=float)
+
+
+def ideal_absorbed_power(desc: Description, zenith, azimuth, dni, beta_m=None, beta_a=None):
     """Power [W] with every line at its exact angle (one drive per line, no law error).
 
     With longitudinal movements (seed 000) this is :func:`optics.power` at the central
-    mirror's theta_t'/2 with the mirrors focused on the tilted receiver, as the day
-    report's ideal today; else every line at seed 004 eqs. 3-4 (r = 0: seed 000 eqs.
-    11-14, seed 003 eqs. 5-6).
+    mirror's theta_t'/2 with the mirrors focused on the tilted receiver, the tilts
+    ``beta_m``, ``beta_a`` [rad] (default: the law's, :func:`longitudinal`); else every
+    line at seed 004 eqs. 3-4 (r = 0: seed 000 eqs. 11-14, seed 003 eqs. 5-6).
     """
     o = desc.optics
     sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
     if desc.longitudinal_law != 'horizontal':
-        bm, ba = longitudinal(desc, sun)
+        bm, ba = _tilts(desc, sun, beta_m, beta_a)
         return power(dni, sun, raytrace.central_mirror_tilt(sun, bm), bm, ba, optical_parameters(desc))
     theta_t = raytrace.transversal_angle(sun)
     return absorbed_power(desc, zenith, azimuth, dni, exact_lines(desc, theta_t))
+
+
+def held_absorbed_power(desc: Description, zenith, azimuth, dni, drive, beta_m=None, beta_a=None):
+    """Power [W] with the common mirror drive held at ``drive`` [rad] (the ``mirrors``
+    joint, e.g. as measured) and the longitudinal tilts at ``beta_m``, ``beta_a`` [rad]
+    (default: the law's): every line rides on the drive at the law's offset
+    (:func:`sslfr_planner.prototype.held_lines`). With longitudinal movements the
+    mirrors are focused on the tilted receiver as in :func:`ideal_absorbed_power`, the
+    drive being the central mirror's tilt.
+    """
+    o = desc.optics
+    sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
+    drive = np.asarray(drive, dtype=float)
+    if desc.longitudinal_law != 'horizontal':
+        bm, ba = _tilts(desc, sun, beta_m, beta_a)
+        return power(dni, sun, drive, bm, ba, optical_parameters(desc))
+    theta_t = raytrace.transversal_angle(sun)
+    return absorbed_power(desc, zenith, azimuth, dni, held_lines(desc, theta_t, drive))
 
 
 def law_absorbed_power(desc: Description, zenith, azimuth, dni, law_zenith=None, law_azimuth=None):
@@ -108,4 +132,4 @@ def law_absorbed_power(desc: Description, zenith, azimuth, dni, law_zenith=None,
 
 
 __all__ = ['MIRRORS', 'aperture_area', 'optical_parameters', 'longitudinal', 'absorbed_power',
-           'ideal_absorbed_power', 'law_absorbed_power']
+           'ideal_absorbed_power', 'held_absorbed_power', 'law_absorbed_power']

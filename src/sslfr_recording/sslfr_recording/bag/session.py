@@ -18,6 +18,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from sslfr_common.files import user_path
 from typing import Callable
 
 from sslfr_common.timeconv import NS_PER_S
@@ -37,7 +38,7 @@ def probe_output_dir(root: str | Path) -> str:
     only test that tells, also as root, that ``/proc/x``, a read-only mount or an
     existing regular file cannot hold bags.
     """
-    path = Path(root).expanduser()
+    path = user_path(root)
     try:
         if path.exists() and not path.is_dir():
             return f'{path} exists and is not a directory'
@@ -92,7 +93,7 @@ class RecordingSession:
                  disk_check_period_s: float = 5.0, definitions: DefinitionCache | None = None,
                  monotonic: Callable[[], float] = time.monotonic,
                  disk_check: Callable[[Path], DiskStatus] | None = None):
-        self.root = Path(root).expanduser()
+        self.root = user_path(root)
         self.prefix = prefix
         self.per_day = per_day
         self.options = options or WriterOptions()

@@ -3,7 +3,10 @@
 // session's CSRF token. Angles arrive in radians (REP-103) and are shown in degrees.
 'use strict';
 
-const AXES = ['mirrors', 'mobile_structure', 'secondary_reflector'];
+// The contract's movements; the page shows those of the collector description the
+// planner names (info.collector.joints) once it is known.
+const ALL_AXES = ['mirrors', 'mobile_structure', 'secondary_reflector'];
+const joints = (s) => (s && s.info && s.info.collector && s.info.collector.joints) || ALL_AXES;
 const SVGNS = 'http://www.w3.org/2000/svg';
 const STALE_S = 3.0;                  // a value older than this [s wall] is greyed out
 const $ = (id) => document.getElementById(id);
@@ -119,7 +122,13 @@ function renderSafety(sf, age) {
 
 function renderAxes(s, age) {
   const body = document.querySelector('#axes tbody');
-  for (const axis of AXES) {
+  const axes = joints(s);
+  for (const axis of ALL_AXES) {                  // a movement the collector lacks: no row
+    const old = $('axis-' + axis);
+    if (old && !axes.includes(axis)) old.remove();
+  }
+  renderJogAxes(axes);
+  for (const axis of axes) {
     let row = $('axis-' + axis);
     if (!row) {
       row = document.createElement('tr'); row.id = 'axis-' + axis;
@@ -152,14 +161,38 @@ function renderAxes(s, age) {
   }
 }
 
+function renderJogAxes(axes) {
+  const sel = $('jog-axis');
+  if (!sel || sel.dataset.axes === axes.join(',')) return;
+  sel.dataset.axes = axes.join(',');
+  const keep = sel.value;
+  sel.textContent = '';
+  for (const a of axes) {
+    const o = document.createElement('option'); o.textContent = a; sel.appendChild(o);
+  }
+  if (axes.includes(keep)) sel.value = keep;
+}
+
 // ------------------------------------------------------------------ drawings
 // View from the south: x to the right = east, so a mirror at x_i (west positive)
 // is drawn at -x_i; a mirror angle beta (counter-clockwise seen from the south,
 // positive = normal leaning west) turns the line counter-clockwise on screen.
+// The lines: the collector description's (info.collector: positions x_i and each
+// line's offset from the drive under its law), else the planner's geometry with seed
+// 000's offsets psi_i / 2 (eqs. 11-14).
 function geometry(s) {
   const i = s.info || {};
-  return { n: i.n_per_side ?? 12, w: i.mirror_width ?? 0.06, d: i.gap ?? 0.024,
-    f: i.receiver_height ?? 1.5, central: i.central_mirror ?? true };
+  const c = i.collector;
+  if (c && c.lines) return { lines: c.lines, w: c.line_width, f: c.aim_height, tilting: c.tilting, name: c.name };
+  const n = i.n_per_side ?? 12, w = i.mirror_width ?? 0.06, d = i.gap ?? 0.024;
+  const f = (i.receiver_height ?? 1.5), central = i.central_mirror ?? true, pitch = w + d;
+  const lines = [];
+  for (let k = -n; k <= n; k++) {
+    if (k === 0 && !central) continue;
+    const x = central ? k * pitch : (k - Math.sign(k) * 0.5) * pitch;
+    lines.push({ x, offset: -Math.atan(x / f) / 2 });
+  }
+  return { lines, w, f, tilting: true, name: null };
 }
 
 function drawSouth(s) {
@@ -167,12 +200,8 @@ function drawSouth(s) {
   const g = geometry(s);
   const a = (s.axes || {}).mirrors;
   const beta0 = a ? a.measured : null;
-  const pitch = g.w + g.d;
-  const xs = [];
-  for (let k = -g.n; k <= g.n; k++) {
-    if (k === 0 && !g.central) continue;
-    xs.push(g.central ? k * pitch : (k - Math.sign(k) * 0.5) * pitch);
-  }
+  const xs = g.lines.map((l) => l.x);
+  const pitch = xs.length > 1 ? Math.abs(xs[1] - xs[0]) : g.w;
   const span = Math.max(...xs.map(Math.abs)) + pitch;
   const scale = 1.45 / Math.max(span, g.f * 0.9);
   svg.textContent = '';
@@ -182,6 +211,7 @@ function drawSouth(s) {
   el('circle', { cx: 0, cy: -g.f, r: Math.max(0.025, 0.03 / scale), fill: '#111', id: 'south-receiver' }, root);
   el('text', { x: -span, y: -g.f, 'font-size': 0.09 / scale, fill: '#555' }, root).textContent = 'W';
   el('text', { x: span - 0.08 / scale, y: -g.f, 'font-size': 0.09 / scale, fill: '#555' }, root).textContent = 'E';
+  if (g.name) el('text', { x: -span, y: 0.12 / scale, 'font-size': 0.07 / scale, fill: '#555', id: 'south-name' }, root).textContent = g.name;
   const sun = s.sun;
   if (sun && sun.transversal !== null) {
     const th = sun.transversal;               // positive toward the west (screen left)
@@ -192,21 +222,22 @@ function drawSouth(s) {
     el('circle', { cx: dx * L, cy: dy * L, r: 0.06 / scale, fill: sun.above_horizon ? '#fbbf24' : '#d1d5db' }, root);
   }
   if (beta0 === null) return;
-  for (const x of xs) {
-    const psi = -Math.atan(x / g.f);          // direction to the tube (seed 000 eqs. 11-14)
-    const b = beta0 + psi / 2;
-    const cx = -x, hx = Math.cos(b) * g.w / 2, hy = Math.sin(b) * g.w / 2;
+  let near = g.lines[0];                      // the line nearest the axis: its reflected ray is drawn
+  for (const l of g.lines) {
+    if (Math.abs(l.x) < Math.abs(near.x)) near = l;
+    const b = beta0 + l.offset;
+    const cx = -l.x, hx = Math.cos(b) * g.w / 2, hy = Math.sin(b) * g.w / 2;
     el('line', { x1: cx - hx, y1: hy, x2: cx + hx, y2: -hy, stroke: '#1e3a8a', 'stroke-width': sw * 1.6,
-      class: 'mirror', 'data-angle': b.toFixed(6) }, root);
+      class: 'mirror', 'data-angle': b.toFixed(6), 'data-x': l.x.toFixed(4) }, root);
   }
-  if (sun && sun.above_horizon && sun.transversal !== null) {   // central mirror's reflected ray
-    const th = sun.transversal;
+  if (sun && sun.above_horizon && sun.transversal !== null) {   // that line's reflected ray
+    const th = sun.transversal, b = beta0 + near.offset;
     const din = [Math.sin(th), -Math.cos(th)];                   // toward the mirror (x east, y up)
-    const nrm = [-Math.sin(beta0), Math.cos(beta0)];
+    const nrm = [-Math.sin(b), Math.cos(b)];
     const dot = din[0] * nrm[0] + din[1] * nrm[1];
     const r = [din[0] - 2 * dot * nrm[0], din[1] - 2 * dot * nrm[1]];
     const L = r[1] > 0 ? g.f / r[1] : g.f;
-    el('line', { x1: 0, y1: 0, x2: r[0] * L, y2: -r[1] * L, stroke: '#dc2626', 'stroke-width': sw * 0.8,
+    el('line', { x1: -near.x, y1: 0, x2: -near.x + r[0] * L, y2: -r[1] * L, stroke: '#dc2626', 'stroke-width': sw * 0.8,
       id: 'south-reflection' }, root);
   }
 }
@@ -230,8 +261,11 @@ function drawSide(s) {
     el('line', { x1: -len * Math.cos(b), y1: y0 + y + len * Math.sin(b), x2: len * Math.cos(b), y2: y0 + y - len * Math.sin(b),
       stroke: color, 'stroke-width': sw * 2, id, 'data-angle': b.toFixed(6) }, root);
   };
-  seg(axes.mobile_structure && axes.mobile_structure.measured, 0, '#1e3a8a', 'side-structure');
-  seg(axes.secondary_reflector && axes.secondary_reflector.measured, -h, '#111', 'side-reflector');
+  const has = joints(s);
+  if (has.includes('mobile_structure')) seg(axes.mobile_structure && axes.mobile_structure.measured, 0, '#1e3a8a', 'side-structure');
+  else seg(0, 0, '#9ca3af', 'side-structure-fixed');          // rows fixed flat: no such movement
+  if (has.includes('secondary_reflector')) seg(axes.secondary_reflector && axes.secondary_reflector.measured, -h, '#111', 'side-reflector');
+  else seg(0, -h, '#9ca3af', 'side-reflector-fixed');
   el('line', { x1: 0, y1: 0.22, x2: 0, y2: y0, stroke: '#6b7280', 'stroke-width': sw }, root);
   const sun = s.sun;
   if (sun && sun.longitudinal !== null) {
@@ -291,7 +325,7 @@ function drawPlots() {
   const c = h.columns, toDeg = (a) => a.map((v) => v === null ? null : v * 180 / Math.PI);
   const colors = { mirrors: '#1d4ed8', mobile_structure: '#059669', secondary_reflector: '#7c3aed' };
   const series = [];
-  for (const a of AXES) {
+  for (const a of joints(page.last)) {
     series.push({ y: toDeg(c[a + '_measured']), color: colors[a] });
     series.push({ y: toDeg(c[a + '_setpoint']), color: colors[a], dash: '5 3' });
   }
