@@ -7,8 +7,10 @@ address is this machine's or ``--role backup|both``, the backup, server id 1), t
 plant gateway (package ``sslfr_gateway``, when installed: SunSpec over Modbus TCP,
 with the field's namespaces and ids) and the field recorder (the ``recorder`` node
 writing ``/diagnostics`` and every collector's ``tracker/phase`` and ``safety/state``
-to ``<field id>_YYYY-MM-DD`` bags). Restarts, stop order and logs are those of
-``sslfr up`` (sslfr_bringup.supervisor).
+to ``<field id>_YYYY-MM-DD`` bags) and, off by default (``--foxglove`` or a ``--set
+foxglove_bridge:...``), Foxglove live (``sslfr_gateway``'s ``foxglove_bridge`` on the
+station's address: a super client, it carries every collector's namespaced topics).
+Restarts, stop order and logs are those of ``sslfr up`` (sslfr_bringup.supervisor).
 
 Every process of the station is a discovery *super client* of the field's servers
 (``ROS_DISCOVERY_SERVER`` = primary;backup, ``ROS_SUPER_CLIENT=TRUE``): it learns the
