@@ -330,26 +330,37 @@ def test_whole_collectors_in_network_namespaces_with_the_station(net2, ros_env, 
         (bag,) = [b for b in (tmp_path / cid / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
         assert bag.name.startswith(f'{cid}_')
         reader = BagReader(bag)
-        states, levels, why = [], [], {}
+        states, levels, why, missed = [], [], {}, []
         for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
             if t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
                 m = reader.decoder(raw.type)(raw.data)
                 if raw.topic.endswith('status'):
                     states.append(m.state)
+                    if m.state == 'link_down':
+                        missed.append(raw.log_time * 1e-9)
                 else:
                     levels.append(m.level)
                     if m.level > 1:              # the rule that stowed: its reasons, first time seen
                         why.setdefault('; '.join(m.reasons), f'{raw.log_time * 1e-9 - t_cut:.1f} s after the cut')
-        return states, levels, why
+        return states, levels, why, missed
 
     def safety_log(cid):
         log = tmp_path / cid / 'logs' / 'safety.log'
         return '\n'.join(ln for ln in log.read_text(errors='replace').splitlines() if 'transition' in ln)[-3000:]
     for cid in f.ids:
-        states, levels, why = during_cut(cid)
-        # 'waiting': a new horizon whose first point is still ahead (each republication)
-        assert states and set(states) <= {'following', 'waiting'}, (cid, set(states), safety_log(cid))
+        states, levels, why, missed = during_cut(cid)
+        # 'waiting': a new horizon whose first point is still ahead (each republication). 'link_down'
+        # for one status: the driver got no fresh board STATUS within its poll's 2-3 control periods
+        # (the collector's own pty board, not the network: seen once 84 s into a 300 s cut on a loaded
+        # machine, the link itself up); allowed alone only, the next status following again
+        lone = all(i + 1 < len(states) and states[i + 1] != 'link_down' and states[i - 1] != 'link_down'
+                   for i, st in enumerate(states) if st == 'link_down')
+        assert states and set(states) <= {'following', 'waiting', 'link_down'} and lone, \
+            (cid, set(states), missed, safety_log(cid))
+        assert states.count('link_down') <= 2, (cid, 'board answers missed', missed)
         # OK or WARN: no stow (else: the reasons of each stow, and the safety log's transitions)
         assert levels and max(levels) <= 1, (cid, sorted(set(levels)), why, safety_log(cid))
         print(f'{cid} during the cut: mirrors following {states.count("following") / len(states):.0%} of '
-              f'{len(states)} status messages, else waiting for the next horizon; safety levels {sorted(set(levels))}')
+              f'{len(states)} status messages, else waiting for the next horizon'
+              + (f' ({len(missed)} lone board answer(s) missed)' if missed else '')
+              + f'; safety levels {sorted(set(levels))}')
