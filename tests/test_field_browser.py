@@ -10,7 +10,11 @@ commands are refused without login; after login "Stow all" stows every collector
 through its own ``planner/set_mode`` (each planner's phase becomes STOW), then one
 collector is set back to auto alone. After the run each collector's bag is named after
 it and the station's field recording holds every collector's statuses on the absolute
-``/diagnostics`` with ``hardware_id`` = its id. A screenshot is kept in
+``/diagnostics`` with ``hardware_id`` = its id. Each row shows the energy of the day
+absorbed (the optical model on the collector's beam, sun and measured axes). Foxglove
+live at the station (``--set foxglove_bridge:...`` turns it on): a WebSocket client
+speaking the Foxglove protocol decodes a ``/c1/joint_states`` message of a collector
+through the station's one bridge. A screenshot is kept in
 out/test-artifacts/field-page.png.
 """
 from __future__ import annotations
@@ -41,7 +45,8 @@ def field(ros_env, tmp_path):
     cmd = [str(ROOT / 'sslfr'), 'sim', '--collectors', str(N), '--end', end, '--out', str(out),
            '--set', f'web:password_file={pw}', '--set', f'field_page:password_file={pw}',
            '--set', f'field_page:audit_file={tmp_path / "audit.jsonl"}',
-           '--set', f'web:audit_file={tmp_path / "web_audit.jsonl"}', '--set', f'web:report_dir={tmp_path / "r"}']
+           '--set', f'web:audit_file={tmp_path / "web_audit.jsonl"}', '--set', f'web:report_dir={tmp_path / "r"}',
+           '--set', 'foxglove_bridge:discovery_period=0.5']
     proc = NodeProcess(cmd, ros_env, tmp_path / 'field.out')
     url, deadline = None, time.monotonic() + 120
     while time.monotonic() < deadline and proc.running() and url is None:
@@ -80,6 +85,20 @@ def test_field_page_in_chromium_against_simulated_collectors(browser, field):  #
                       for t in rows().values()),
           180, 'every collector heard with a phase', lambda: str(rows()))
     print(f'field page: {N} collectors seen with a phase {time.monotonic() - t0:.1f} s after the page opened')
+    # the energy of the day: absorbed (beam, sun and the three measured axes heard); 0 at night
+    _wait(lambda: all(re.search(r'absorbed \d+\.\d{3}', t) for t in rows().values()), 60,
+          'every collector\'s absorbed energy of the day', lambda: str(rows()))
+    # Foxglove live at the station: one bridge carries every collector's namespaced topics
+    m = _wait(lambda: re.search(r'FOXGLOVE WEBSOCKET at ws://(\S+):(\d+)', proc.output()), 60,
+              'the station\'s Foxglove WebSocket', lambda: proc.output()[-2000:])
+    import asyncio
+
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+    from test_gateway import _foxglove_one
+    payload = asyncio.run(asyncio.wait_for(_foxglove_one(f'ws://{m.group(1)}:{m.group(2)}', '/c1/joint_states'), 60))
+    joints = deserialize_message(payload, JointState)
+    assert joints.name and all(n in ('mirrors', 'mobile_structure', 'secondary_reflector') for n in joints.name)
     # each collector's own page, one click away: the link answers with the operator page
     for cid in ids:
         link = browser.execute_script(f"return document.querySelector('#collector-{cid} a').href")

@@ -41,6 +41,9 @@ def field_page_params() -> ParamTable:
         ParamSpec('collector_ids', [''], 'the collectors\' ids, in the order of collectors', read_only=True),
         ParamSpec('collector_pages', [''], 'each collector\'s operator page URL ([] or one per collector)',
                   read_only=True),
+        ParamSpec('collector_configs', [''],
+                  "each collector's site config (path), for its absorbed energy of the day "
+                  "([] or one per collector; '' for a collector without one: no absorbed energy)", read_only=True),
         ParamSpec('port', 8090, 'TCP port of the field page (0: any free port, logged at start-up)', '-',
                   0, 65535, read_only=True),
         ParamSpec('lost_after', DEFAULT_LOST_AFTER, 'a collector silent this long is shown lost [s, steady]',
@@ -64,6 +67,9 @@ def _check_lists(v: dict) -> list[str]:
         errors.append('collectors and collector_ids must be unique')
     if pages and len(pages) != len(nsp):
         errors.append(f'collector_pages has {len(pages)} URLs for {len(nsp)} collectors')
+    configs = list(v['collector_configs'])
+    if configs != [''] and len(configs) != len(nsp):
+        errors.append(f'collector_configs has {len(configs)} entries for {len(nsp)} collectors')
     return errors
 
 

@@ -7,8 +7,10 @@ address is this machine's or ``--role backup|both``, the backup, server id 1), t
 plant gateway (package ``sslfr_gateway``, when installed: SunSpec over Modbus TCP,
 with the field's namespaces and ids) and the field recorder (the ``recorder`` node
 writing ``/diagnostics`` and every collector's ``tracker/phase`` and ``safety/state``
-to ``<field id>_YYYY-MM-DD`` bags). Restarts, stop order and logs are those of
-``sslfr up`` (sslfr_bringup.supervisor).
+to ``<field id>_YYYY-MM-DD`` bags) and, off by default (``--foxglove`` or a ``--set
+foxglove_bridge:...``), Foxglove live (``sslfr_gateway``'s ``foxglove_bridge`` on the
+station's address: a super client, it carries every collector's namespaced topics).
+Restarts, stop order and logs are those of ``sslfr up`` (sslfr_bringup.supervisor).
 
 Every process of the station is a discovery *super client* of the field's servers
 (``ROS_DISCOVERY_SERVER`` = primary;backup, ``ROS_SUPER_CLIENT=TRUE``): it learns the
@@ -32,6 +34,8 @@ from sslfr_field import field as field_mod
 
 #: the plant gateway's package and executable (SunSpec over Modbus TCP); started when installed
 GATEWAY = ('sslfr_gateway', 'modbus_gateway')
+#: Foxglove live at the station (off by default: ``--foxglove`` / parameters for ``foxglove_bridge``)
+FOXGLOVE = ('sslfr_gateway', 'foxglove_bridge')
 #: the field recorder's topics per collector (relative to its namespace) and for the field
 RECORDED_PER_COLLECTOR = (TRACKER_PHASE.name, SAFETY_STATE.name)
 
@@ -90,11 +94,15 @@ def servers_here(f: field_mod.Field, role: str, here: set[str] | None = None) ->
 
 
 def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: Path | None,
-             finder=None, here: set[str] | None = None, record: bool = True, params: dict | None = None):
+             finder=None, here: set[str] | None = None, record: bool = True, params: dict | None = None,
+             foxglove: bool = False):
     """The station's Programs and the list of what is missing (never replaced by
-    anything else): discovery servers, field page, gateway, field recorder.
-    ``params``: more parameters per node (``{'field_page': {...}, 'modbus_gateway': {...}}``)."""
+    anything else): discovery servers, field page, gateway, field recorder and, with
+    ``foxglove`` (or parameters for it in ``params``), the Foxglove bridge.
+    ``params``: more parameters per node (``{'field_page': {...}, 'modbus_gateway': {...},
+    'foxglove_bridge': {...}}``)."""
     params = params or {}
+    foxglove = foxglove or bool(params.get(FOXGLOVE[1]))
 
     def more(node):
         return [a for k, v in (params.get(node) or {}).items() for a in ('-p', f'{k}:={v}')]
@@ -119,6 +127,7 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
         progs.append(Program(name='field_page', argv=[
             str(page), '--ros-args', '-r', '__node:=field_page', '-p', f'collectors:={_yaml_list(f.namespaces)}',
             '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'collector_pages:={_yaml_list(pages)}',
+            '-p', f'collector_configs:={_yaml_list(str(c.config) for c in f.collectors)}',
             '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}',
             *more('field_page')], start=1, stop=1))
     # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway): started when installed
@@ -130,6 +139,16 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
             str(gw), '--ros-args', '-r', f'__node:={GATEWAY[1]}', '-p', f'collectors:={_yaml_list(f.namespaces)}',
             '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'bind_address:={f.station.address}',
             *more(GATEWAY[1])], start=1, stop=1))
+    # Foxglove live: one bridge, a super client like every station process, carries every
+    # collector's topics (their namespaced names) to Foxglove; bound to the station's address
+    if foxglove:
+        fox = finder(*FOXGLOVE)
+        if fox is None:
+            missing.append(f'Foxglove bridge ({FOXGLOVE[0]}/{FOXGLOVE[1]} is not installed)')
+        else:
+            progs.append(Program(name=FOXGLOVE[1], argv=[
+                str(fox), '--ros-args', '-r', f'__node:={FOXGLOVE[1]}', '-p', f'bind_address:={f.station.address}',
+                *more(FOXGLOVE[1])], start=1, stop=1))
     if record and out_dir is not None:
         rec = finder('sslfr_recording', 'recorder')
         if rec is None:
@@ -178,8 +197,32 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--out', default=None, help='station output: field bags and logs (default out/station-<field id>)')
     p.add_argument('--domain-id', type=bounded_int(0, 232), default=None,
                    help='ROS_DOMAIN_ID of the field (default: $ROS_DOMAIN_ID, else 42)')
+    p.add_argument('--foxglove', action='store_true',
+                   help='also start Foxglove live (sslfr_gateway foxglove_bridge) on the station\'s address, '
+                        'carrying every collector\'s topics (off by default; docs/field.md)')
+    p.add_argument('--set', action='append', default=[], metavar='NODE:KEY=VALUE',
+                   help='a parameter of a station node (field_page, modbus_gateway, foxglove_bridge), e.g. '
+                        "foxglove_bridge:allow=\"['192.168.10.50']\"; repeatable")
     p.add_argument('--print', action='store_true', dest='print_only', help='print the command lines and exit')
     return p
+
+
+#: the station's nodes that take parameters from ``--set NODE:KEY=VALUE``
+STATION_NODES = ('field_page', GATEWAY[1], FOXGLOVE[1])
+
+
+def station_params(specs) -> dict:
+    """``{node: {key: value}}`` of ``--set NODE:KEY=VALUE`` specs for the station's nodes;
+    CliError names a spec that is not one."""
+    from sslfr_common.cliargs import CliError
+    out: dict = {}
+    for spec in specs:
+        node, _, rest = spec.partition(':')
+        key, eq, value = rest.partition('=')
+        if node not in STATION_NODES or not (key and eq):
+            raise CliError(f'--set {spec!r}: expected NODE:KEY=VALUE with NODE one of {", ".join(STATION_NODES)}')
+        out.setdefault(node, {})[key] = value
+    return out
 
 
 def resolve_field(name: str) -> Path:
@@ -201,6 +244,7 @@ def main(argv: list[str]) -> int:
 
     def body(stop, run_dir) -> int:
         args = parser().parse_args(argv)
+        args.params = station_params(args.set)
         try:
             f = load_checked(str(resolve_field(args.field)))
         except field_mod.FieldError as exc:
@@ -221,7 +265,7 @@ def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say
     say = say or (lambda text: print(text, file=sys.stderr))
     out = Path(args.out or f'out/station-{f.id}').resolve()
     progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out,
-                              params=getattr(args, 'params', None))
+                              params=getattr(args, 'params', None), foxglove=getattr(args, 'foxglove', False))
     env = station_environment(f)
     env['ROS_DOMAIN_ID'] = str(args.domain_id if args.domain_id is not None else os.environ.get('ROS_DOMAIN_ID', 42))
     for m in missing:

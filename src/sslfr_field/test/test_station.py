@@ -98,3 +98,29 @@ def test_a_collector_node_set_under_its_namespace(tmp_path):
     assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in env
     assert nodeset.ros_environment(ns, base={})['ROS_AUTOMATIC_DISCOVERY_RANGE'] == ns.discovery_range
     assert [collector_id(n) for n in ('/c2', '/field/row1/', '', '/')] == ['c2', 'row1', 'sslfr', 'sslfr']
+
+
+def test_foxglove_at_the_station_is_off_by_default_and_bound_to_the_station(tmp_path):
+    f = field(tmp_path)
+    everything = finder({('sslfr_field', 'field_page'), ('sslfr_gateway', 'modbus_gateway'),
+                         ('sslfr_gateway', 'foxglove_bridge')})
+    progs, _ = station.programs(f, role='both', run_dir=tmp_path, out_dir=None, finder=everything)
+    assert 'foxglove_bridge' not in [p.name for p in progs]
+    page = next(p for p in progs if p.name == 'field_page')
+    assert f"collector_configs:=['{f.collectors[0].config}','{f.collectors[1].config}']" in page.argv
+    progs, _ = station.programs(f, role='both', run_dir=tmp_path, out_dir=None, finder=everything, foxglove=True)
+    fox = next(p for p in progs if p.name == 'foxglove_bridge')
+    assert 'bind_address:=192.168.10.2' in fox.argv and '__node:=foxglove_bridge' in fox.argv
+    # a parameter for it (e.g. the allow-list) turns it on too
+    params = station.station_params(["foxglove_bridge:allow=['192.168.10.50']", 'foxglove_bridge:port=9000'])
+    progs, _ = station.programs(f, role='both', run_dir=tmp_path, out_dir=None, finder=everything, params=params)
+    fox = next(p for p in progs if p.name == 'foxglove_bridge')
+    assert "allow:=['192.168.10.50']" in fox.argv and 'port:=9000' in fox.argv
+    _, missing = station.programs(f, role='both', run_dir=tmp_path, out_dir=None, foxglove=True,
+                                  finder=finder({('sslfr_field', 'field_page')}))
+    assert any('foxglove_bridge is not installed' in m for m in missing)
+    import pytest
+    from sslfr_common.cliargs import CliError
+    for bad in ('foxglove_bridge:port', 'planner:x=1', 'allow=1'):
+        with pytest.raises(CliError, match='NODE:KEY=VALUE'):
+            station.station_params([bad])

@@ -24,7 +24,7 @@ from sslfr_field import field as field_mod
 from sslfr_field import station as station_mod
 
 #: the station's nodes that ``--set NODE:KEY=VALUE`` reaches (the rest go to every collector)
-STATION_NODES = ('field_page', station_mod.GATEWAY[1])
+STATION_NODES = station_mod.STATION_NODES
 #: [s] the ordered stop: each collector's own sim stops its node set (<= 5 s) first
 FIELD_STOP_TIMEOUT = 15.0
 
@@ -106,6 +106,7 @@ def run_field(args, stop, run: Path) -> int:
                 print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
                 return 1
     station_params: dict = {'modbus_gateway': {'port': 0}}   # any free port, printed
+    # Foxglove live at the station: on with any --set foxglove_bridge:KEY=VALUE (its port 0: any free port, printed)
     for spec in args.set:              # --set field_page:KEY=VALUE etc.: the station's nodes
         node, _, rest = spec.partition(':')
         if node in STATION_NODES:
@@ -114,6 +115,8 @@ def run_field(args, stop, run: Path) -> int:
                 print(f'sslfr sim: --set {spec!r}: expected {node}:KEY=VALUE', file=sys.stderr)
                 return 2
             station_params.setdefault(node, {})[key] = value
+    if station_mod.FOXGLOVE[1] in station_params:
+        station_params[station_mod.FOXGLOVE[1]].setdefault('port', 0)
     out = Path(args.out or 'out/sim-field').resolve()
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -138,6 +141,15 @@ def run_field(args, stop, run: Path) -> int:
             if m:
                 pages['gateway'] = m.group(1)
                 print(f'sslfr sim: SunSpec MODBUS TCP GATEWAY at {m.group(1)}', file=sys.stderr)
+        if 'foxglove' not in pages and station_mod.FOXGLOVE[1] in station_params:
+            try:
+                m = re.search(r'Foxglove WebSocket at (\S+)', (out / 'station' / 'logs' / f'{station_mod.FOXGLOVE[1]}.log')
+                              .read_text(errors='replace'))
+            except OSError:
+                m = None
+            if m:
+                pages['foxglove'] = m.group(1)
+                print(f'sslfr sim: FOXGLOVE WEBSOCKET at {m.group(1)}', file=sys.stderr)
         if 'station' not in pages:
             try:
                 m = re.search(r'field page at (\S+)', (out / 'station' / 'logs' / 'field_page.log').read_text(errors='replace'))

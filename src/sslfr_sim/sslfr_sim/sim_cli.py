@@ -216,7 +216,9 @@ def parser() -> argparse.ArgumentParser:
                    help='namespace of the whole tracker, e.g. /c1 (default: the node set\'s)')
     p.add_argument('--collectors', type=bounded_int(1, 64), default=None, metavar='N',
                    help='a field: N simulated collectors /c1../cN (composed layout, on the system clock) '
-                        'and their station (discovery servers, field recorder) on this machine (docs/field.md)')
+                        'and their station (discovery servers, field recorder) on this machine (docs/field.md); '
+                        '--set field_page:/modbus_gateway:/foxglove_bridge:KEY=VALUE go to the station '
+                        '(any foxglove_bridge parameter starts Foxglove live there)')
     p.add_argument('--only', default='', help='comma-separated nodes to run (default: all)')
     p.add_argument('--skip', default='', help='comma-separated nodes not to run')
     p.add_argument('--domain-id', type=bounded_int(1, 232), default=None,

@@ -44,6 +44,9 @@ function render(data) {
     // where a flow meter counts (else '-'): flow [m^3/s] shown in L/h
     tr.append(el('td', c.flow === null ? '-' : (c.flow * 3.6e6).toFixed(1) + ' L/h, ' +
       (c.thermal_power === null ? '-' : c.thermal_power.toFixed(0) + ' W'), 'thermal'));
+    const e = c.energy_today;
+    tr.append(el('td', (e.absorbed_kwh === null ? '-' : 'absorbed ' + e.absorbed_kwh.toFixed(3)) +
+      (e.thermal_kwh === null ? '' : ', thermal ' + e.thermal_kwh.toFixed(3)), 'energy'));
     const cmds = el('td');
     for (const [label, name, extra] of [['Stow', 'stow', null], ['Auto', 'mode', {mode: 'auto'}]]) {
       const b = el('button', label);
