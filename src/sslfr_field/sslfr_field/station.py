@@ -130,25 +130,22 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
             '-p', f'collector_configs:={_yaml_list(str(c.config) for c in f.collectors)}',
             '-p', f'bind_address:={f.station.address}', '-p', f'port:={f.station.web_port}',
             *more('field_page')], start=1, stop=1))
-    # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway): started when installed
-    gw = finder(*GATEWAY)
-    if gw is None:
-        missing.append(f'plant gateway ({GATEWAY[0]}/{GATEWAY[1]} is not installed): no Modbus TCP')
-    else:
-        progs.append(Program(name=GATEWAY[1], argv=[
-            str(gw), '--ros-args', '-r', f'__node:={GATEWAY[1]}', '-p', f'collectors:={_yaml_list(f.namespaces)}',
-            '-p', f'collector_ids:={_yaml_list(f.ids)}', '-p', f'bind_address:={f.station.address}',
-            *more(GATEWAY[1])], start=1, stop=1))
+    def optional(node: tuple[str, str], what: str, *params: str) -> None:
+        """A station node of another package, started when installed, bound to the station's address."""
+        exe = finder(*node)
+        if exe is None:
+            missing.append(f'{what} ({node[0]}/{node[1]} is not installed)')
+            return
+        progs.append(Program(name=node[1], argv=[
+            str(exe), '--ros-args', '-r', f'__node:={node[1]}', *params, '-p', f'bind_address:={f.station.address}',
+            *more(node[1])], start=1, stop=1))
+    # the plant gateway (SunSpec over Modbus TCP; package sslfr_gateway)
+    optional(GATEWAY, 'plant gateway: no Modbus TCP', '-p', f'collectors:={_yaml_list(f.namespaces)}',
+             '-p', f'collector_ids:={_yaml_list(f.ids)}')
     # Foxglove live: one bridge, a super client like every station process, carries every
-    # collector's topics (their namespaced names) to Foxglove; bound to the station's address
+    # collector's topics (their namespaced names) to Foxglove
     if foxglove:
-        fox = finder(*FOXGLOVE)
-        if fox is None:
-            missing.append(f'Foxglove bridge ({FOXGLOVE[0]}/{FOXGLOVE[1]} is not installed)')
-        else:
-            progs.append(Program(name=FOXGLOVE[1], argv=[
-                str(fox), '--ros-args', '-r', f'__node:={FOXGLOVE[1]}', '-p', f'bind_address:={f.station.address}',
-                *more(FOXGLOVE[1])], start=1, stop=1))
+        optional(FOXGLOVE, 'Foxglove bridge')
     if record and out_dir is not None:
         rec = finder('sslfr_recording', 'recorder')
         if rec is None:

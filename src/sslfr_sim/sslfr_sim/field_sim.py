@@ -131,44 +131,27 @@ def run_field(args, stop, run: Path) -> int:
           f'{field_mod.discovery_servers(f.station)}, ROS_DOMAIN_ID={args.domain_id}, out {out}', file=sys.stderr)
     pages: dict[str, str] = {}
 
+    # what the station's processes print once they serve: (key, log file, pattern, what to say)
+    faces = [('gateway', out / 'station' / 'logs' / f'{station_mod.GATEWAY[1]}.log',
+              r'SunSpec Modbus TCP at (\S+)', 'SunSpec MODBUS TCP GATEWAY'),
+             ('station', out / 'station' / 'logs' / 'field_page.log', r'field page at (\S+)', 'FIELD PAGE')]
+    if station_mod.FOXGLOVE[1] in station_params:
+        faces.append(('foxglove', out / 'station' / 'logs' / f'{station_mod.FOXGLOVE[1]}.log',
+                      r'Foxglove WebSocket at (\S+)', 'FOXGLOVE WEBSOCKET'))
+    faces += [(c.id, out / c.id / 'logs' / 'web.log', r'operator page at (\S+)',
+               f'collector {c.id} ({c.namespace}): operator page') for c in f.collectors]
+
     def announce():
-        if 'gateway' not in pages:
-            try:
-                m = re.search(r'SunSpec Modbus TCP at (\S+)', (out / 'station' / 'logs' / f'{station_mod.GATEWAY[1]}.log')
-                              .read_text(errors='replace'))
-            except OSError:
-                m = None
-            if m:
-                pages['gateway'] = m.group(1)
-                print(f'sslfr sim: SunSpec MODBUS TCP GATEWAY at {m.group(1)}', file=sys.stderr)
-        if 'foxglove' not in pages and station_mod.FOXGLOVE[1] in station_params:
-            try:
-                m = re.search(r'Foxglove WebSocket at (\S+)', (out / 'station' / 'logs' / f'{station_mod.FOXGLOVE[1]}.log')
-                              .read_text(errors='replace'))
-            except OSError:
-                m = None
-            if m:
-                pages['foxglove'] = m.group(1)
-                print(f'sslfr sim: FOXGLOVE WEBSOCKET at {m.group(1)}', file=sys.stderr)
-        if 'station' not in pages:
-            try:
-                m = re.search(r'field page at (\S+)', (out / 'station' / 'logs' / 'field_page.log').read_text(errors='replace'))
-            except OSError:
-                m = None
-            if m:
-                pages['station'] = m.group(1)
-                print(f'sslfr sim: FIELD PAGE at {m.group(1)}', file=sys.stderr)
-        for c in f.collectors:
-            if c.id in pages:
+        for key, log, pattern, what in faces:
+            if key in pages:
                 continue
             try:
-                text = (out / c.id / 'logs' / 'web.log').read_text(errors='replace')
+                m = re.search(pattern, log.read_text(errors='replace'))
             except OSError:
                 continue
-            m = re.search(r'operator page at (\S+)', text)
             if m:
-                pages[c.id] = m.group(1)
-                print(f'sslfr sim: collector {c.id} ({c.namespace}): operator page at {m.group(1)}', file=sys.stderr)
+                pages[key] = m.group(1)
+                print(f'sslfr sim: {what} at {m.group(1)}', file=sys.stderr)
     t0 = time.monotonic()
     code = station_mod.run(f, station_args, stop, run, extra_programs=collectors, tick=announce,
                            stop_timeout=FIELD_STOP_TIMEOUT,
