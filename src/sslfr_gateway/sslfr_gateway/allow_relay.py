@@ -288,8 +288,11 @@ class AllowRelay:
         finally:
             for task in (up, down):
                 task.cancel()
-            for w in (writer, up_w):
-                w.close()
+            writer.close()
+            # the server's side at once, unflushed: a graceful close would wait for its
+            # buffered bytes, and once the loop stops the server would hold a connection
+            # nobody reads (its stop() waits for it)
+            up_w.transport.abort()
 
     async def _pipe_up(self, src: asyncio.StreamReader, dst: asyncio.StreamWriter,
                        ip: str) -> tuple[int, str] | None:

@@ -42,9 +42,19 @@ class FoxgloveFront:
         relay = self.relay.all_counters() if self.relay is not None else {}
         return {'clients': self.relay.active if self.relay is not None else 0, **relay, **self.sdk_log.counters}
 
+    #: [s] longest wait for the SDK server's stop (it waits for its clients' connections)
+    STOP_TIMEOUT = 5.0
+
     def stop(self) -> None:
+        """Close the relay, then the server; bounded: a server stop that does not return
+        within STOP_TIMEOUT is left to its daemon thread (one line logged)."""
         if self.relay is not None:
             self.relay.stop()
         if self.server is not None:
-            self.server.stop()
+            import threading
+            t = threading.Thread(target=self.server.stop, daemon=True, name='foxglove-stop')
+            t.start()
+            t.join(self.STOP_TIMEOUT)
+            if t.is_alive():
+                self.log.report('stop', f'foxglove server: stop not done within {self.STOP_TIMEOUT:g} s, left behind')
         self.sdk_log.detach()
