@@ -78,8 +78,9 @@ class Net:
     """The station's address in this namespace and one namespace per collector, shaped."""
 
     def __init__(self, ids: list[str], mode: str | None = None, shaping: Shaping = WIFI, seed: int | None = None):
-        tag = os.getpid() % 100000
-        self.subnet = f'10.213.{os.getpid() % 250}'
+        pid = os.getpid()
+        tag = pid % 100000
+        self.subnet = f'10.{200 + pid // 250 % 50}.{pid % 250}'   # apart for concurrent runs (test workers)
         self.bridge = f'sfbr{tag}'
         self.station_if = f'sfs{tag}'              # emulator: the station's TAP device
         self.station_ip = f'{self.subnet}.1'
@@ -105,10 +106,10 @@ class Net:
         for ns in self.ns.values():
             _run('ip', 'netns', 'exec', ns, 'ip', 'link', 'set', 'lo', 'up')
 
-    def _netem(self, ns: str | None, dev: str, loss: float) -> None:
+    def _netem(self, ns: str | None, dev: str) -> None:
         s = self.shaping
         cmd = ['tc', 'qdisc', 'replace', 'dev', dev, 'root', 'netem', 'delay', f'{s.delay_s * 1e3:g}ms',
-               f'{s.jitter_s * 1e3:g}ms', 'loss', f'{loss * 100:g}%']
+               f'{s.jitter_s * 1e3:g}ms', 'loss', f'{s.loss * 100:g}%']
         _run(*((['ip', 'netns', 'exec', ns] if ns else []) + cmd))
 
     def _up_bridge(self) -> None:
@@ -123,8 +124,8 @@ class Net:
             _run('ip', 'netns', 'exec', ns, 'ip', 'addr', 'add', f'{self.ip[cid]}/24', 'dev', peer)
             _run('ip', 'netns', 'exec', ns, 'ip', 'link', 'set', peer, 'up')
             if self.mode == 'netem':
-                self._netem(ns, peer, self.shaping.loss)
-                self._netem(None, self.host_if[cid], self.shaping.loss)
+                self._netem(ns, peer)
+                self._netem(None, self.host_if[cid])
 
     def _up_emulator(self) -> None:
         tag = self.station_if[3:]

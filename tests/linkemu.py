@@ -256,7 +256,8 @@ def _command(sw: Switch, words: list[str], late: dict, write_errors: int) -> str
         if words == ['stats']:
             return json.dumps({'ports': {p: vars(s) for p, s in sw.stats.items()},
                                'late': {**late, 'mean_s': late['sum_s'] / max(1, late['n'])},
-                               'write_errors': write_errors, 'pending': len(sw.heap)})
+                               'write_errors': write_errors, 'pending': len(sw.heap),
+                               'cpu_s': sum(os.times()[:2])})
     except KeyError as e:
         return f'error {e}'
     return f'error unknown command {" ".join(words)!r} (cut NAME, join NAME, stats)'

@@ -74,7 +74,8 @@ def _net(ids):
             late = st['late']
             print('emulated links: ' + ', '.join(f'{p} {v["rx_frames"]} frames in, {v["tx_frames"]} out, {v["lost"]} lost'
                                                   for p, v in st['ports'].items() if p != 'station')
-                  + f'; deliveries late by {late["mean_s"] * 1e6:.0f} us on average, at most {late["max_s"] * 1e3:.1f} ms')
+                  + f'; deliveries late by {late["mean_s"] * 1e6:.0f} us on average, at most {late["max_s"] * 1e3:.1f} ms'
+                  + f'; emulator CPU {st["cpu_s"]:.1f} s')
     finally:
         n.down()
 
