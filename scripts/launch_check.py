@@ -11,7 +11,7 @@ clock, as ``./sslfr sim --wall-clock`` starts them) in a private ROS domain, and
    the launch's ``liveness_watchdog`` SIGKILLs it within the bound (``watchdog_timeout``
    of silence since its last beat) and prints the cause, launch respawns it after its
    ``respawn_delay``, the new process beats again (the watchdog watches its pid), the
-   drivers are active again and safety is back to its level before the hang;
+   drivers are active again, safety is back to OK and the planner to its phase;
 3. each process of ``--kill`` (default: planner) is sent SIGKILL and respawned after
    ``respawn_delay`` too.
 
@@ -290,10 +290,11 @@ def main(argv=None) -> int:  # noqa: C901 - one sequence of checks
         check(ok, f'started: drivers {", ".join(drivers)} active at +{time.monotonic() - t0:.1f} s')
         if not ok:
             return 1
-        wait_for(lambda: obs.safety_level(time.monotonic() - 1.0) is not None and obs.phase_name(), 30.0)
+        # the start-up's stow (axes referencing, nodes not heard yet) cleared: safety OK
+        wait_for(lambda: obs.safety_level(time.monotonic() - 1.0) == 0 and obs.phase_name(), 60.0)
         before = obs.safety_level()
         phase = obs.phase_name()
-        check(before is not None and phase, f'safety publishing, level {before} {obs.safety[-1][2] if obs.safety else ""}; '
+        check(before == 0 and phase, f'safety OK after the start-up, level {before} {obs.safety[-1][2] if obs.safety else ""}; '
               f'phase {phase}')
         # every process beats: the watchdog watches as many pids as there are processes
         nprocs = len(ns.processes(args.layout))
