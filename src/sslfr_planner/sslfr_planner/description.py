@@ -10,7 +10,7 @@ receiver height and size, axis azimuth). A site config names its collector with 
 :func:`load` validates everything before any process starts and raises
 :class:`DescriptionError` listing every problem, each line naming the file and the key
 (``movements.mirrors.drive``): unknown keys, wrong types, unknown drive kinds, a law
-that needs a movement the collector lacks, ranges outside the mechanics, positions
+that needs a movement the collector lacks (:data:`LAW_NEEDS`), ranges outside the mechanics, positions
 outside a range, duplicate names. Angles are degrees in the file (``*_deg`` keys, for
 people) and radians in :class:`Description` (SI inside the code).
 """
