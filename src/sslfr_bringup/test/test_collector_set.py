@@ -8,6 +8,8 @@ import yaml
 from collectors_testutil import write_fourth_collector
 from sslfr_bringup import nodeset
 from sslfr_bringup.collector_set import driver_parameters
+from sslfr_common.tracking_loss import from_flat
+from sslfr_planner.analysis.ideal import loss_table
 from sslfr_planner.description import load
 from sslfr_safety.params import TABLE as SAFETY_TABLE, config_from
 
@@ -45,6 +47,12 @@ def test_each_shipped_collector_gets_the_nodes_and_boards_it_describes(config):
     assert cfg.joints == tuple(joints)
     assert set(cfg.watchdogs) == set(present)
     nodeset.checked_params(ns, path)         # the shipped config agrees with its description
+    # the mirrors' driver quotes the collector's own loss table at the config's site
+    planner = nodeset.node_params(nodeset.read_params(path), 'planner')
+    table = from_flat(ns.node('mirrors_driver').parameters['accuracy.loss_table'])
+    assert table and table == loss_table(desc, planner['site.latitude_deg'], planner['site.longitude_deg'],
+                                         planner.get('site.elevation', 0.0))
+    assert all('accuracy.loss_table' not in n.parameters for n in drivers[1:])
 
 
 def test_a_site_value_contradicting_the_description_is_refused(tmp_path):

@@ -133,3 +133,33 @@ def law_absorbed_power(desc: Description, zenith, azimuth, dni, law_zenith=None,
 
 __all__ = ['MIRRORS', 'aperture_area', 'optical_parameters', 'longitudinal', 'absorbed_power',
            'ideal_absorbed_power', 'held_absorbed_power', 'law_absorbed_power']
+
+
+#: the loss table's tracking errors [deg]: seed 000 Figs. 22-24's span and its 0.06 / 0.36 deg
+LOSS_ERRORS_DEG = (0.0, 0.03, 0.06, 0.09, 0.12, 0.18, 0.24, 0.30, 0.36, 0.48, 0.60, 0.72, 1.0)
+#: the instants of the loss table: the equinoxes and solstices (of 2024) at these solar hours [h]
+LOSS_DAYS = ('2024-03-21', '2024-06-21', '2024-09-21', '2024-12-21')
+LOSS_HOURS = (9.0, 12.0, 15.0)
+
+
+def loss_table(desc: Description, latitude_deg: float, longitude_deg: float, elevation: float = 0.0):
+    """The collector's loss table (:mod:`sslfr_common.tracking_loss`): seed 000 section
+    5.2's study (eqs. 17-24: every line held epsilon below its ideal tilt, one drive) on
+    the 3-D trace of ``desc``'s optics at the site [deg, deg, m], under its longitudinal
+    law; for each error of :data:`LOSS_ERRORS_DEG`, the smallest and the largest loss [%]
+    over :data:`LOSS_DAYS` x :data:`LOSS_HOURS` (sun above the horizon). Rows (error
+    [rad], low [%], high [%]); ~0.1 s."""
+    from datetime import date
+
+    from .performance import AnalysisSite, error_table
+    site = AnalysisSite(latitude_deg, longitude_deg, elevation, desc.optics.azimuth)
+    errors = np.radians(LOSS_ERRORS_DEG)
+    rows = error_table(site, optical_parameters(desc), errors, [date.fromisoformat(d) for d in LOSS_DAYS],
+                       list(LOSS_HOURS), law=desc.longitudinal_law)
+    out = []
+    for e in errors:
+        losses = [r.loss_total for r in rows if abs(r.error - e) < 1e-12]
+        if not losses:                 # the sun never up at those hours (polar night)
+            return ()
+        out.append((float(e), round(max(0.0, min(losses)), 2), round(min(100.0, max(losses)), 2)))
+    return tuple(out)
