@@ -205,6 +205,12 @@ class Description:
         m = self.movements.get(LONGITUDINAL_JOINTS[0])
         return m.law if m is not None else 'horizontal'
 
+    @property
+    def receiver_fixed(self) -> bool:
+        """True when the collector does not move its receiver (no secondary_reflector
+        movement): it stays at :data:`FIXED_TILT` whatever the longitudinal law."""
+        return LONGITUDINAL_JOINTS[1] not in self.movements
+
 
 # ------------------------------------------------------------------- schema
 # key -> (type, required); types: 'str', 'int', 'num', 'bool', 'range', 'map', 'list'

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sslfr_common.contract import JOINTS, SECONDARY_REFLECTOR, Phase
+from sslfr_common.contract import JOINTS, Phase
 
 from . import laws, prototype, raytrace, spa
 from .collector import MOVING_LAWS, Collector
@@ -149,7 +149,7 @@ def _longitudinal(zenith, azimuth, t, site: Site, c: Collector, sun=None):
         bm, ba = np.zeros(n), np.zeros(n)
     else:  # daily
         bm, ba = laws.daily(site.latitude, _declination_at_noons(t, site, c), c.azimuth)
-    if c.description is not None and SECONDARY_REFLECTOR not in c.description.movements:
+    if c.description is not None and c.description.receiver_fixed:
         ba = np.full(n, FIXED_TILT)     # a receiver the collector does not move (docs/collectors.md)
     return np.clip(bm, -c.tilt_max, c.tilt_max), np.clip(ba, -c.tilt_max, c.tilt_max)
 

@@ -83,3 +83,33 @@ def test_rows_tilting_alone_over_a_fixed_receiver(tmp_path):
     # the report's default (a movement the collector lacks: 0) is the table's fixed receiver
     assert ideal.ideal_absorbed_power(desc, tab.zenith, tab.azimuth, np.full(2, 900.0), tab.mobile_structure,
                                       tab.secondary_reflector) == pytest.approx(rows)
+
+
+def test_the_loss_table_of_rows_over_a_fixed_receiver(tmp_path):
+    """The accuracy alarms' loss table (seed 000 section 5.2) of the two-movement collector
+    is studied with its receiver where it is (fixed, horizontal), not tilted by the law."""
+    import numpy as np
+    from collectors_testutil import write_fourth_collector
+    from sslfr_planner.analysis import ideal, performance
+    from sslfr_planner.description import load
+
+    write_fourth_collector(tmp_path)
+    desc = load(tmp_path / 'fourth.yaml')
+    assert desc.receiver_fixed
+    site = performance.AnalysisSite(41.39, 2.17, 12.0, 0.0)
+    t = np.array([1782043200.0 - 3600.0])       # 2026-06-21 11:00 UTC
+    zen, azi = performance.sun_positions(t, site)
+    moving = performance.commands('eq16', zen, azi, t, site)
+    fixed = performance.commands('eq16', zen, azi, t, site, receiver_fixed=True)
+    assert moving[2][0] == pytest.approx(zen[0] / 2.0) and fixed[2][0] == 0.0
+    np.testing.assert_array_equal(moving[1], fixed[1])
+    from datetime import date
+    table = ideal.loss_table(desc, 41.39, 2.17, 12.0)
+    err = table[-1][0]
+    for fixed_rcv in (True, False):
+        rows = performance.error_table(site, ideal.optical_parameters(desc), [err],
+                                       [date.fromisoformat(d) for d in ideal.LOSS_DAYS], list(ideal.LOSS_HOURS),
+                                       law='eq16', receiver_fixed=fixed_rcv)
+        low = round(max(0.0, min(r.loss_total for r in rows)), 2)
+        high = round(min(100.0, max(r.loss_total for r in rows)), 2)
+        assert ((low, high) == table[-1][1:]) is fixed_rcv, (fixed_rcv, low, high, table[-1])
