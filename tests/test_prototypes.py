@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import subprocess
 
 import numpy as np
@@ -63,6 +64,21 @@ def prototype_day(tmp_path_factory):
     return get
 
 
+def _energy(text: str) -> dict:
+    """The day report's absorbed energy [kWh] (exact ideal, the collector's law, achieved)
+    from the summary `./sslfr sim` prints at the end of its run."""
+    m = re.search(r'absorbed energy ([0-9.]+) kWh achieved vs ([0-9.]+) kWh with ideal angles .*?'
+                  r"the collector's law gives ([0-9.]+) kWh", text)
+    assert m, text[-3000:]
+    achieved, ideal, law = (float(g) for g in m.groups())
+    return {'achieved_kwh': achieved, 'ideal_kwh': ideal, 'law_kwh': law}
+
+
+def _energy_text(e) -> str:
+    return (f"absorbed {e['achieved_kwh']:.2f} kWh: {100 * e['achieved_kwh'] / e['law_kwh']:.1f} % of its law's "
+            f"{e['law_kwh']:.2f} kWh ({100 * e['law_kwh'] / e['ideal_kwh']:.1f} % of the exact ideal)")
+
+
 def _site(day):
     k = np.asarray(day.phase['site_source']) != ''
     return float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k]))
@@ -113,9 +129,13 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
     err = np.abs(measured - setpoint)
     # on its setpoint to the microstep between steps (a status during a 24 s move aside)
     assert np.percentile(err, 90) <= (m.step or 0.0) + 1e-6, math.degrees(np.percentile(err, 90))
+    e = _energy(text)
+    # the collector's own ideal is its stepped law (the 15-minute steps cost ~9 % of the
+    # exact ideal on the bench, docs/measurements.md): the drive loses nothing of it
+    assert e['achieved_kwh'] >= 0.98 * e['law_kwh'] and e['law_kwh'] >= 0.85 * e['ideal_kwh'], e
     print(f'\nseed 003 day: {len(jumps)} steps, every {np.median(gaps):.0f} s; drive rate {math.degrees(rate):.2f} '
           f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - '
-          f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg')
+          f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg; {_energy_text(e)}')
 
 
 def test_seed004_day_every_line_within_the_budget_of_the_exact_solution(prototype_day):
@@ -139,8 +159,12 @@ def test_seed004_day_every_line_within_the_budget_of_the_exact_solution(prototyp
     # 600-fold motion by ~0.6 deg: its accuracy is judged at 30x below
     track = np.degrees(np.abs(measured - setpoint))
     assert np.percentile(track, 95) <= 1.5, np.percentile(track, 95)
+    e = _energy(text)
+    # Table 1's law is within 0.06 deg of the exact lines (within the actuator's range: the
+    # collector's own ideal); at 600x the drive's lag above costs a few %
+    assert e['law_kwh'] >= 0.98 * e['ideal_kwh'] and e['achieved_kwh'] >= 0.95 * e['law_kwh'], e
     print('\nseed 004 day: p95 |law - exact| per line [deg]: ' + ' '.join(f'{v:.3f}' for v in np.percentile(law, 95, axis=0))
-          + f'; |measured - setpoint| at {SPEED:g}x p50 {np.percentile(track, 50):.3f} deg')
+          + f'; |measured - setpoint| at {SPEED:g}x p50 {np.percentile(track, 50):.3f} deg; {_energy_text(e)}')
 
 
 def test_seed004_every_line_within_the_uncertainty_budget_while_tracking(tmp_path):
