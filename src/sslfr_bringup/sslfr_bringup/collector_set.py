@@ -44,6 +44,7 @@ def driver_parameters(mv) -> dict[str, Any]:
     if mv.step is not None:
         p['step_angle'] = float(mv.step)
         p['gear_ratio'] = float(mv.gear_ratio)
+        p['use_sensor'] = mv.feedback != 'steps'   # open loop: the step count is the position
     if mv.deadband is not None:
         p['deadband'] = float(mv.deadband)
     if mv.drive != DriveKind.STEPPER_SWITCHES.value:
@@ -52,7 +53,6 @@ def driver_parameters(mv) -> dict[str, Any]:
         p['home_position'] = float(mv.reference if mv.reference is not None else mv.stow)
         if mv.drive == DriveKind.STEPPER_NO_SWITCHES.value:
             p['auto_home'] = False       # never moves by itself before the operator's reference
-            p['use_sensor'] = mv.feedback != 'steps'   # open loop: the step count is the position
     return p
 
 

@@ -83,9 +83,15 @@ def test_an_invalid_description_stops_the_node_set_before_anything_starts(tmp_pa
 def test_a_fourth_collector_needs_only_a_description(tmp_path):
     cfg = write_fourth_collector(tmp_path)
     ns = nodeset.for_config(nodeset.load(), cfg)
-    assert [n.name for n in ns.nodes if n.parameters.get('axis')] == ['mirrors_driver']
+    assert [n.name for n in ns.nodes if n.parameters.get('axis')] == ['mirrors_driver', 'mobile_structure_driver']
     p = ns.node('mirrors_driver').parameters
     assert p['drive'] == 'stepper_no_switches' and p['upper_limit'] == pytest.approx(math.radians(60.0))
     assert p['step_angle'] == pytest.approx(math.radians(0.05)) and p['auto_home'] is False
+    p = ns.node('mobile_structure_driver').parameters      # seed 000's stepper, open loop (feedback: steps)
+    assert p['drive'] == 'stepper_switches' and p['lower_limit'] == pytest.approx(math.radians(-30.0))
+    assert p['use_sensor'] is False and 'auto_home' not in p
     assert 'gps' not in {n.name for n in ns.nodes}
+    watched = ns.node('safety').parameters['collector.nodes']
+    assert 'mobile_structure_driver' in watched and 'secondary_reflector_driver' not in watched and 'gps' not in watched
+    assert load(ns.collector).longitudinal_law == 'eq16'
     nodeset.checked_params(ns, cfg)

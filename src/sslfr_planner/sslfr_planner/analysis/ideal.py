@@ -171,7 +171,7 @@ def loss_table(desc: Description, latitude_deg: float, longitude_deg: float, ele
     site = AnalysisSite(latitude_deg, longitude_deg, elevation, desc.optics.azimuth)
     errors = np.radians(LOSS_ERRORS_DEG)
     rows = error_table(site, optical_parameters(desc), errors, [date.fromisoformat(d) for d in LOSS_DAYS],
-                       list(LOSS_HOURS), law=desc.longitudinal_law)
+                       list(LOSS_HOURS), law=desc.longitudinal_law, receiver_fixed=desc.receiver_fixed)
     out = []
     for e in errors:
         losses = [r.loss_total for r in rows if abs(r.error - e) < 1e-12]
