@@ -184,6 +184,28 @@ CUT_S = float(os.environ.get('SSLFR_FIELD_CUT_S', '30'))
 N_WHOLE = int(os.environ.get('SSLFR_FIELD_COLLECTORS', '4'))
 
 
+def _daylit_config(tmp_path) -> Path:
+    """Seed 000's site config moved to where the sun is near its noon now: the collectors
+    run on the system clock (``--wall-clock``) and must track whatever the hour of the
+    test (at Almeria the sun sets at 17-20 UTC). Latitude 20 N, the longitude of local
+    solar noon at this UTC hour; the collector description by its absolute path."""
+    import yaml
+
+    from conftest import ROOT
+    src = ROOT / 'src/sslfr_bringup/config/almeria_sslfr.yaml'
+    doc = yaml.safe_load(src.read_text())
+    now = time.gmtime()
+    hours = now.tm_hour + now.tm_min / 60.0
+    lon = (12.0 - hours) * 15.0
+    lon = (lon + 180.0) % 360.0 - 180.0
+    doc['/**']['ros__parameters'].update({'site.latitude_deg': 20.0, 'site.longitude_deg': round(lon, 4)})
+    planner = doc['planner']['ros__parameters']
+    planner['collector.description'] = str((src.parent / planner['collector.description']).resolve())
+    out = tmp_path / 'daylit_site.yaml'
+    out.write_text(yaml.safe_dump(doc))
+    return out
+
+
 @pytest.fixture
 def netw():
     yield from _net([f'c{k + 1}' for k in range(N_WHOLE)])
@@ -209,11 +231,11 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     from conftest import ROOT, NodeProcess
     base = os.getpid() % 1000 * 2 + 20000
     web_port = base + 7
+    config = _daylit_config(tmp_path)
     doc = {'field': {'id': 'netns_field',
                      'station': {'address': netw.station_ip, 'discovery_port': base, 'backup_address': netw.station_ip,
                                  'backup_port': base + 1, 'web_port': web_port},
-                     'collectors': [{'id': cid, 'address': netw.ip[cid],
-                                     'config': str(ROOT / 'src/sslfr_bringup/config/almeria_sslfr.yaml')}
+                     'collectors': [{'id': cid, 'address': netw.ip[cid], 'config': str(config)}
                                     for cid in netw.ns]}}
     fpath = tmp_path / 'field.yaml'
     fpath.write_text(yaml.safe_dump(doc))
@@ -225,7 +247,8 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     try:
         for c in f.collectors:
             procs[c.id] = NodeProcess(['ip', 'netns', 'exec', netw.ns[c.id], str(ROOT / 'sslfr'), 'sim',
-                                       '--wall-clock', '--namespace', c.namespace, '--layout', 'composed',
+                                       '--wall-clock', '--config', str(config), '--namespace', c.namespace,
+                                       '--layout', 'composed',
                                        '--end', end, '--no-report', '--out', str(tmp_path / c.id)],
                                       env, tmp_path / f'{c.id}.out')
         url = f'http://{netw.station_ip}:{web_port}/api/field'
