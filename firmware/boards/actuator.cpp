@@ -28,6 +28,7 @@
 #include <util/atomic.h>
 
 #define PWM_TOP 799u            /* 16 MHz / 800 = 20 kHz */
+#define PWM_START_COUNT ((uint16_t)(ACT_MIN_DUTY * (float)(PWM_TOP + 1u)))   /* the motor does not start at or below */
 #define DIR_BIT _BV(0)          /* PB0 = D8 */
 #define PWM_BIT _BV(1)          /* PB1 = D9 = OC1A */
 #define CONTROL_MS 10u
@@ -88,7 +89,14 @@ static void pwm_set(float duty)
     }
     if (duty > 0) PORTB |= DIR_BIT; else PORTB &= (uint8_t)~DIR_BIT;
     float a = fabsf(duty);
-    OCR1A = (uint16_t)(a * (float)(PWM_TOP + 1) + 0.5f);
+    uint16_t count = (uint16_t)(a * (float)(PWM_TOP + 1) + 0.5f);
+    /* a drive is at least the first count above the start duty: rounded down to the
+     * start duty itself, a slow approach (a speed under half a count: 0.15 mm/s with a
+     * 0.2 m/s actuator) would leave the motor standing while the loop drives, and the
+     * motion watch would latch STALL */
+    if (count <= PWM_START_COUNT) count = PWM_START_COUNT + 1u;
+    if (count > PWM_TOP + 1u) count = PWM_TOP + 1u;
+    OCR1A = count;
     TCCR1A |= _BV(COM1A1);
 }
 
