@@ -258,6 +258,10 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
         return session_nack(req, ans, ERR_OUT_OF_RANGE);
     if (!act.has_target || act.duty == 0.0f)
         watch_reset();
+    else if (target != act.target)
+        act.since = millis();   /* a new target is a new move: its time-out starts again
+                                   (the stall window keeps its blocks: a tracking loop
+                                   gets a new target every control period) */
     act.target = target;
     act.speed = m.speed * ACT_STEP_RAD;
     act.has_target = 1;
