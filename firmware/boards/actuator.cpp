@@ -41,6 +41,7 @@ static volatile uint16_t g_adc_n;
 
 /* the board's state (read by the harness by symbol: `act`, actuator_state.h) */
 volatile act_state_t act __attribute__((used));
+static volatile uint8_t g_retarget;   /* MOVE_TO gave a new target while driving */
 static float act_blocks[NBLOCKS];   /* the motion watch's 100 ms block means */
 
 ISR(ADC_vect)
@@ -127,6 +128,10 @@ static uint8_t watch_update(uint32_t now, uint8_t driving, float angle)
         act.watching = 1;
         act.since = now;
         act.block_start = now;
+    }
+    if (g_retarget) {           /* at the loop's own `now`: a time read later would be ahead of it */
+        g_retarget = 0;
+        act.since = now;
     }
     if ((uint32_t)(now - act.since) > ACT_TIMEOUT_MS)
         return 1;
@@ -259,7 +264,7 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
     if (!act.has_target || act.duty == 0.0f)
         watch_reset();
     else if (target != act.target)
-        act.since = millis();   /* a new target is a new move: its time-out starts again
+        g_retarget = 1;         /* a new target is a new move: its time-out starts again
                                    (the stall window keeps its blocks: a tracking loop
                                    gets a new target every control period) */
     act.target = target;
