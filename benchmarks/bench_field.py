@@ -11,23 +11,26 @@ slope between the smallest and the largest N.
 
 ``discovery`` part (root: network namespaces): ``--ns-collectors`` (default 2) whole
 simulated collectors (``sslfr sim --wall-clock --namespace /cK --layout composed``), each
-in its own network namespace on a veth pair joined by a bridge, once as discovery clients
-of the station's two Fast DDS discovery servers (the station runs only the servers: no
-ROS subscriber of the collectors' topics) and once with Fast DDS's default simple
-discovery (multicast on the bridge's subnet, no station). A packet counter (an
-``AF_PACKET`` socket on each collector's host-side veth) counts the UDP bytes in both
-directions over ``--window`` seconds once every collector is up, split by RTPS port:
-metatraffic (discovery: SPDP/EDP, the multicast port, the servers' ports) and user
-traffic (the topics; with nobody subscribing across, only ``ros_discovery_info`` and
-the like). It also times a new participant (a heartbeat publisher started in a
-collector's namespace) until a super client at the station hears it.
+in its own network namespace on a link shaped like Wi-Fi as in the tests
+(tests/fieldnet.py: 20 ms +- 5 ms, 1 % loss each way; ``tc netem`` where the kernel has
+it, else the userspace link emulator tests/linkemu.py; ``--shaping`` chooses), once as
+discovery clients of the station's two Fast DDS discovery servers (the station runs only
+the servers: no ROS subscriber of the collectors' topics) and once with Fast DDS's
+default simple discovery (multicast on the field's subnet, no station). A packet counter
+(an ``AF_PACKET`` socket on each collector's link: the bridge end of its veth, or its
+TAP device in its namespace) counts the UDP bytes in both directions over ``--window``
+seconds once every collector is up, split by RTPS port: metatraffic (discovery:
+SPDP/EDP, the multicast port, the servers' ports) and user traffic (the topics; with
+nobody subscribing across, only ``ros_discovery_info`` and the like). It also times a
+new participant (a heartbeat publisher started in a collector's namespace; three, one
+after the other) until a super client at the station hears it, Python's start-up included.
 
-``tc netem`` is not available on every kernel (not on the one these figures were taken
-on): the links are not shaped. Load averages at start and end are printed: figures taken
-while other jobs load the machine must say so.
+The shaping in force is printed with the figures (and, with the emulator, how late it
+delivered). Load averages at start and end are printed: figures taken while other jobs
+load the machine must say so.
 
     python benchmarks/bench_field.py station [--collectors 1 4] [--window 60]
-    sudo python benchmarks/bench_field.py discovery [--ns-collectors 2] [--window 60]
+    sudo python benchmarks/bench_field.py discovery [--ns-collectors 2] [--window 60] [--shaping none]
     python benchmarks/bench_field.py            # both (discovery only as root)
 """
 from __future__ import annotations
@@ -136,12 +139,11 @@ def bench_station(n: int, window: float, out: Path) -> dict:
 
 # ---------------------------------------------------------------------------------------- discovery
 class Counter(threading.Thread):
-    """UDP bytes (IP length) on one interface, both directions, split by RTPS port."""
+    """UDP bytes (IP length) on one collector's link, both directions, split by RTPS port."""
 
-    def __init__(self, ifname: str, domain: int, server_ports: set[int]):
+    def __init__(self, sock: socket.socket, domain: int, server_ports: set[int]):
         super().__init__(daemon=True)
-        self.s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
-        self.s.bind((ifname, 0))
+        self.s = sock                                      # an AF_PACKET socket on the link (fieldnet.Net)
         self.s.settimeout(0.5)
         self.base = 7400 + 250 * domain
         self.server_ports = server_ports
@@ -177,15 +179,16 @@ class Counter(threading.Thread):
             setattr(self, k, getattr(self, k) + length)
 
 
-def bench_discovery(k: int, window: float, out: Path, mode: str) -> dict:
-    from test_field_netns import TALKER, LISTENER, Net, _heard  # the tests' namespaces and probes
+def bench_discovery(k: int, window: float, out: Path, mode: str, shaping: str, repeats: int = 3) -> dict:
+    from fieldnet import Net                       # the tests' namespaces and shaped links
+    from test_field_netns import LISTENER, TALKER, _heard  # the tests' probes
 
     from sslfr_field import field as field_mod
     from sslfr_field import station as station_mod
     from sslfr_bringup.host import acquire_domain
     domain, _lock = acquire_domain()              # held for the run
     ids = [f'c{i + 1}' for i in range(k)]
-    net = Net(ids)
+    net = Net(ids, mode=shaping)
     net.up()
     procs: list[subprocess.Popen] = []
     counters: dict[str, Counter] = {}
@@ -213,7 +216,7 @@ def bench_discovery(k: int, window: float, out: Path, mode: str) -> dict:
             cenv = {**base, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
             cenv.pop('ROS_DISCOVERY_SERVER', None)
             senv, server_ports = cenv, set()
-        counters.update({cid: Counter(net.host_if[cid], domain, server_ports) for cid in ids})
+        counters.update({cid: Counter(net.packet_socket(cid), domain, server_ports) for cid in ids})
         for c in counters.values():
             c.start()
         for cid in ids:
@@ -222,7 +225,8 @@ def bench_discovery(k: int, window: float, out: Path, mode: str) -> dict:
                   cenv, ns=net.ns[cid], name=cid)
         # the station's probe (a super client with the servers, else a plain participant): hears /new/heartbeat
         probe = out / f'{mode}-probe.log'
-        start([sys.executable, '-c', LISTENER, 'new'], senv, name='probe')
+        news = [f'new{j + 1}' for j in range(repeats)]
+        start([sys.executable, '-c', LISTENER, *news], senv, name='probe')
         # counting starts once every collector's safety supervisor went to OK (its nodes up, axes homed)
         deadline = time.monotonic() + 240
 
@@ -243,16 +247,20 @@ def bench_discovery(k: int, window: float, out: Path, mode: str) -> dict:
             c.counting = False
         per = {cid: {'meta_Bps': c.meta / window, 'user_Bps': c.user / window, 'other_Bps': c.other / window}
                for cid, c in counters.items()}
-        # a new participant in c1's namespace: until the station's probe hears it
-        t0 = time.monotonic()
-        start([sys.executable, '-c', TALKER, '/new'], cenv, ns=net.ns[ids[0]], name='new')
-        seen = None
-        while time.monotonic() - t0 < 60 and seen is None:
-            if 'new' in _heard(probe):
-                seen = time.monotonic() - t0
-            time.sleep(0.1)
+        # new participants, one after the other in the collectors' namespaces: until the station's probe hears each
+        seen = []
+        for j, name in enumerate(news):
+            t0 = time.monotonic()
+            p = start([sys.executable, '-c', TALKER, f'/{name}'], cenv, ns=net.ns[ids[j % k]], name=name)
+            heard = None
+            while time.monotonic() - t0 < 60 and heard is None:
+                if name in _heard(probe):
+                    heard = time.monotonic() - t0
+                time.sleep(0.1)
+            seen.append(heard)
+            _stop(p, 10)
         return {'mode': mode, 'collectors': k, 'per_collector': per, 'new_participant_s': seen,
-                'load': f'{load0} -> {_load()}', 'netem': 'tc netem unavailable: links not shaped'}
+                'load': f'{load0} -> {_load()}', 'links': net.describe, 'emulator': net.stats()}
     finally:
         for c in counters.values():
             c.done = True
@@ -268,6 +276,9 @@ def main() -> int:
     ap.add_argument('--collectors', type=int, nargs='+', default=[1, 4])
     ap.add_argument('--ns-collectors', type=int, default=2)
     ap.add_argument('--window', type=float, default=60.0)
+    ap.add_argument('--shaping', choices=('auto', 'netem', 'emulator', 'none'), default=None,
+                    help='discovery: the links (tests/fieldnet.py; default SSLFR_LINK_SHAPING, else auto: '
+                         'netem where the kernel has it, else the userspace emulator)')
     ap.add_argument('--json', default=None)
     args = ap.parse_args()
     out = Path(tempfile.mkdtemp(prefix='bench-field-'))
@@ -293,15 +304,21 @@ def main() -> int:
             return 1
     elif args.part in ('discovery', 'all'):
         for mode in ('server', 'simple'):
-            r = bench_discovery(args.ns_collectors, args.window, out, mode)
+            r = bench_discovery(args.ns_collectors, args.window, out, mode, args.shaping)
             results.append(r)
             per = r['per_collector']
             meta = sum(v['meta_Bps'] for v in per.values()) / len(per)
             user = sum(v['user_Bps'] for v in per.values()) / len(per)
-            new = f'{r["new_participant_s"]:.1f} s' if r['new_participant_s'] is not None else 'not within 60 s'
+            new = ', '.join(f'{x:.1f} s' if x is not None else 'not within 60 s' for x in r['new_participant_s'])
             print(f'{mode:6s} discovery, {r["collectors"]} collectors: per collector {meta / 1000:.2f} kB/s discovery '
-                  f'(metatraffic), {user / 1000:.2f} kB/s user traffic; a new participant heard at the station in '
-                  f'{new} (load {r["load"]}; {r["netem"]})')
+                  f'(metatraffic), {user / 1000:.2f} kB/s user traffic; new participants heard at the station in '
+                  f'{new} (load {r["load"]}; links: {r["links"]})')
+            if r['emulator']:
+                late = r['emulator']['late']
+                print(f'    link emulator: deliveries late by {late["mean_s"] * 1e6:.0f} us on average, at most '
+                      f'{late["max_s"] * 1e3:.1f} ms; frames lost ' + ', '.join(
+                          f'{p} {v["lost"]} of {v["rx_frames"] + v["tx_frames"]}'
+                          for p, v in r['emulator']['ports'].items() if p != 'station'))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     print(f'load average at end: {_load()}')

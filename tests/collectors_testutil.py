@@ -5,16 +5,25 @@ import yaml
 
 
 def write_fourth_collector(tmp_path):
-    """A collector no seed describes (thirteen 0.2 m lines with a central one, one
-    stepper without switches, seed 000's half-angle law, at Barcelona): a description
+    """A two-movement collector no seed describes, at Barcelona: thirteen 0.2 m lines with
+    a central one on one stepper without switches (seed 000's half-angle law, eq. 13) and
+    a mobile structure tilting the rows on seed 000's stepper (open loop) with its home switch under
+    seed 000 eq. 16 (beta_M = theta_z / 2: the reflected rays vertical in the longitudinal
+    plane at solar noon, seed 001 eq. 3) below a fixed horizontal receiver. A description
     and a site config, nothing else."""
     col = {
         'name': 'fourth_rooftop', 'source': 'test: a collector from its description only',
-        'movements': {'mirrors': {
-            'drive': 'stepper_no_switches', 'feedback': 'steps', 'law': 'half_transversal',
-            'range_deg': [-50.0, 60.0], 'sleep_deg': 0.0, 'stow_deg': 60.0, 'reference_deg': 0.0,
-            'step_deg': 0.05, 'gear_ratio': 1.0}},
+        'movements': {
+            'mirrors': {
+                'drive': 'stepper_no_switches', 'feedback': 'steps', 'law': 'half_transversal',
+                'range_deg': [-50.0, 60.0], 'sleep_deg': 0.0, 'stow_deg': 60.0, 'reference_deg': 0.0,
+                'step_deg': 0.05, 'gear_ratio': 1.0},
+            'mobile_structure': {
+                'drive': 'stepper_switches', 'feedback': 'steps', 'law': 'eq16',
+                'range_deg': [-30.0, 60.0], 'sleep_deg': 0.0, 'stow_deg': 0.0, 'step_deg': 0.006,
+                'gear_ratio': 1.0, 'switches_deg': {'longitudinal_1': 0.0}}},
         'boards': [{'name': 'mirrors', 'kind': 'axis', 'movement': 'mirrors'},
+                   {'name': 'mobile_structure', 'kind': 'axis', 'movement': 'mobile_structure'},
                    {'name': 'absorber', 'kind': 'absorber'}, {'name': 'irradiance', 'kind': 'irradiance'}],
         'sensors': [{'name': 'inlet', 'kind': 'thermocouple', 'board': 'absorber'},
                     {'name': 'outlet', 'kind': 'thermocouple', 'board': 'absorber'},

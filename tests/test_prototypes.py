@@ -1,13 +1,14 @@
 """Each prototype runs on its own simulated hardware (issue 34 items 6 and 7): a whole
 simulated day of seed 003 at Bucaramanga and of seed 004 at Florianopolis through
 `./sslfr sim` (one run per prototype, shared by its tests), recorded and reported; and
-a fourth collector written as a description in a temporary directory runs a short
-window. Seed 000's day is tests/test_system_tracking.py.
+a fourth collector with two movements, written as a description in a temporary
+directory, runs a short window. Seed 000's day is tests/test_system_tracking.py.
 """
 from __future__ import annotations
 
 import math
 import os
+import re
 import subprocess
 
 import numpy as np
@@ -19,6 +20,8 @@ from conftest import ROOT
 from sslfr_bringup import nodeset
 from sslfr_planner import prototype
 from sslfr_planner.description import load
+from sslfr_recording import report
+from sslfr_recording.report_energy import energy_estimate
 from sslfr_recording.day import read_day, reference
 from sslfr_sim.sim_cli import day_epoch
 
@@ -59,6 +62,21 @@ def prototype_day(tmp_path_factory):
             days[name] = (text, day, load(ns.collector), path)
         return days[name]
     return get
+
+
+def _energy(text: str) -> dict:
+    """The day report's absorbed energy [kWh] (exact ideal, the collector's law, achieved)
+    from the summary `./sslfr sim` prints at the end of its run."""
+    m = re.search(r'absorbed energy ([0-9.]+) kWh achieved vs ([0-9.]+) kWh with ideal angles .*?'
+                  r"the collector's law gives ([0-9.]+) kWh", text)
+    assert m, text[-3000:]
+    achieved, ideal, law = (float(g) for g in m.groups())
+    return {'achieved_kwh': achieved, 'ideal_kwh': ideal, 'law_kwh': law}
+
+
+def _energy_text(e) -> str:
+    return (f"absorbed {e['achieved_kwh']:.2f} kWh: {100 * e['achieved_kwh'] / e['law_kwh']:.1f} % of its law's "
+            f"{e['law_kwh']:.2f} kWh ({100 * e['law_kwh'] / e['ideal_kwh']:.1f} % of the exact ideal)")
 
 
 def _site(day):
@@ -111,9 +129,13 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
     err = np.abs(measured - setpoint)
     # on its setpoint to the microstep between steps (a status during a 24 s move aside)
     assert np.percentile(err, 90) <= (m.step or 0.0) + 1e-6, math.degrees(np.percentile(err, 90))
+    e = _energy(text)
+    # the collector's own ideal is its stepped law (the 15-minute steps cost ~9 % of the
+    # exact ideal on the bench, docs/measurements.md): the drive loses nothing of it
+    assert e['achieved_kwh'] >= 0.98 * e['law_kwh'] and e['law_kwh'] >= 0.85 * e['ideal_kwh'], e
     print(f'\nseed 003 day: {len(jumps)} steps, every {np.median(gaps):.0f} s; drive rate {math.degrees(rate):.2f} '
           f'deg/h; largest line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - '
-          f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg')
+          f'setpoint| p90 {math.degrees(np.percentile(err, 90)):.4f} deg; {_energy_text(e)}')
 
 
 def test_seed004_day_every_line_within_the_budget_of_the_exact_solution(prototype_day):
@@ -137,8 +159,12 @@ def test_seed004_day_every_line_within_the_budget_of_the_exact_solution(prototyp
     # 600-fold motion by ~0.6 deg: its accuracy is judged at 30x below
     track = np.degrees(np.abs(measured - setpoint))
     assert np.percentile(track, 95) <= 1.5, np.percentile(track, 95)
+    e = _energy(text)
+    # Table 1's law is within 0.06 deg of the exact lines (within the actuator's range: the
+    # collector's own ideal); at 600x the drive's lag above costs a few %
+    assert e['law_kwh'] >= 0.98 * e['ideal_kwh'] and e['achieved_kwh'] >= 0.95 * e['law_kwh'], e
     print('\nseed 004 day: p95 |law - exact| per line [deg]: ' + ' '.join(f'{v:.3f}' for v in np.percentile(law, 95, axis=0))
-          + f'; |measured - setpoint| at {SPEED:g}x p50 {np.percentile(track, 50):.3f} deg')
+          + f'; |measured - setpoint| at {SPEED:g}x p50 {np.percentile(track, 50):.3f} deg; {_energy_text(e)}')
 
 
 def test_seed004_every_line_within_the_uncertainty_budget_while_tracking(tmp_path):
@@ -163,16 +189,63 @@ def test_seed004_every_line_within_the_uncertainty_budget_while_tracking(tmp_pat
           + ' (budget 0.085-0.12 deg, seed 004 Tables 3-4)')
 
 
-def test_a_fourth_collector_runs_from_its_description_alone(tmp_path):
+def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
+    """A fourth collector (mirrors on a switchless stepper, a mobile structure under seed
+    000 eq. 16, a fixed horizontal receiver; tests/collectors_testutil.py) from its
+    description alone: the node set starts its two drivers, both follow their law to the
+    drive's step, safety does not miss the boards it lacks, the report has both."""
     config = write_fourth_collector(tmp_path)
+    desc = load(nodeset.for_config(nodeset.load(), config).collector)
+    end = DAY0 + 11 * 3600.0 + 600.0
     text, day = run_sim(config, '11:00', '11:10', tmp_path / 'out', speed=30.0, timeout=200.0)
     assert 'simulated operator referenced mirrors' in text, text[-3000:]
-    assert not any(t.startswith('/axes/') and 'mirrors' not in t for t in day.topics), day.topics
-    s, ok = _tracking(day)
-    assert ok.sum() > 20, (ok.sum(), text[-3000:])
+    started = next(line for line in text.splitlines() if 'nodes started at' in line).split(': ', 1)[1].split(', ')
+    assert sorted(n for n in started if n.endswith('_driver')) == ['mirrors_driver', 'mobile_structure_driver']
+    assert 'gps' not in started, started
+    assert {t for t in day.topics if t.startswith('/axes/')} == {'/axes/mirrors/status', '/axes/mobile_structure/status'}
     lat, lon = _site(day)
-    ideal = np.asarray(reference(config, lat, lon, 12.0)(np.asarray(s.t)[ok]).mirrors, dtype=float)
-    err = np.abs(np.asarray(s['measured'])[ok] - ideal)
-    # one 0.05 deg step, plus the ideal's travel within one status age at 30x
-    assert np.percentile(err, 95) <= math.radians(0.05) + math.radians(15.0 / 3600 / 2) * 30 * 0.5, \
-        math.degrees(np.percentile(err, 95))
+    ref = reference(config, lat, lon, 12.0)
+    settled = 0.0                                  # when both axes follow their law
+    for axis in ('mirrors', 'mobile_structure'):
+        s = day.axes[axis]
+        phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
+        k = np.searchsorted(phase_t, s.t, side='right') - 1
+        ok = ((k >= 0) & (phase[np.clip(k, 0, None)] == TRACKING) & (np.asarray(s.t) < end - 2.0)
+              & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting')))
+        assert ok.sum() > 60, (axis, ok.sum(), text[-3000:])
+        t = np.asarray(s.t)[ok]
+        settled = max(settled, t[0])
+        table = ref(t)
+        law = np.asarray(getattr(table, axis), dtype=float)
+        if axis == 'mobile_structure':    # seed 000 eq. 16: the rows at theta_z / 2, facing the equator
+            assert np.allclose(law, np.asarray(table.zenith) / 2.0, atol=1e-9)
+            assert np.all(np.asarray(table.secondary_reflector) == 0.0)   # the receiver is fixed, horizontal
+        step = desc.movement(axis).step
+        measured, setpoint = np.asarray(s['measured'])[ok], np.asarray(s['setpoint'])[ok]
+        # the setpoint is the law's (its travel within one status' age, ~0.5 s wall at 30x)
+        travel = np.max(np.abs(np.asarray(getattr(ref(t + 15.0), axis), dtype=float) - law))
+        assert np.percentile(np.abs(setpoint - law), 95) <= travel + 1e-6, (axis, np.degrees(travel))
+        # the drive holds it to its step (open-loop steppers: the position is the step count)
+        err = np.abs(measured - setpoint)
+        assert np.percentile(err, 95) <= step + 1e-9, (axis, np.degrees(np.percentile(err, 95)), np.degrees(step))
+    # safety watches what the collector has: no reason names a board it lacks, and
+    # nothing stops the run between the start-up and the end of the window
+    st = np.asarray(day.safety.t)
+    reasons = [r for rs in day.safety['reasons'] for r in rs]
+    assert not any('secondary_reflector' in r for r in reasons), reasons
+    first_ok = st[np.asarray(day.safety['level']) == 0][0]
+    during = (st > first_ok) & (st < end - 2.0)       # (a start-up state may share its stamp)
+    assert np.all(np.asarray(day.safety['level'])[during] == 0), \
+        [r for r, d in zip(day.safety['reasons'], during) if d and r]
+    rep = report.analyse(day, str(config))
+    assert rep.collector == 'fourth_rooftop' and rep.joints == ('mirrors', 'mobile_structure'), rep.joints
+    for axis in rep.joints:
+        assert rep.tracking[axis]['ideal'].samples > 60 and rep.tracking[axis]['ideal'].p95 < math.radians(0.1)
+    assert rep.energy['ideal_kwh'] > 0.05 and rep.energy['achieved_kwh'] > 0.0, rep.energy
+    # once both follow (the start-up slew aside), the absorbed energy on the described
+    # optics with the measured angles is the ideal's (the drives' errors are ~0.02 deg)
+    bt, beam = np.asarray(day.beam.t), np.asarray(day.beam['g'], dtype=float)
+    k = (bt >= settled) & (bt < end - 2.0)
+    e = energy_estimate(rep.site, bt[k], beam[k], {a: (day.axes[a].t, day.axes[a].cols) for a in rep.joints},
+                        str(config))
+    assert e['ideal_kwh'] > 0.05 and e['achieved_kwh'] >= 0.99 * e['ideal_kwh'], e

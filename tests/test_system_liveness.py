@@ -195,11 +195,15 @@ def test_hung_process_is_killed_within_the_bound_and_restarted(run):
     hangs = _hangs(run)
     assert {h[0] for h in hangs} == {n for _, _, names in run['plan'] for n in names}, 'every planned process hung'
     for name, _nodes, _t, _k, _b, took, detail in hangs:
-        # silent for the bound since its last beat (at most 1 s before the SIGSTOP), found
-        # within a supervision pass; 1.5 s for a loaded machine
-        assert bound - 1.0 <= took <= bound + 1.5, (name, took)
-        assert detail.startswith('no executor beat for ') and f'(bound {bound:g} s)' in detail, detail
-        assert run['summary']['restarts'].get(name) == 1, (name, run['summary']['restarts'])
+        # killed once silent for the bound since its last beat, found within a supervision
+        # pass (1.5 s for a loaded machine); the last beat came before the SIGSTOP (how long
+        # before depends on the load: no lower bound on `took` but the hang itself)
+        assert detail.startswith('no executor beat for ') and detail.endswith(f'(bound {bound:g} s)'), detail
+        silence = float(detail.split()[4])
+        assert bound <= silence <= bound + 1.5, (name, silence)
+        assert 0.0 < took <= silence + 0.5, (name, took, silence)
+        assert run['summary']['restarts'].get(name) == 1, (name, run['summary']['restarts'],
+                                                            [ln for ln in run['text'].splitlines() if name in ln][-20:])
     assert 'no executor beat for' in run['text'] and 'killing it (SIGKILL) to restart it' in run['text']
     # no process was killed that was not hung (a loaded machine must not starve a
     # spin loop for the bound)

@@ -97,6 +97,11 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros
         err = scenario.tracking_error(s.t, s['measured'], lambda t, a=axis: getattr(ref(t), a), lag=lag)
         report[axis] = (float(np.max(err)), float(np.sqrt(np.mean(err ** 2))))
         assert np.max(err) <= TOL, (axis, np.degrees(report[axis]), 'deg (max, rms)')
+    # each board link's lines are under the node it works for, in both layouts (a composed
+    # process holds six board nodes: sslfr_common.log_route)
+    linked = {name for name, msg in zip(day.logs['name'], day.logs['msg']) if ': link ' in msg}
+    assert linked >= {f'{a}_driver' for a in JOINTS} | {'absorber_board', 'irradiance', 'gps'}, \
+        sorted(zip(day.logs['name'], day.logs['msg']))[:40]
     print('tracking error vs ephemeris (max, rms) [deg]:',
           {a: tuple(round(math.degrees(v), 5) for v in r) for a, r in report.items()})
 

@@ -26,7 +26,8 @@ the same description and applies it the same way:
   and ``WATCHDOG_USEC`` (the node set's ``watchdog_timeout``) in its environment and
   beats ``WATCHDOG=1`` from its spin loop; a process whose beats stop for longer is
   SIGKILLed by the watchdog and respawned by launch (``respawn=True``), the cause
-  printed on the launch's output. A node process is respawned no sooner than its DDS
+  printed on the launch's output (the run directory is removed when the launch stops).
+  A node process is respawned no sooner than its DDS
   participant lease + 1 s after its death (``respawn_delay``; 4 s with the node set's
   Fast DDS profile, config/fastdds_profile.xml; :mod:`sslfr_bringup.dds_profile` says why).
 
@@ -89,7 +90,8 @@ def _respawn_delay(env: dict[str, str]) -> float:
 
 def generate_launch_description():
     from launch import LaunchDescription
-    from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler, SetEnvironmentVariable
+    from launch.event_handlers import OnShutdown
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import LifecycleNode, Node
 
@@ -100,9 +102,13 @@ def generate_launch_description():
             return LaunchConfiguration(name).perform(context)
         namespace = arg('namespace')
         use_sim_time = arg('use_sim_time').lower() in ('true', '1', 'yes')
+        import shutil
         write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
         env = _environment(arg('domain_id'), arg('discovery_range'))
         actions = [SetEnvironmentVariable(k, v) for k, v in env.items()]
+        # the run directory goes with the launch (its files are read at a process's start)
+        actions.append(RegisterEventHandler(OnShutdown(
+            on_shutdown=lambda event, context: shutil.rmtree(write_dir, ignore_errors=True))))
         respawn_delay = _respawn_delay(env)
         watchdog_args, notify_env = _liveness(write_dir)
         actions.append(Node(package='sslfr_bringup', executable='liveness_watchdog', arguments=watchdog_args,

@@ -9,7 +9,9 @@ processes, for the launch file, ``./sslfr up``, ``./sslfr sim`` and the systemd 
 * one axis driver per movement (node parameter ``axis``), given the movement's facts
   as role parameters (:func:`driver_parameters`: drive kind, soft limits = the
   mechanical range, stow position, motor step or deadband); a site config that sets
-  one of them otherwise is refused (:func:`contradictions`);
+  one of them otherwise is refused (:func:`contradictions`); the mirrors' driver also
+  gets the collector's loss table at its site (``accuracy.loss_table``, the estimate
+  its accuracy alarms quote: :func:`loss_table_param`);
 * a board node (``gps``, ``absorber_board``, ``irradiance``) only when the collector
   lists its board;
 * each axis board's simulator chosen by the movement's drive kind (``drive_sims`` of
@@ -23,7 +25,7 @@ import dataclasses
 import math
 from typing import Any
 
-from sslfr_common.contract import DriveKind, driver_node
+from sslfr_common.contract import MIRRORS, DriveKind, driver_node
 
 #: the safety parameter that lists the watchable nodes of the set (sslfr_safety.params)
 SAFETY_NODES_PARAM = 'collector.nodes'
@@ -42,6 +44,7 @@ def driver_parameters(mv) -> dict[str, Any]:
     if mv.step is not None:
         p['step_angle'] = float(mv.step)
         p['gear_ratio'] = float(mv.gear_ratio)
+        p['use_sensor'] = mv.feedback != 'steps'   # open loop: the step count is the position
     if mv.deadband is not None:
         p['deadband'] = float(mv.deadband)
     if mv.drive != DriveKind.STEPPER_SWITCHES.value:
@@ -50,8 +53,25 @@ def driver_parameters(mv) -> dict[str, Any]:
         p['home_position'] = float(mv.reference if mv.reference is not None else mv.stow)
         if mv.drive == DriveKind.STEPPER_NO_SWITCHES.value:
             p['auto_home'] = False       # never moves by itself before the operator's reference
-            p['use_sensor'] = mv.feedback != 'steps'   # open loop: the step count is the position
     return p
+
+
+def loss_table_param(desc, planner_params: dict) -> list[float]:
+    """The mirrors' ``accuracy.loss_table`` (flat) of collector ``desc`` at the site of
+    ``planner_params`` (the planner's ``site.*`` values; its defaults where absent):
+    seed 000 section 5.2 on the collector's optics
+    (:func:`sslfr_planner.analysis.ideal.loss_table`, ~0.05 s). A site the planner's
+    parameter table refuses gives no table (the config check names the key)."""
+    from sslfr_common.tracking_loss import to_flat
+    from sslfr_planner.analysis.ideal import loss_table
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+
+    site = PLANNER_PARAMS.defaults()
+    site.update(PLANNER_PARAMS.coerce({k: v for k, v in planner_params.items() if k in site}))
+    if PLANNER_PARAMS.validate(site):
+        return [0.0, 0.0, 0.0]
+    table = loss_table(desc, site['site.latitude_deg'], site['site.longitude_deg'], site['site.elevation'])
+    return to_flat(table) if table else [0.0, 0.0, 0.0]
 
 
 def board_node_present(node, desc) -> bool:
@@ -59,10 +79,11 @@ def board_node_present(node, desc) -> bool:
     return node.board is None or node.board in desc.boards
 
 
-def for_collector(ns, desc):
+def for_collector(ns, desc, planner_params: dict | None = None):
     """``ns`` (:class:`sslfr_bringup.nodeset.NodeSet`) narrowed to collector ``desc``
-    (see the module doc). ValueError when the node set cannot serve it (a movement
-    without a driver node, a drive kind without a simulator)."""
+    (see the module doc) at the site of ``planner_params`` (the planner's parameters of
+    the site config). ValueError when the node set cannot serve it (a movement without a
+    driver node, a drive kind without a simulator)."""
     drivers = {n.parameters.get('axis'): n for n in ns.nodes if n.parameters.get('axis')}
     all_drivers = {n.parameters.get('axis') for n in (ns.all_nodes or ns.nodes) if n.parameters.get('axis')}
     missing = [m for m in desc.movements if m not in all_drivers]
@@ -76,7 +97,10 @@ def for_collector(ns, desc):
             if axis not in desc.movements:
                 continue
             mv = desc.movements[axis]
-            n = dataclasses.replace(n, parameters={**n.parameters, **driver_parameters(mv)})
+            role = driver_parameters(mv)
+            if axis == MIRRORS:
+                role['accuracy.loss_table'] = loss_table_param(desc, planner_params or {})
+            n = dataclasses.replace(n, parameters={**n.parameters, **role})
         elif not board_node_present(n, desc):
             continue
         nodes.append(n)

@@ -343,11 +343,12 @@ def for_config(ns: NodeSet, config: str | os.PathLike, namespace: str | None = N
 
     from sslfr_bringup import collector_set
     nsp = ns.namespace if namespace is None else namespace
-    name = node_params(for_namespace(read_params(config), nsp), 'planner', nsp).get(DESCRIPTION_KEY)
+    planner = node_params(for_namespace(read_params(config), nsp), 'planner', nsp)
+    name = planner.get(DESCRIPTION_KEY)
     path = desc_mod.resolve(name, Path(config).parent) if isinstance(name, str) and name \
         else desc_mod.resolve(ns.collector, config_dir())
     try:
-        return collector_set.for_collector(ns, desc_mod.load(path))
+        return collector_set.for_collector(ns, desc_mod.load(path), planner)
     except desc_mod.DescriptionError as exc:
         raise NodeSetError(f'{config}: {DESCRIPTION_KEY} {str(path)!r}:\n  ' + '\n  '.join(exc.problems)) from None
     except ValueError as exc:

@@ -9,7 +9,8 @@ to its datagrams. A process is watched from its first message (launch starts the
 processes, so their pids are learnt, not given); when its beats stop for longer than
 ``--timeout`` it is killed with SIGKILL (a stopped or deadlocked process does not act
 on SIGTERM), which launch sees as an exit and respawns. The kill is printed with the
-cause and the node names the process reported (``STATUS=``). ``STOPPING=1`` (an
+cause and the node names the process reported (``STATUS=``, else those on its
+command line: a respawned watchdog hears no ``STATUS=``). ``STOPPING=1`` (an
 orderly stop) ends the watch of a process; so does its exit.
 
 Pure core: :class:`sslfr_bringup.liveness.LivenessWatch`. Plain Python, no rclpy.
@@ -28,6 +29,21 @@ from sslfr_common.sdnotify import NotifyListener
 from sslfr_bringup.liveness import DEFAULT_TIMEOUT, STARTUP_RANGE, TIMEOUT_RANGE, LivenessWatch
 
 PROG = 'sslfr watchdog'
+
+
+def node_names(pid: int) -> str:
+    """The node names on the process's command line (its ``-r __node:=NAME`` remaps:
+    one for a single node, several for a composed process), comma-separated; '' when
+    none or the process is gone. Used when the process's ``STATUS=`` (sent once, at
+    its start) was not heard: a watchdog respawned by launch learns the running
+    processes from their next beat, which carries no names."""
+    try:
+        with open(f'/proc/{pid}/cmdline', 'rb') as f:
+            argv = f.read().decode(errors='replace').split('\0')
+    except OSError:
+        return ''
+    names = [a.partition('__node:=')[2] for a in argv if '__node:=' in a]
+    return ', '.join(dict.fromkeys(n for n in names if n))
 
 
 def start_time(pid: int) -> int | None:
@@ -50,6 +66,7 @@ class PidWatch:
         self._kill = kill
         self._now = now
         self._start: dict[int, int] = {}
+        self._names: dict[int, str] = {}                   # from the command line (node_names)
         self.killed: list[tuple[int, str, str]] = []       # (pid, names, cause)
 
     def say(self, text: str) -> None:
@@ -65,10 +82,14 @@ class PidWatch:
                     continue
                 self.watch.watch(n.pid, now)
                 self._start[n.pid] = started
-                self.say(f'watching pid {n.pid} ({n.fields.get("STATUS", "no status")})')
+                self._names[n.pid] = node_names(n.pid)
+                status = n.fields.get('STATUS') or (f'nodes {self._names[n.pid]}' if self._names[n.pid]
+                                                    else 'no status')
+                self.say(f'watching pid {n.pid} ({status})')
             self.watch.note(n.pid, n.fields, now)
             if not self.watch.watching(n.pid):
                 self._start.pop(n.pid, None)                   # STOPPING=1
+                self._names.pop(n.pid, None)
 
     def check(self) -> None:
         """Forget processes that are gone; kill the overdue ones."""
@@ -76,11 +97,13 @@ class PidWatch:
             if start_time(pid) != self._start[pid]:          # exited (None) or pid reused
                 self.watch.forget(pid)
                 del self._start[pid]
+                self._names.pop(pid, None)
         for late in self.watch.overdue(self._now()):
             pid = late.key
-            names = late.status.removeprefix('executor turning: ') or 'unknown nodes'
+            names = late.status.removeprefix('executor turning: ') or self._names.get(pid) or 'unknown nodes'
             self.watch.forget(pid)
             self._start.pop(pid, None)
+            self._names.pop(pid, None)
             try:
                 self._kill(pid, signal.SIGKILL)
             except ProcessLookupError:

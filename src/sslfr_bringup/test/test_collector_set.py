@@ -8,6 +8,8 @@ import yaml
 from collectors_testutil import write_fourth_collector
 from sslfr_bringup import nodeset
 from sslfr_bringup.collector_set import driver_parameters
+from sslfr_common.tracking_loss import from_flat
+from sslfr_planner.analysis.ideal import loss_table
 from sslfr_planner.description import load
 from sslfr_safety.params import TABLE as SAFETY_TABLE, config_from
 
@@ -45,6 +47,12 @@ def test_each_shipped_collector_gets_the_nodes_and_boards_it_describes(config):
     assert cfg.joints == tuple(joints)
     assert set(cfg.watchdogs) == set(present)
     nodeset.checked_params(ns, path)         # the shipped config agrees with its description
+    # the mirrors' driver quotes the collector's own loss table at the config's site
+    planner = nodeset.node_params(nodeset.read_params(path), 'planner')
+    table = from_flat(ns.node('mirrors_driver').parameters['accuracy.loss_table'])
+    assert table and table == loss_table(desc, planner['site.latitude_deg'], planner['site.longitude_deg'],
+                                         planner.get('site.elevation', 0.0))
+    assert all('accuracy.loss_table' not in n.parameters for n in drivers[1:])
 
 
 def test_a_site_value_contradicting_the_description_is_refused(tmp_path):
@@ -75,9 +83,15 @@ def test_an_invalid_description_stops_the_node_set_before_anything_starts(tmp_pa
 def test_a_fourth_collector_needs_only_a_description(tmp_path):
     cfg = write_fourth_collector(tmp_path)
     ns = nodeset.for_config(nodeset.load(), cfg)
-    assert [n.name for n in ns.nodes if n.parameters.get('axis')] == ['mirrors_driver']
+    assert [n.name for n in ns.nodes if n.parameters.get('axis')] == ['mirrors_driver', 'mobile_structure_driver']
     p = ns.node('mirrors_driver').parameters
     assert p['drive'] == 'stepper_no_switches' and p['upper_limit'] == pytest.approx(math.radians(60.0))
     assert p['step_angle'] == pytest.approx(math.radians(0.05)) and p['auto_home'] is False
+    p = ns.node('mobile_structure_driver').parameters      # seed 000's stepper, open loop (feedback: steps)
+    assert p['drive'] == 'stepper_switches' and p['lower_limit'] == pytest.approx(math.radians(-30.0))
+    assert p['use_sensor'] is False and 'auto_home' not in p
     assert 'gps' not in {n.name for n in ns.nodes}
+    watched = ns.node('safety').parameters['collector.nodes']
+    assert 'mobile_structure_driver' in watched and 'secondary_reflector_driver' not in watched and 'gps' not in watched
+    assert load(ns.collector).longitudinal_law == 'eq16'
     nodeset.checked_params(ns, cfg)

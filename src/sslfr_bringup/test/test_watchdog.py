@@ -18,7 +18,7 @@ from pathlib import Path
 from sslfr_common.sdnotify import Notification
 
 from sslfr_bringup import nodeset
-from sslfr_bringup.watchdog import PidWatch, start_time
+from sslfr_bringup.watchdog import PidWatch, node_names, start_time
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -60,6 +60,33 @@ def test_pid_watch_learns_kills_and_forgets():
     clock[0] = 20.0
     w.check()
     assert len(killed) == 1
+
+
+def test_process_heard_without_status_is_named_from_its_command_line():
+    """A watchdog respawned by launch hears the running processes' beats but never
+    their STATUS= (sent once at their start): the kill names the nodes of the
+    process's ``__node:=`` remaps (one, or several for a composed process)."""
+    child = subprocess.Popen([sys.executable, '-c', 'import time; print("up", flush=True); time.sleep(60)',
+                              '--ros-args', '-r', '__node:=gps', '--params-file', '/x.yaml', '-r', '__node:=irradiance'],
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline() == 'up\n'      # its own command line from here (exec done)
+        assert node_names(child.pid) == 'gps, irradiance'
+        clock = [0.0]
+        killed = []
+        out = io.StringIO()
+        w = PidWatch(2.0, out=out, kill=lambda pid, sig: killed.append(pid), now=lambda: clock[0])
+        w.take([Notification(child.pid, {'WATCHDOG': '1'})])
+        assert f'watching pid {child.pid} (nodes gps, irradiance)' in out.getvalue()
+        clock[0] = 2.5
+        w.check()
+        assert killed == [child.pid]
+        assert f'gps, irradiance (pid {child.pid}): no executor beat for 2.5 s' in out.getvalue()
+    finally:
+        child.kill()
+        child.wait(10)
+        child.stdout.close()
+    assert node_names(child.pid) == '' and node_names(os.getpid()) == ''
 
 
 def test_gone_process_is_forgotten_not_killed():
@@ -127,6 +154,7 @@ def test_launch_file_gives_nodes_and_watchdog_one_socket_and_bound(tmp_path):
     text = path.read_text()
     assert text.count('additional_env=notify_env') == 2, 'every node entry (single and composed)'
     assert "executable='liveness_watchdog'" in text
+    assert 'OnShutdown(' in text and 'rmtree(write_dir' in text, 'the run directory (socket) goes with the launch'
     cfg = configparser.ConfigParser()
     cfg.read(ROOT / 'src/sslfr_bringup/setup.cfg')
     scripts = cfg['options.entry_points']['console_scripts'].split('\n')

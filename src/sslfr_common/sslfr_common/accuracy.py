@@ -5,8 +5,8 @@ count: ``AxisStatus.measured``) is compared with the setpoint; the RMS of the er
 over the last ``accuracy.window`` seconds of ROS time is judged against two
 thresholds: seed 000's 0.06 deg (WARN: about 0.2 % of the power lost,
 :mod:`sslfr_common.tracking_loss`) and 0.36 deg (ERROR: 2.5-3.4 % lost, growing to
-10-17 % at 0.6 deg). Each alarm quotes the estimated optical loss from the project's
-loss table. A level is left when the filtered error falls below :data:`CLEAR` times
+10-17 % at 0.6 deg). Each alarm quotes the estimated optical loss from the collector's
+loss table (``accuracy.loss_table``, :mod:`sslfr_common.tracking_loss`). A level is left when the filtered error falls below :data:`CLEAR` times
 its threshold (no chatter around a threshold).
 
 "Tracking" (:func:`tracking`) is the planner's phase TRACKING with the driver following
@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 from sslfr_common.contract import Phase
 from sslfr_common.params import ParamSpec
+from sslfr_common import tracking_loss
 from sslfr_common.tracking_loss import loss_text
 
 #: a setpoint moving faster than this is a deliberate move, not sun tracking [rad/s]: the
@@ -57,6 +58,15 @@ def tracking(state: str, phase: int | None) -> bool:
     return state in TRACKING_STATES and phase == Phase.TRACKING
 LEVEL_TEXT = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
+
+def _table_problem(values) -> str | None:
+    """Why a flat ``accuracy.loss_table`` is not a loss table (None: it is one)."""
+    if len(values) % 3:
+        return f'{len(values)} numbers: rows of three expected'
+    problems = tracking_loss.table_problems([values[i:i + 3] for i in range(0, len(values), 3)])
+    return '; '.join(problems) or None
+
+
 #: The driver's parameters of the alarm (sslfr_drivers.axis.params adds them to its table).
 PARAM_SPECS = (
     ParamSpec('accuracy.warn_threshold', math.radians(0.06), 'tracking error (RMS over accuracy.window, '
@@ -67,6 +77,12 @@ PARAM_SPECS = (
               '(~2.5-3.4 % optical loss); must exceed accuracy.warn_threshold', 'rad', 1e-5, 0.5),
     ParamSpec('accuracy.window', 60.0, 'window of the RMS filter [s] (ROS time); 0 = the latest '
               'sample alone', 's', 0.0, 3600.0),
+    ParamSpec('accuracy.loss_table', [0.0, 0.0, 0.0], 'the collector\'s loss table, rows of (mirror tilt '
+              'error [rad], smallest and largest optical loss [%]) flattened, errors from 0 increasing '
+              '(seed 000 section 5.2 on the 3-D ray trace for the collector\'s optics at its site: the node '
+              'set sets it for the mirror movement, sslfr_planner.analysis.ideal.loss_table); one row: the '
+              'loss is not estimated', 'rad, %', 0.0, 100.0,
+              validator=_table_problem),
 )
 
 
@@ -80,15 +96,18 @@ def cross_check(p: dict) -> list[str]:
 
 @dataclass(frozen=True)
 class AccuracyConfig:
-    """Thresholds [rad] and filter window [s, ROS time]."""
+    """Thresholds [rad], filter window [s, ROS time] and the loss table the alarms quote
+    (:data:`sslfr_common.tracking_loss.LossTable`; empty: no estimate)."""
 
     warn: float = math.radians(0.06)
     error: float = math.radians(0.36)
     window: float = 60.0
+    loss_table: tracking_loss.LossTable = ()
 
     @classmethod
     def from_params(cls, p: dict) -> 'AccuracyConfig':
-        return cls(p['accuracy.warn_threshold'], p['accuracy.error_threshold'], p['accuracy.window'])
+        return cls(p['accuracy.warn_threshold'], p['accuracy.error_threshold'], p['accuracy.window'],
+                   tracking_loss.from_flat(p.get('accuracy.loss_table', ())))
 
 
 class AccuracyAlarm:
@@ -210,7 +229,7 @@ class AccuracyAlarm:
                    f'{math.degrees(c.warn):.3f} deg'
         thr = c.error if self.level == ERROR else c.warn
         return (f'{self.axis}: tracking error {deg:.3f} deg RMS over {c.window:g} s > '
-                f'{math.degrees(thr):.3f} deg: {loss_text(self.filtered, self.axis)}')
+                f'{math.degrees(thr):.3f} deg: {loss_text(self.filtered, c.loss_table)}')
 
     def values(self) -> dict:
         """Diagnostics key/values (degrees for people, seconds of ROS time)."""
@@ -218,7 +237,7 @@ class AccuracyAlarm:
         return {'level': LEVEL_TEXT[self.level], 'tracking': self.tracking,
                 'error_rms_deg': f'{math.degrees(self.filtered):.4f}' if self.tracking else 'nan',
                 'peak_deg': f'{math.degrees(self.peak):.4f}',
-                'estimated_loss': loss_text(self.filtered, self.axis) if self.tracking else '',
+                'estimated_loss': loss_text(self.filtered, c.loss_table) if self.tracking else '',
                 'warn_threshold_deg': f'{math.degrees(c.warn):.4f}',
                 'error_threshold_deg': f'{math.degrees(c.error):.4f}', 'window_s': c.window,
                 'time_above_warn_s': f'{self.time_above[WARN]:.1f}',

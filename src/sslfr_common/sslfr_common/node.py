@@ -53,6 +53,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .contract import Qos, Topic
 from .executor import LeanExecutor
+from .log_route import NODE_ATTR
 from .sdnotify import Notifier
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
 
@@ -116,7 +117,9 @@ class SpinStats:
 
 
 class LogBridge(logging.Handler):
-    """Forward Python ``logging`` records of ``loggers`` to ``node``'s rclpy logger.
+    """Forward Python ``logging`` records of ``loggers`` to a node's rclpy logger: the
+    node the record names (:mod:`sslfr_common.log_route`; a composed process's
+    board links and control loops name their own driver), else the first node.
 
     Repeated identical texts are forwarded once (a link that retries every 0.1 s does
     not flood the log). :meth:`detach` removes the bridge; records after that are
@@ -124,9 +127,10 @@ class LogBridge(logging.Handler):
     resort), never sent to a destroyed node.
     """
 
-    def __init__(self, node, loggers: tuple[str, ...]) -> None:
+    def __init__(self, node, loggers: tuple[str, ...], others=()) -> None:
         super().__init__(logging.INFO)
         self.node = node
+        self.by_name = {n.get_name(): n for n in (node, *others)}
         self.last = ''
         self._loggers = [logging.getLogger(name) for name in loggers]
         for lg in self._loggers:
@@ -138,6 +142,7 @@ class LogBridge(logging.Handler):
         node = self.node
         if node is None:
             return
+        node = self.by_name.get(getattr(record, NODE_ATTR, ''), node)
         text = record.getMessage()
         if text == self.last:
             return
@@ -156,6 +161,7 @@ class LogBridge(logging.Handler):
     def detach(self) -> None:
         """Stop forwarding (idempotent)."""
         self.node = None
+        self.by_name = {}
         for lg in self._loggers:
             lg.removeHandler(self)
             lg.propagate = True
@@ -402,7 +408,7 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
             if stop.requested.is_set():
                 return code
         if log_bridge:
-            bridge = LogBridge(built[0], log_bridge)
+            bridge = LogBridge(built[0], log_bridge, built[1:])
         share_time_source(built)
         ex = make_executor(built[0].context)
         stop.executor = ex

@@ -1,82 +1,92 @@
-"""Optical loss caused by a tracking error: the project's loss table (pure Python).
+"""Optical loss caused by a tracking error: a collector's loss table (pure Python).
 
 Seed 000 section 5.2 (eqs. 17-24, Figs. 21-24) measures the power a linear Fresnel
 collector loses when its mirrors are held epsilon away from their ideal tilt: about
-0.3 % at 0.06 deg and 2.6-3.5 % at 0.36 deg. :data:`LOSS_TABLE` is that study run on
-the project's 3-D ray trace (:func:`sslfr_planner.analysis.performance.error_table`,
-``./sslfr analyse error``, docs/optics.md) for the seed 000 prototype at Almeria
-(default :class:`~sslfr_planner.analysis.optics.OpticalParameters`, law eq. 16), on
-the equinoxes and solstices of 2024 at 9:00, 12:00 and 15:00 solar time: for each
-error, the smallest and the largest total loss of those twelve instants [%]
-(noon loses least, the mornings and afternoons most).
-``test_tracking_loss.py`` recomputes it from the trace, so the two cannot drift.
-
-It is kept as numbers (not computed at run time) so that a driver can quote it
-without importing the ray trace. The table is the seed's transversal study: it
-applies to the mirrors' tilt error; the longitudinal axes' errors move the image
+0.3 % at 0.06 deg and 2.6-3.5 % at 0.36 deg for its prototype. The same study run on
+the project's 3-D ray trace for the collector at hand
+(:func:`sslfr_planner.analysis.ideal.loss_table`: its description's optics at its site,
+the equinoxes and solstices at 9:00, 12:00 and 15:00 solar time) gives a table of rows
+(error [rad], smallest loss [%], largest loss [%]); the node set hands it to the mirror
+movement's driver as ``accuracy.loss_table`` and the day report builds the same one.
+The table covers the mirrors' tilt error; the longitudinal axes' errors move the image
 along the tube, which the study does not cover (their loss is not estimated).
 """
 from __future__ import annotations
 
 import math
 
-from .contract import MIRRORS
-
-#: (tracking error [deg], smallest loss [%], largest loss [%]) over the twelve instants
-#: above, at the errors ``./sslfr analyse error --errors`` was run with.
-LOSS_TABLE: tuple[tuple[float, float, float], ...] = (
-    (0.00, 0.00, 0.00),
-    (0.03, 0.00, 0.07),
-    (0.06, 0.00, 0.20),
-    (0.09, 0.03, 0.37),
-    (0.12, 0.18, 0.65),
-    (0.18, 0.70, 1.29),
-    (0.24, 1.22, 1.92),
-    (0.30, 1.75, 2.56),
-    (0.36, 2.47, 3.38),
-    (0.48, 5.41, 7.39),
-    (0.60, 10.23, 16.68),
-    (0.72, 17.37, 28.44),
-    (1.00, 41.41, 55.32),
-)
-#: Axes whose error the table covers (seed 000's study tilts the mirrors).
-AXES_COVERED = (MIRRORS,)
+#: a loss table: rows (tracking error [rad], smallest loss [%], largest loss [%]), the
+#: errors increasing from 0; fewer than two rows: no estimate
+LossTable = tuple[tuple[float, float, float], ...]
 
 
-def estimated_loss(error: float) -> tuple[float, float, bool]:
+def table_problems(table) -> list[str]:
+    """Why ``table`` (rows of three numbers) is not a loss table (empty: it is one, or it
+    has fewer than two rows, which means no estimate)."""
+    rows = [tuple(r) for r in table]
+    if len(rows) < 2:
+        return []
+    if any(len(r) != 3 or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in r) for r in rows):
+        return ['each row is three finite numbers (error [rad], smallest loss [%], largest loss [%])']
+    out = []
+    if rows[0][0] != 0.0 or any(b[0] <= a[0] for a, b in zip(rows, rows[1:])):
+        out.append('errors must start at 0 and increase')
+    if any(not 0.0 <= lo <= hi <= 100.0 for _, lo, hi in rows):
+        out.append('losses must satisfy 0 <= smallest <= largest <= 100 %')
+    return out
+
+
+def from_flat(values) -> LossTable:
+    """The table of a flat parameter array [e0, low0, high0, e1, ...] (a length that is
+    not a multiple of three: no table)."""
+    v = [float(x) for x in values]
+    if len(v) % 3:
+        return ()
+    rows = tuple((v[i], v[i + 1], v[i + 2]) for i in range(0, len(v), 3))
+    return rows if len(rows) >= 2 and not table_problems(rows) else ()
+
+
+def to_flat(table: LossTable) -> list[float]:
+    """The flat parameter array of ``table`` (:func:`from_flat`'s inverse)."""
+    return [float(x) for row in table for x in row]
+
+
+def estimated_loss(error: float, table: LossTable) -> tuple[float, float, bool]:
     """Estimated optical loss of a tracking error.
 
     Parameters
     ----------
     error : float
         Tracking error of the mirrors [rad], either sign (the table is read at |error|).
+    table : LossTable
+        The collector's loss table (at least two rows).
 
     Returns
     -------
     (low, high, beyond) : (float, float, bool)
-        The loss range [%] linearly interpolated in the table; beyond its last error
-        (1 deg) the last row and ``beyond`` True (the loss is at least that).
-        NaN error: (nan, nan, False).
+        The loss range [%] linearly interpolated in the table; beyond its last error the
+        last row and ``beyond`` True (the loss is at least that). NaN error or no table:
+        (nan, nan, False).
     """
-    e = abs(math.degrees(error))
-    if math.isnan(e):
+    e = abs(error)
+    if math.isnan(e) or len(table) < 2:
         return math.nan, math.nan, False
-    last = LOSS_TABLE[-1]
+    last = table[-1]
     if e >= last[0]:
         return last[1], last[2], e > last[0]
-    for (e0, lo0, hi0), (e1, lo1, hi1) in zip(LOSS_TABLE, LOSS_TABLE[1:]):
+    for (e0, lo0, hi0), (e1, lo1, hi1) in zip(table, table[1:]):
         if e <= e1:
             f = (e - e0) / (e1 - e0)
             return lo0 + f * (lo1 - lo0), hi0 + f * (hi1 - hi0), False
     return last[1], last[2], True   # not reached
 
 
-def loss_text(error: float, axis: str = MIRRORS) -> str:
-    """One phrase for people: ``estimated optical loss 0.2-0.7 %`` (seed 000 Figs.
-    22-24 on the project's ray trace), or why there is no estimate for ``axis``."""
-    if axis not in AXES_COVERED:
-        return 'optical loss not estimated for this axis (the loss table is the mirrors\' tilt error)'
-    low, high, beyond = estimated_loss(error)
+def loss_text(error: float, table: LossTable) -> str:
+    """One phrase for people: ``estimated optical loss 0.2-0.7 %`` (seed 000 section 5.2
+    on the collector's optics), or why there is no estimate."""
+    if len(table) < 2:
+        return 'optical loss not estimated for this axis (no loss table: the table covers the mirrors\' tilt)'
+    low, high, beyond = estimated_loss(error, table)
     if math.isnan(low):
         return 'optical loss unknown (no measured position)'
     return f'estimated optical loss {">= " if beyond else ""}{low:.1f}-{high:.1f} %'

@@ -9,6 +9,8 @@ import pytest
 from sslfr_common.accuracy import CLEAR, ERROR, MOVE_CAP, OK, WARN, AccuracyAlarm, AccuracyConfig
 
 D = math.radians
+#: a loss table (error [rad], smallest, largest loss [%]): seed 000's study rounded
+TABLE = ((0.0, 0.0, 0.0), (D(0.06), 0.0, 0.2), (D(0.36), 2.47, 3.38), (D(1.0), 41.41, 55.32))
 
 
 def feed(alarm, t0, t1, dt, error_of, setpoint_of=lambda t: 0.3 + 1e-5 * t, following=True):
@@ -24,7 +26,7 @@ def feed(alarm, t0, t1, dt, error_of, setpoint_of=lambda t: 0.3 + 1e-5 * t, foll
 
 
 def test_ramp_raises_warn_then_error_with_the_loss_and_counts_the_time():
-    a = AccuracyAlarm('mirrors', AccuracyConfig(window=10.0))
+    a = AccuracyAlarm('mirrors', AccuracyConfig(window=10.0, loss_table=TABLE))
     # tracking cleanly for 100 s, then the error grows 0.001 deg/s (a slipping coupling)
     ev = feed(a, 0.0, 100.0, 0.2, lambda t: D(0.005))
     assert ev == [] and a.level == OK and a.tracking
@@ -50,7 +52,7 @@ def test_a_short_spike_is_filtered_and_levels_clear_with_hysteresis():
     assert ev == [] and a.level == OK
     ev = feed(a, 120.2, 300.0, 0.2, lambda t: D(0.07))
     assert [lvl for _, lvl, _ in ev] == [WARN]
-    assert 'not estimated for this axis' in ev[0][2]       # the loss table is the mirrors'
+    assert 'not estimated for this axis' in ev[0][2]       # no loss table: the mirrors' driver has one
     # just below the threshold but above CLEAR x threshold: still WARN
     ev = feed(a, 300.2, 500.0, 0.2, lambda t: D(0.06 * (CLEAR + 0.1)))
     assert ev == [] and a.level == WARN
@@ -129,3 +131,17 @@ def test_only_sun_tracking_is_judged():
     for k in range(5):                       # at night, off the setpoint: never judged
         a.sample_snapshot(Snapshot(float(k), 'following', 1.5, 1.5, 1.5 + D(0.5)), 'active', None)
     assert not a.tracking and a.level == OK
+
+
+def test_the_loss_table_parameter_is_refused_unless_a_table():
+    from sslfr_common.accuracy import PARAM_SPECS
+    from sslfr_common.tracking_loss import to_flat
+    spec = next(s for s in PARAM_SPECS if s.name == 'accuracy.loss_table')
+    assert spec.check([0.0, 0.0, 0.0]) is None and spec.check(to_flat(TABLE)) is None
+    assert 'rows of three' in spec.check([0.0, 0.0])
+    assert 'increase' in spec.check([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
+    assert 'smallest <= largest' in spec.check([0.0, 0.0, 0.0, 0.01, 2.0, 1.0])
+    assert spec.check([0.0, 0.0, 0.0, 0.01, -1.0, 1.0])                     # below the range
+    cfg = AccuracyConfig.from_params({'accuracy.warn_threshold': D(0.06), 'accuracy.error_threshold': D(0.36),
+                                      'accuracy.window': 60.0, 'accuracy.loss_table': to_flat(TABLE)})
+    assert cfg.loss_table == TABLE

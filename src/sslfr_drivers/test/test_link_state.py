@@ -33,7 +33,7 @@ def test_state_listeners_are_told_before_the_state_shows():
     """A listener sees its state before ``shown`` (what BoardLink.state and wait_up
     show) changes; a change made by a listener wins over the one that called it."""
     pokes = []
-    link = type('L', (), {'name': 'b', 'poke': lambda self, within=0.0: pokes.append(within)})()
+    link = type('L', (), {'name': 'b', 'log_extra': {}, 'poke': lambda self, within=0.0: pokes.append(within)})()
     sm = LinkStateMachine(link, 0.1, 1.0)
     seen = []
     sm.listeners.append(lambda state, lk: seen.append((state, sm.shown)))

@@ -10,7 +10,7 @@ receiver height and size, axis azimuth). A site config names its collector with 
 :func:`load` validates everything before any process starts and raises
 :class:`DescriptionError` listing every problem, each line naming the file and the key
 (``movements.mirrors.drive``): unknown keys, wrong types, unknown drive kinds, a law
-that needs a movement the collector lacks, ranges outside the mechanics, positions
+that needs a movement the collector lacks (:data:`LAW_NEEDS`), ranges outside the mechanics, positions
 outside a range, duplicate names. Angles are degrees in the file (``*_deg`` keys, for
 people) and radians in :class:`Description` (SI inside the code).
 """
@@ -37,7 +37,7 @@ FEEDBACK_FOR_DRIVE = {
     DriveKind.LINEAR_ACTUATOR_INCLINOMETER.value: ('inclinometer',),
     DriveKind.STEPPER_NO_SWITCHES.value: ('steps', 'encoder'),
 }
-#: movement laws -> the movements each needs (all of them must be in the collector).
+#: movement laws -> the movements each may move (a movement's law must list it).
 #: Mirror laws: half_transversal (seed 000 eq. 13, beta_0 = theta_t'/2), lepten_linear
 #: (seed 004 eq. 5 with Table 1's pace and offsets), seed003_linkage (seed 003 eqs. 5-6,
 #: 15-minute steps, never beyond its maximum inclination). Longitudinal laws
@@ -48,6 +48,20 @@ LAW_MOVEMENTS: dict[str, tuple[str, ...]] = {
     'seed003_linkage': (JOINTS[0],),
     **{law: LONGITUDINAL_JOINTS for law in ('continuous', 'eq16', 'optimum_fixed', 'daily')},
 }
+#: movement laws -> the movements each needs (all of them must be in the collector).
+#: 'continuous' centres the rays on a tube tilted with the rows (both move); 'eq16',
+#: 'optimum_fixed' and 'daily' set the rows' tilt beta_M, which alone makes the reflected
+#: rays vertical in the longitudinal plane at solar noon (seed 001 eq. 3, mu = 2 beta_M -
+#: theta_z = 0): they need the mobile structure and move the secondary reflector with it
+#: when the collector has one; without it the receiver is fixed (:data:`FIXED_TILT`).
+LAW_NEEDS: dict[str, tuple[str, ...]] = {
+    **{law: movements for law, movements in LAW_MOVEMENTS.items()},
+    **{law: LONGITUDINAL_JOINTS[:1] for law in ('eq16', 'optimum_fixed', 'daily')},
+}
+#: tilt [rad] of a longitudinal part the collector does not move: the rows and receiver
+#: of a collector without longitudinal movements (seeds 003, 004), the receiver of one
+#: without a secondary_reflector movement. Horizontal: beta = 0 (docs/conventions.md).
+FIXED_TILT = 0.0
 #: kinematic limits of each movement [deg] (contract JOINT_LIMITS)
 MOVEMENT_LIMITS_DEG = {j: (math.degrees(lo), math.degrees(hi)) for j, (lo, hi) in JOINT_LIMITS.items()}
 #: board kinds the node set knows (sslfr_bringup/config/nodeset.yaml ``boards``)
@@ -190,6 +204,12 @@ class Description:
         movements' law, or 'horizontal' when the collector has none (seeds 003, 004)."""
         m = self.movements.get(LONGITUDINAL_JOINTS[0])
         return m.law if m is not None else 'horizontal'
+
+    @property
+    def receiver_fixed(self) -> bool:
+        """True when the collector does not move its receiver (no secondary_reflector
+        movement): it stays at :data:`FIXED_TILT` whatever the longitudinal law."""
+        return LONGITUDINAL_JOINTS[1] not in self.movements
 
 
 # ------------------------------------------------------------------- schema
@@ -554,15 +574,16 @@ def parse(data: Any, where: str = 'description') -> Description:
             movements[mv.name] = mv
     if 'movements' in top and JOINTS[0] not in top['movements']:
         c.add('movements', f'a collector needs the {JOINTS[0]} movement')
-    # a law needs every movement it moves (the longitudinal laws move two together)
+    # a law needs the movements of LAW_NEEDS; those of LAW_MOVEMENTS it has move together
     for mv in movements.values():
-        for needed in LAW_MOVEMENTS[mv.law]:
+        for needed in LAW_NEEDS[mv.law]:
             if needed not in (top.get('movements') or {}):
                 c.add(f'movements.{mv.name}.law', f'the {mv.law} law needs the {needed} movement, '
                                                   f'which this collector lacks')
-            elif needed in movements and movements[needed].law != mv.law:
-                c.add(f'movements.{mv.name}.law', f'{mv.law!r} differs from movements.{needed}.law '
-                                                  f'{movements[needed].law!r}: the two move together')
+        for other in LAW_MOVEMENTS[mv.law]:
+            if other in movements and movements[other].law != mv.law:
+                c.add(f'movements.{mv.name}.law', f'{mv.law!r} differs from movements.{other}.law '
+                                                  f'{movements[other].law!r}: the two move together')
     boards = {}
     for name, k, d in _kinded(c, top.get('boards') or [], _BOARD, 'boards', 'board', BOARD_KINDS):
         mv = d.get('movement')

@@ -14,6 +14,12 @@ not here. docs/optics.md compares the laws' annual energy, area, EAR and LCOE
 * :func:`optimum_fixed`: seed 001 eqs. 16 and 19 (fixed).
 * :func:`daily`: once a day, latitude corrected by the declination (seed 000 section 1).
 * :func:`horizontal`: the classic large-scale LFR (no longitudinal movement).
+
+:func:`eq16`, :func:`optimum_fixed` and :func:`daily` set the rows' tilt beta_M for the
+rows' sake (the reflected rays leave at 2 beta_M - theta_z from the vertical in the
+longitudinal plane, seed 001 eq. 3, whatever beta_a): a collector without a secondary
+reflector movement follows their beta_M under a fixed receiver. :func:`continuous`
+assumes the tube tilts with the rows (docs/collectors.md, "Longitudinal movements").
 """
 from __future__ import annotations
 

@@ -43,6 +43,7 @@ from sslfr_common.contract import JOINTS, Phase
 
 from . import laws, prototype, raytrace, spa
 from .collector import MOVING_LAWS, Collector
+from .description import FIXED_TILT
 from .events import SCAN_STEP, SunEvents, crossings, events_around, events_from_crossings, solar_transit
 from .site import Site
 
@@ -128,6 +129,9 @@ def _commands(zenith, azimuth, t, site: Site, c: Collector):
 def _longitudinal(zenith, azimuth, t, site: Site, c: Collector, sun=None):
     """(beta_M, beta_a) [rad] of the collector's law at instants ``t`` (clipped to tilt_max).
 
+    A described collector without a secondary_reflector movement keeps its receiver at
+    :data:`~sslfr_planner.description.FIXED_TILT` (horizontal) whatever the law.
+
     ``zenith`` and ``azimuth`` [rad] are the sun's at ``t``; ``sun`` its unit vector in
     the collector frame if already computed.
     """
@@ -145,6 +149,8 @@ def _longitudinal(zenith, azimuth, t, site: Site, c: Collector, sun=None):
         bm, ba = np.zeros(n), np.zeros(n)
     else:  # daily
         bm, ba = laws.daily(site.latitude, _declination_at_noons(t, site, c), c.azimuth)
+    if c.description is not None and c.description.receiver_fixed:
+        ba = np.full(n, FIXED_TILT)     # a receiver the collector does not move (docs/collectors.md)
     return np.clip(bm, -c.tilt_max, c.tilt_max), np.clip(ba, -c.tilt_max, c.tilt_max)
 
 

@@ -46,3 +46,70 @@ def test_a_broken_description_is_refused_naming_the_key(tmp_path, capsys):
     assert cli.main(['error', '--config', str(tmp_path / 'site.yaml')]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and 'optics.lines' in err and 'florianopolis_lepten.yaml' in err
+
+
+def test_rows_tilting_alone_over_a_fixed_receiver(tmp_path):
+    """The two-movement test collector (rows under seed 000 eq. 16, receiver fixed
+    horizontal; docs/collectors.md "Longitudinal movements"), 21 June at Barcelona, 900
+    W/m^2, ideal mirror angles: near solar noon the rows' tilt gains over horizontal rows
+    and a receiver tilted with them gains a little more (seed 001 section 4); at 08:00 UTC
+    eq. 16's rows face away from the sun and lose."""
+    import calendar
+
+    import numpy as np
+    from collectors_testutil import write_fourth_collector
+    from sslfr_planner.analysis import ideal
+    from sslfr_planner.day_cycle import make_collector
+    from sslfr_planner.description import load
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    from sslfr_planner.site import Site
+    from sslfr_planner.tracking_table import evaluate
+
+    write_fourth_collector(tmp_path)
+    desc = load(tmp_path / 'fourth.yaml')
+    t = calendar.timegm((2026, 6, 21, 0, 0, 0)) + np.array([8.0, 11.9]) * 3600.0
+    tab = evaluate(t, Site.from_degrees(41.39, 2.17, 12.0), make_collector(PLANNER_PARAMS.defaults(), desc))
+    assert np.all(tab.secondary_reflector == 0.0)
+    assert np.allclose(tab.mobile_structure, tab.zenith / 2.0)
+    zero = np.zeros(2)
+
+    def q(bm, ba):
+        return ideal.ideal_absorbed_power(desc, tab.zenith, tab.azimuth, np.full(2, 900.0), bm, ba)
+    rows, flat, both = q(tab.mobile_structure, zero), q(zero, zero), q(tab.mobile_structure, tab.mobile_structure)
+    assert rows == pytest.approx([439.1, 1183.3], abs=1.0)
+    assert flat == pytest.approx([1290.5, 957.6], abs=1.0)
+    assert both == pytest.approx([700.9, 1266.5], abs=1.0)
+    assert flat[1] < rows[1] < both[1] and rows[0] < both[0] < flat[0]
+    # the report's default (a movement the collector lacks: 0) is the table's fixed receiver
+    assert ideal.ideal_absorbed_power(desc, tab.zenith, tab.azimuth, np.full(2, 900.0), tab.mobile_structure,
+                                      tab.secondary_reflector) == pytest.approx(rows)
+
+
+def test_the_loss_table_of_rows_over_a_fixed_receiver(tmp_path):
+    """The accuracy alarms' loss table (seed 000 section 5.2) of the two-movement collector
+    is studied with its receiver where it is (fixed, horizontal), not tilted by the law."""
+    import numpy as np
+    from collectors_testutil import write_fourth_collector
+    from sslfr_planner.analysis import ideal, performance
+    from sslfr_planner.description import load
+
+    write_fourth_collector(tmp_path)
+    desc = load(tmp_path / 'fourth.yaml')
+    assert desc.receiver_fixed
+    site = performance.AnalysisSite(41.39, 2.17, 12.0, 0.0)
+    t = np.array([1782043200.0 - 3600.0])       # 2026-06-21 11:00 UTC
+    zen, azi = performance.sun_positions(t, site)
+    moving = performance.commands('eq16', zen, azi, t, site)
+    fixed = performance.commands('eq16', zen, azi, t, site, receiver_fixed=True)
+    assert moving[2][0] == pytest.approx(zen[0] / 2.0) and fixed[2][0] == 0.0
+    np.testing.assert_array_equal(moving[1], fixed[1])
+    from datetime import date
+    table = ideal.loss_table(desc, 41.39, 2.17, 12.0)
+    err = table[-1][0]
+    for fixed_rcv in (True, False):
+        rows = performance.error_table(site, ideal.optical_parameters(desc), [err],
+                                       [date.fromisoformat(d) for d in ideal.LOSS_DAYS], list(ideal.LOSS_HOURS),
+                                       law='eq16', receiver_fixed=fixed_rcv)
+        low = round(max(0.0, min(r.loss_total for r in rows)), 2)
+        high = round(min(100.0, max(r.loss_total for r in rows)), 2)
+        assert ((low, high) == table[-1][1:]) is fixed_rcv, (fixed_rcv, low, high, table[-1])

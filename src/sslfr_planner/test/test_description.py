@@ -94,7 +94,13 @@ def _broken(tmp_path, edit):
     (4, lambda x: x['movements']['mirrors'].update(drive='hydraulic_ram'), 'movements.mirrors.drive',
      'unknown drive kind'),
     (0, lambda x: x['movements'].pop('secondary_reflector'), 'movements.mobile_structure.law',
-     'needs the secondary_reflector movement'),
+     'the continuous law needs the secondary_reflector movement, which this collector lacks'),
+    (0, lambda x: x['movements'].pop('mobile_structure'), 'movements.secondary_reflector.law',
+     'the continuous law needs the mobile_structure movement, which this collector lacks'),
+    (0, lambda x: (x['movements'].pop('mobile_structure'), x['movements']['secondary_reflector'].update(law='eq16')),
+     'movements.secondary_reflector.law', 'the eq16 law needs the mobile_structure movement'),
+    (0, lambda x: x['movements']['secondary_reflector'].update(law='eq16'), 'movements.mobile_structure.law',
+     "'continuous' differs from movements.secondary_reflector.law 'eq16': the two move together"),
     (0, lambda x: x['movements']['mobile_structure'].update(range_deg=[-120.0, 90.0]),
      'movements.mobile_structure.range_deg', 'outside the mechanics'),
     (0, lambda x: x['movements']['mirrors'].update(sleep_deg=120.0), 'movements.mirrors.sleep_deg',
@@ -142,6 +148,22 @@ def _broken(tmp_path, edit):
 def test_refused_naming_file_and_key(tmp_path, seed, change, key, text):
     msg, path = _broken(tmp_path, (seed, change))
     assert f'{path}: {key}: ' in msg and text in msg, msg
+
+
+@pytest.mark.parametrize('law', ['eq16', 'optimum_fixed', 'daily'])
+def test_rows_alone_tilt_under_a_law_of_the_mobile_structure(tmp_path, law):
+    """Seed 000 without its secondary_reflector movement: eq16, optimum_fixed and daily set
+    the rows' tilt alone (seed 001 eq. 3), the receiver stays fixed; continuous is refused above."""
+    data = yaml.safe_load(SEED000.read_text())
+    data['movements'].pop('secondary_reflector')
+    data['movements']['mobile_structure']['law'] = law
+    data['boards'] = [b for b in data['boards'] if b['name'] != 'secondary_reflector']
+    data['sensors'] = [x for x in data['sensors'] if x['board'] != 'secondary_reflector']
+    p = tmp_path / 'two.yaml'
+    p.write_text(yaml.safe_dump(data))
+    desc = d.load(p)
+    assert desc.joints == ('mirrors', 'mobile_structure') and desc.longitudinal_law == law
+    assert d.LAW_NEEDS[law] == ('mobile_structure',) and d.LAW_NEEDS['continuous'] == contract.LONGITUDINAL_JOINTS
 
 
 def test_duplicate_yaml_keys_and_bad_files_refused(tmp_path):

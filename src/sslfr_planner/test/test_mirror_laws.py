@@ -159,6 +159,21 @@ def test_single_axis_power_bounds_and_law_losses():
     assert ideal.law_absorbed_power(S004, z, az, 900.0)[0] == pytest.approx(q4, rel=0.01)
 
 
+def test_the_ideal_stays_within_the_collectors_range():
+    """Seed 004's actuator ends at +-40 deg (theta_T ~ +-80 deg, section 2.1): within it
+    the ideal lines are the exact eqs. 3-4; beyond, the drive stays at its end and every
+    line rides with it, so the law (which holds there too) loses nothing of the ideal."""
+    tt = np.radians([30.0, 70.0, 86.0, -86.0])
+    lines, exact = ideal.ideal_lines(S004, tt), exact_lines(S004, tt)
+    assert np.allclose(lines[:2], exact[:2], atol=1e-12)
+    drive = np.mean(lines - (commanded_lines(S004, tt)[1] - commanded_lines(S004, tt)[0][:, None]), axis=-1)
+    assert np.degrees(drive[2:]) == pytest.approx([40.0, -40.0])
+    assert np.all(np.abs(lines[2:] - exact[2:]) > DEG(2.0))             # beyond the range: not exact
+    z, az = np.radians([60.0, 75.0]), np.radians([70.0, 290.0])
+    q_ideal, q_law = ideal.ideal_absorbed_power(S004, z, az, 900.0), ideal.law_absorbed_power(S004, z, az, 900.0)
+    assert q_law == pytest.approx(q_ideal, rel=0.01)
+
+
 def test_lines_follow_the_description_geometry():
     g = field_geometry(S004)
     assert g.n_mirrors == 10 and g.aim_height == pytest.approx(3.75)

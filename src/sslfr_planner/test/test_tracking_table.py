@@ -120,6 +120,29 @@ def test_horizontal_and_daily_laws():
     assert math.isclose(tab.mobile_structure[0], (math.radians(36.8353) - math.radians(23.44)) / 2, abs_tol=1e-3)
 
 
+@pytest.mark.parametrize('law', ['eq16', 'optimum_fixed'])
+def test_a_receiver_the_collector_does_not_move_stays_horizontal(tmp_path, law):
+    """Seed 000 without its secondary_reflector movement: the rows follow the law's beta_M,
+    the receiver's column is the fixed tilt (0), under any law; with both, beta_a is the law's."""
+    import yaml
+    from sslfr_planner import description
+    from sslfr_planner.day_cycle import make_collector
+    from sslfr_planner.planner_params import PLANNER_PARAMS
+    seed = yaml.safe_load((description.Path(__file__).resolve().parents[2] / 'sslfr_bringup' / 'config'
+                           / 'collectors' / 'almeria_three_movement.yaml').read_text())
+    seed['movements']['mobile_structure']['law'] = seed['movements']['secondary_reflector']['law'] = law
+    both = description.parse(seed, 'both')
+    seed['movements'].pop('secondary_reflector')
+    seed['boards'] = [b for b in seed['boards'] if b['name'] != 'secondary_reflector']
+    seed['sensors'] = [x for x in seed['sensors'] if x['board'] != 'secondary_reflector']
+    rows = description.parse(seed, 'rows')
+    t = sun_events(dt.date(2026, 6, 21), ALMERIA).solar_noon + np.array([-7200.0, 0.0, 3600.0])
+    tabs = [evaluate(t, ALMERIA, make_collector(PLANNER_PARAMS.defaults(), desc)) for desc in (both, rows)]
+    np.testing.assert_array_equal(tabs[0].mobile_structure, tabs[1].mobile_structure)
+    assert np.all(np.abs(tabs[0].secondary_reflector) > 0.1) and np.all(tabs[1].secondary_reflector == 0.0)
+    np.testing.assert_array_equal(tabs[0].mirrors, tabs[1].mirrors)   # beta_0 = theta_t'/2 whatever beta_a
+
+
 def test_law_signs():
     bm, ba = laws.eq16(np.array([1.0, 0.5]), 0.6)
     np.testing.assert_array_equal(bm, [0.5, 0.25])

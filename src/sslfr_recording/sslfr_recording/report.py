@@ -22,7 +22,7 @@ from sslfr_common import accuracy as accuracy_mod
 from sslfr_common.accuracy import MOVE_CAP, MOVE_RATE, SETTLE  # noqa: F401 - one definition (the alarm's)
 from sslfr_common.contract import JOINTS, LEVEL_NAMES, MIRRORS, PHASE_NAMES, TRACKER_TRAJECTORY, LinkState
 
-from .day import TOPICS, Day, read_day, reference, run_description
+from .day import TOPICS, Day, planner_config, read_day, reference, run_description
 from .report_energy import energy_estimate
 from .report_thermal import thermal_of
 
@@ -258,14 +258,21 @@ def line_tracking(desc, t: np.ndarray, zenith, azimuth, measured, commanded) -> 
 
 
 def accuracy_config(axis: str, config: str | None) -> accuracy_mod.AccuracyConfig:
-    """The accuracy alarm's thresholds of ``axis``: the driver's defaults, overlaid with
-    the ``<axis>_driver`` section of a site params file (judged as ``sslfr up`` does)."""
-    from sslfr_bringup import nodeset
+    """The accuracy alarm's configuration of ``axis`` as the node set gives its driver:
+    the driver's defaults, the mirrors' loss table of the run's collector at its site
+    (:func:`sslfr_bringup.collector_set.loss_table_param`), overlaid with the
+    ``<axis>_driver`` section of a site params file (judged as ``sslfr up`` does)."""
+    from sslfr_bringup import collector_set, nodeset
+    from sslfr_planner import description as description_mod
     p = {spec.name: spec.default for spec in accuracy_mod.PARAM_SPECS}
+    if axis == MIRRORS:
+        desc = run_description(config) or description_mod.load(
+            description_mod.resolve(nodeset.load().collector, nodeset.config_dir()))
+        p['accuracy.loss_table'] = collector_set.loss_table_param(desc, planner_config(config))
     if config:
         flat = nodeset.node_params(nodeset.checked_params(nodeset.load(), nodeset.resolve_config(config)),
                                    f'{axis}_driver')
-        p.update({k: float(v) for k, v in flat.items() if k in p})
+        p.update({k: (list(v) if isinstance(v, (list, tuple)) else float(v)) for k, v in flat.items() if k in p})
     return accuracy_mod.AccuracyConfig.from_params(p)
 
 
@@ -284,7 +291,7 @@ def accuracy_of(axis: str, t: np.ndarray, v: dict, phases, config: str | None = 
     c = alarm.cfg
     return {'warn_s': alarm.time_above[accuracy_mod.WARN], 'error_s': alarm.time_above[accuracy_mod.ERROR],
             'judged_s': alarm.judged_time, 'peak': alarm.peak, 'warn': c.warn, 'error': c.error,
-            'window': c.window, 'changes': changes}
+            'window': c.window, 'loss_table': c.loss_table, 'changes': changes}
 
 
 def timeline(pt, pv, st, sv, logs) -> tuple[list, dict]:

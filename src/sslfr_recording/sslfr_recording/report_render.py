@@ -111,7 +111,7 @@ def render_text(rep: DayReport) -> str:
     for axis, a in rep.accuracy.items():
         lines.append(f'  {axis:<20} {a["warn_s"]:8.0f} s / {a["error_s"]:6.0f} s of {a["judged_s"]:.0f} s judged; '
                      f'largest {math.degrees(a["peak"]):.3f} deg'
-                     + (f' ({loss_text(a["peak"], axis)})' if a['peak'] > a['warn'] else ''))
+                     + (f' ({loss_text(a["peak"], a["loss_table"])})' if a['peak'] > a['warn'] else ''))
     lines += render_timeline(rep)
     return '\n'.join(lines)
 

@@ -97,6 +97,22 @@ def test_lepten_drive_off_by_a_quarter_degree_is_beyond_the_budget_and_costs_ene
     assert bad.energy['ideal_kwh'] == pytest.approx(good.energy['ideal_kwh'], rel=1e-12)
 
 
+def test_accuracy_alarm_quotes_the_collectors_own_loss_table():
+    """The same 0.25 deg drive error: seed 004's wide receiver forgives it (its loss table
+    at Florianopolis), seed 003's bench does not; the report quotes each one's own."""
+    t0 = _utc(2026, 6, 21, 13, 0)
+    texts = {}
+    for config in (LEPTEN, BUCARAMANGA):
+        rep = report.analyse(synthetic_day(config, t0, t0 + 1800.0, error_deg=0.25), config)
+        a = rep.accuracy['mirrors']
+        assert a['peak'] > a['warn'] and len(a['loss_table']) > 2
+        texts[config] = next(ln for ln in report_render.render_text(rep).splitlines()
+                             if ln.strip().startswith('mirrors') and 'judged; largest' in ln)
+    assert 'estimated optical loss 0.0-0.0 %' in texts[LEPTEN], texts
+    low = float(texts[BUCARAMANGA].split('estimated optical loss ')[1].split('-')[0])
+    assert low > 1.0, texts
+
+
 def test_bucaramanga_steps_ideal_and_energy():
     """Seed 003's 15-minute steps: the ideal of the mirrors is the stepped law (the
     drive holds the sun of each step's middle), the law costs a few % against every

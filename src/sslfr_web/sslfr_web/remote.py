@@ -34,14 +34,16 @@ REMOTE_PARAMS: dict[str, dict[str, str]] = {
 }
 
 # rcl_interfaces/msg/ParameterType
-_BOOL, _INT, _DOUBLE, _STRING = 1, 2, 3, 4
+_BOOL, _INT, _DOUBLE, _STRING, _DOUBLE_ARRAY = 1, 2, 3, 4, 8
 
 
 def param_value(v) -> Any:
-    """rcl_interfaces/ParameterValue -> Python value (None when not set or an array)."""
+    """rcl_interfaces/ParameterValue -> Python value (a tuple for a double array; None
+    when not set or another array type)."""
     t = int(getattr(v, 'type', 0))
     return {_BOOL: lambda: bool(v.bool_value), _INT: lambda: int(v.integer_value),
-            _DOUBLE: lambda: float(v.double_value), _STRING: lambda: str(v.string_value)}.get(t, lambda: None)()
+            _DOUBLE: lambda: float(v.double_value), _STRING: lambda: str(v.string_value),
+            _DOUBLE_ARRAY: lambda: tuple(float(x) for x in v.double_array_value)}.get(t, lambda: None)()
 
 
 def apply(node: str, names: list[str], values: list) -> dict[str, Any]:

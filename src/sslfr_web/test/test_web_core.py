@@ -354,14 +354,19 @@ def test_live_state_shows_each_axis_accuracy_alarm_with_the_drivers_thresholds()
     for t in range(1010, 1100):
         s.on_axis(status(t, 0.1))
     acc = s.snapshot()['accuracy']['mirrors']
-    assert acc['level'] == 'WARN' and 'estimated optical loss' in acc['estimated_loss'] and '> 0.060 deg' in acc['message']
+    assert acc['level'] == 'WARN' and 'not estimated' in acc['estimated_loss'] and '> 0.060 deg' in acc['message']
+    # the driver's loss table (a double array parameter): the alarm quotes its estimate
+    s.set_info('mirrors.accuracy.loss_table', (0.0, 0.0, 0.0, math.radians(0.2), 1.0, 2.0))
+    s.on_axis(status(1100, 0.1))
+    acc = s.snapshot()['accuracy']['mirrors']
+    assert acc['estimated_loss'] == 'estimated optical loss 0.5-1.0 %' and '0.5-1.0 %' in acc['message']
     # the driver's own thresholds, read from its parameters: 0.1 deg is now within
     s.set_info('mirrors.accuracy.warn_threshold', math.radians(0.2))
-    s.on_axis(status(1100, 0.1))
+    s.on_axis(status(1101, 0.1))
     assert s.snapshot()['accuracy']['mirrors']['level'] == 'OK'
     s.set_info('mirrors.accuracy.error_threshold', math.radians(0.1))     # below warn: not applied
     assert s.accuracy['mirrors'].cfg.error == pytest.approx(math.radians(0.36))
-    s.on_axis(status(1101, 0.1, state='stowing'))
+    s.on_axis(status(1102, 0.1, state='stowing'))
     acc = s.snapshot()['accuracy']['mirrors']
     assert acc['tracking'] is False and acc['level'] == 'OK'
     json.dumps(s.snapshot(), allow_nan=False)

@@ -87,7 +87,7 @@ class AxisDriver(ManagedNode):
             self.start_self_activation(p['retry_period'], p['retry_period_max'])
         self.get_logger().info(f'axis {self.axis}: port {board_port(p)}, '
                                f'{"autostart" if p["autostart"] else "waiting for configure"}')
-        self._loop = ControlLoop(self._control_step, name=f'{self.axis} control').start()
+        self._loop = ControlLoop(self._control_step, name=f'{self.axis} control', owner=self.get_name()).start()
 
     def _apply(self, p: dict) -> None:
         """A run-time parameter change that passed the table (ValueError refuses it)."""
@@ -113,7 +113,7 @@ class AxisDriver(ManagedNode):
         if self._opening is None or self._opening.key != port:
             if self._opening is not None:
                 self._opening.discard(AxisBoardSession.close)
-            self._opening = BackgroundOpen(port, lambda: open_session(port, p))
+            self._opening = BackgroundOpen(port, lambda: open_session(port, p, self.get_name()))
         res = self._opening.result(OPEN_WAIT)
         self._opening = self._opening if res is None else None
         session, exc = res or (None, ConnectionError('no INFO yet (still waiting for the board)'))

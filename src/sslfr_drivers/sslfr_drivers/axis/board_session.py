@@ -90,14 +90,14 @@ class AxisBoardSession:
 
     def __init__(self, port: str, baudrate: int = 115200, request_timeout: float = 0.25,
                  link_timeout: float = 1.0, heartbeat: float = 0.25, key: bytes | None = None,
-                 board_kind: int = m.BoardKind.AXIS_STEPPER):
+                 board_kind: int = m.BoardKind.AXIS_STEPPER, owner: str = ''):
         self.port = port
         self.board_kind = board_kind      # INFO.board_kind of the drive (axis.drive.Drive.board_kind)
         self.reference = None             # a switchless drive's kept reference (axis.drive.ReferenceKeeper)
         self.request_timeout = request_timeout
         self.link = BoardLink(make_transport(port, baudrate), name=port, timeout=request_timeout,
                               retries=2, heartbeat=heartbeat, silence=link_timeout,
-                              backoff_min=0.1, backoff_max=2.0, key=key)
+                              backoff_min=0.1, backoff_max=2.0, key=key, owner=owner)
         self.board_info = ''
         self.host_loss_note = ''
         self.last_status: m.Status | None = None
@@ -291,13 +291,14 @@ def board_command(act: Action) -> m.Message | None:
     return None
 
 
-def open_session(port: str, p: dict) -> AxisBoardSession:
-    """A session on ``port`` with the driver's parameters ``p``, opened (INFO read);
-    the exceptions of :meth:`AxisBoardSession.open`."""
+def open_session(port: str, p: dict, owner: str = '') -> AxisBoardSession:
+    """A session on ``port`` with the driver's parameters ``p``, opened (INFO read), for
+    node ``owner`` (its log lines); the exceptions of :meth:`AxisBoardSession.open`."""
     from sslfr_drivers.axis.drive import drive_for, reference_keeper
     session = AxisBoardSession(port, p['baudrate'], p['request_timeout'], p['link_timeout'], p['heartbeat_period'],
-                               key=link_key(p['key_file']), board_kind=drive_for(p['drive']).board_kind)
-    session.reference = reference_keeper(p)
+                               key=link_key(p['key_file']), board_kind=drive_for(p['drive']).board_kind,
+                               owner=owner)
+    session.reference = reference_keeper(p, owner)
     session.open()
     session.host_loss_note = configure_host_loss(session.link, p)     # the board's own stow (EEPROM)
     return session

@@ -17,6 +17,8 @@ import threading
 import time
 from typing import Callable
 
+from sslfr_common.log_route import log_extra
+
 _log = logging.getLogger('sslfr_drivers.axis')
 
 
@@ -25,11 +27,13 @@ class ControlLoop:
 
     The wait counts from the START of the step (a fixed rate, like a timer: the board
     I/O inside a step does not stretch the period). A step raising an exception is
-    logged and the loop goes on after ``retry`` [s].
+    logged (on node ``owner``'s logger, :mod:`sslfr_common.log_route`) and the loop goes
+    on after ``retry`` [s].
     """
 
-    def __init__(self, step: Callable[[], float], name: str = 'control', retry: float = 0.05):
+    def __init__(self, step: Callable[[], float], name: str = 'control', retry: float = 0.05, owner: str = ''):
         self._step = step
+        self._extra = log_extra(owner)
         self._retry = retry
         self._event = threading.Event()
         self._halt = False
@@ -62,7 +66,7 @@ class ControlLoop:
             try:
                 wait = float(self._step())
             except Exception:  # noqa: BLE001 - the control loop must survive a bad step
-                _log.exception('control step failed')
+                _log.exception('control step failed', extra=self._extra)
                 wait = self._retry
             wait = max(0.0, wait - (time.monotonic() - started))
             self.steps += 1

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 
 from sslfr_common.contract import DRIVE_KINDS, DriveKind
+from sslfr_common.log_route import log_extra
 from sslfr_drivers.axis.commands import NOTHING, Action, ActionKind, BoardState
 from sslfr_drivers.axis.homing import home_action
 from sslfr_drivers.link import messages as m
@@ -133,8 +134,9 @@ class ReferenceKeeper:
     longer HOMED marks it lost). ``state`` is for diagnostics; problems and losses are
     logged (logger ``sslfr_drivers.axis.reference``, forwarded to the node's)."""
 
-    def __init__(self, store, angle: float):
+    def __init__(self, store, angle: float, owner: str = ''):
         self.store, self.angle = store, angle
+        self.owner = owner                   # the driver node (its log lines, log_route)
         self.state = 'unchecked'
         self._checked = False
 
@@ -149,11 +151,11 @@ class ReferenceKeeper:
             try:
                 self.store.record(self.angle, act.steps, boot_count, stamp)
                 self.state, self._checked = 'valid', True
-                return _log(f'reference at {self.angle:.4f} rad kept in {self.store.path} (board boot {boot_count})',
-                            logging.INFO)
+                return _log(self.owner, f'reference at {self.angle:.4f} rad kept in {self.store.path} '
+                            f'(board boot {boot_count})', logging.INFO)
             except OSError as exc:
                 self.state = f'not kept: {exc}'
-        return _log(f'reference at {self.angle:.4f} rad {self.state}')
+        return _log(self.owner, f'reference at {self.angle:.4f} rad {self.state}')
 
     def after_read(self, board: BoardState | None, reset: bool, reconnected: bool,
                    boot_count: int | None) -> str | None:
@@ -168,25 +170,25 @@ class ReferenceKeeper:
             state, ref = self.store.check(boot_count, board.homed)
         except (OSError, ValueError) as exc:
             self.state = f'unreadable: {exc}'
-            return _log(f'reference file: {exc}')
+            return _log(self.owner, f'reference file: {exc}')
         was = self.state
         self.state = state if ref is None or not ref.lost else f'lost ({ref.why})'
         if state == 'lost' and was != self.state:
-            return _log(f'the reference of {ref.axis} is lost: {ref.why}; put the axis at its '
+            return _log(self.owner, f'the reference of {ref.axis} is lost: {ref.why}; put the axis at its '
                         'reference angle and call the home service')
         return None
 
 
-def _log(line: str, level: int = logging.WARNING) -> str:
-    logging.getLogger('sslfr_drivers.axis.reference').log(level, line)
+def _log(owner: str, line: str, level: int = logging.WARNING) -> str:
+    logging.getLogger('sslfr_drivers.axis.reference').log(level, line, extra=log_extra(owner))
     return line
 
 
-def reference_keeper(p: dict) -> ReferenceKeeper | None:
+def reference_keeper(p: dict, owner: str = '') -> ReferenceKeeper | None:
     """The :class:`ReferenceKeeper` of the driver's parameters ``p``: for a
     stepper_no_switches drive with a ``state_dir`` (``~`` expanded), else None."""
     if p['drive'] != DriveKind.STEPPER_NO_SWITCHES.value or not p['state_dir']:
         return None
     import os
     from sslfr_common.drives import ReferenceStore
-    return ReferenceKeeper(ReferenceStore(os.path.expanduser(p['state_dir']), p['axis']), p['home_position'])
+    return ReferenceKeeper(ReferenceStore(os.path.expanduser(p['state_dir']), p['axis']), p['home_position'], owner)

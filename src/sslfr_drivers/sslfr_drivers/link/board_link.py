@@ -27,6 +27,7 @@ from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Callable
 
+from sslfr_common.log_route import log_extra
 from sslfr_drivers.link import messages as m
 from sslfr_drivers.link.board_calls import BoardCalls
 from sslfr_drivers.link.heartbeat import Heartbeat
@@ -62,15 +63,17 @@ class BoardLink(BoardCalls, Protocol):
     ``read_timeout`` [s]: the reader's longest wait (it wakes for a frame or the next
     deadline, :meth:`next_tick`; at most ``timeout``); ``clock``: the steady clock [s];
     ``key``: the installation key (16 bytes, link/keys.py), None: the null key of
-    unprovisioned boards (a provisioned board refuses this host, which the link reports).
+    unprovisioned boards (a provisioned board refuses this host, which the link reports);
+    ``owner``: the ROS node the link works for, whose logger gets its log lines.
     """
 
     def __init__(self, transport: Transport, *, name: str | None = None, timeout: float = 0.25,
                  retries: int = 2, heartbeat: float | None = None, silence: float = 1.0,
                  backoff_min: float = BACKOFF_MIN, backoff_max: float = BACKOFF_MAX,
                  read_timeout: float = 0.25, clock: Callable[[], float] = time.monotonic,
-                 key: bytes | None = None):
+                 key: bytes | None = None, owner: str = ''):
         self.name = name or getattr(transport, 'name', 'board')
+        self.log_extra = log_extra(owner)     # its log lines go to its node's logger (log_route)
         self.timeout = timeout
         self.retries = retries
         self.clock = clock
@@ -282,7 +285,7 @@ class BoardLink(BoardCalls, Protocol):
             try:
                 self.auth.on_frame(frame, now)
             except Exception:  # noqa: BLE001 - never let one frame kill the reader
-                _log.exception('%s: error handling frame %r', self.name, frame)
+                _log.exception('%s: error handling frame %r', self.name, frame, extra=self.log_extra)
 
     def tick(self) -> None:
         """Retries, time-outs, heartbeat, silence and re-read timers."""
@@ -344,5 +347,5 @@ class BoardLink(BoardCalls, Protocol):
             try:
                 fn(msg, frame)
             except Exception:  # noqa: BLE001
-                _log.exception('%s: listener failed', self.name)
+                _log.exception('%s: listener failed', self.name, extra=self.log_extra)
         self.states.heard_board()

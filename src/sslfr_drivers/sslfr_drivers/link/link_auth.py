@@ -138,7 +138,7 @@ class LinkAuth:
         link.last_error = str(link.version_error)
         self.session = None
         if link.states.state != BoardLinkState.REFUSED:
-            _log.error('%s: %s', link.name, link.version_error)
+            _log.error('%s: %s', link.name, link.version_error, extra=link.log_extra)
         link.requests.fail_all(link.version_error)
         link.states.set(BoardLinkState.REFUSED, str(link.version_error))
 

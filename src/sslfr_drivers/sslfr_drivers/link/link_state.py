@@ -67,12 +67,12 @@ class LinkStateMachine:
             if state == self.state:
                 return
             old, self.state = self.state, state
-        _log.info('%s: link %s -> %s %s', self.link.name, old.value, state.value, why)
+        _log.info('%s: link %s -> %s %s', self.link.name, old.value, state.value, why, extra=self.link.log_extra)
         for fn in list(self.listeners):
             try:
                 fn(state, self.link)
             except Exception:  # noqa: BLE001 - a listener bug must not kill the link
-                _log.exception('%s: state listener failed', self.link.name)
+                _log.exception('%s: state listener failed', self.link.name, extra=self.link.log_extra)
         with self.cv:
             if self.state == state:
                 self.shown = state
@@ -137,7 +137,8 @@ class LinkStateMachine:
         in it, requests waiting in it end with NoSession, never re-sent to a board that
         lost its position); a new session and the re-read follow."""
         link = self.link
-        _log.warning('%s: board reset detected (%s): position lost until re-homed', link.name, why)
+        _log.warning('%s: board reset detected (%s): position lost until re-homed', link.name, why,
+                     extra=link.log_extra)
         if end_session:
             link.end_session()
             link.requests.fail_all(NoSession(f'{link.name}: the board was reset ({why})'), session_only=True)
@@ -195,7 +196,7 @@ class LinkStateMachine:
                 pass
         except AuthError as exc:
             if str(exc) != link.auth_error:
-                _log.error('%s', exc)
+                _log.error('%s', exc, extra=link.log_extra)
             link.auth_error = link.last_error = str(exc)
             link.auth.session = None
             self.set(BoardLinkState.REFUSED, str(exc))

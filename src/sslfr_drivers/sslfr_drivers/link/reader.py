@@ -130,6 +130,7 @@ class ReaderThread:
         self.transport = transport
         self.protocol = protocol
         self.name = name or getattr(transport, 'name', 'port')
+        self._extra = getattr(protocol, 'log_extra', {})      # the protocol's node (log_route)
         self.read_timeout = read_timeout
         self.backoff = backoff or Backoff()
         self.opens = 0
@@ -209,7 +210,7 @@ class ReaderThread:
             try:
                 due = proto.next_tick()
             except Exception:  # noqa: BLE001 - the reader must survive a protocol bug
-                _log.exception('%s: protocol next_tick failed', self.name)
+                _log.exception('%s: protocol next_tick failed', self.name, extra=self._extra)
                 due = None
             if due is not None:
                 timeout = min(timeout, max(MIN_WAIT, due))
@@ -226,8 +227,8 @@ class ReaderThread:
                 try:
                     proto.data_received(data)
                 except Exception:  # noqa: BLE001 - the reader must survive any input
-                    _log.exception('%s: protocol failed on %d bytes', self.name, len(data))
+                    _log.exception('%s: protocol failed on %d bytes', self.name, len(data), extra=self._extra)
             try:
                 proto.tick()
             except Exception:  # noqa: BLE001
-                _log.exception('%s: protocol tick failed', self.name)
+                _log.exception('%s: protocol tick failed', self.name, extra=self._extra)

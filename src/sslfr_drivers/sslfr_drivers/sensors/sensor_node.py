@@ -76,7 +76,7 @@ class SensorBoardNode(LeanEvents, Node):
         return BoardSource(v['port'], v.get('framing', 'protocol'), v['baudrate'],
                            on_message=self._on_message, on_bytes=self._enqueue,
                            heartbeat=v['heartbeat'], key_file=v.get('key_file', ''),
-                           on_up=self._on_link_up)
+                           on_up=self._on_link_up, owner=self.get_name())
 
     def _change(self, new: dict) -> None:
         """ParameterGuard's apply: reopen the board if needed, then the subclass's

@@ -60,8 +60,10 @@ class BoardSource:
 
     def __init__(self, port: str, framing: str = 'protocol', baudrate: int = 115200,
                  on_message: Callable | None = None, on_bytes: Callable | None = None,
-                 heartbeat: float = 0.5, key_file: str = '', on_up: Callable | None = None):
+                 heartbeat: float = 0.5, key_file: str = '', on_up: Callable | None = None,
+                 owner: str = ''):
         self.on_up = on_up
+        self.owner = owner                  # the node it works for (its link's log lines)
         self.port = port
         self.key_file = key_file
         self.framing = framing
@@ -91,7 +93,7 @@ class BoardSource:
                 self.last_error = f'not starting the board link: {exc}'
                 return self
             self.link = BoardLink(transport, name=self.port, heartbeat=self.heartbeat,
-                                  silence=max(1.0, 4 * self.heartbeat), key=key)
+                                  silence=max(1.0, 4 * self.heartbeat), key=key, owner=self.owner)
             self.link.add_listener(lambda msg, frame: self.on_message(msg))
             if self.on_up is not None:
                 self.link.add_state_listener(

@@ -186,7 +186,8 @@ def cmd_error(args) -> int:
         raise CliError('--hours: solar hours must be within 0..24')
     desc = params.get('__description__')
     law = args.mode or (desc.longitudinal_law if desc is not None else 'eq16')
-    rows = performance.error_table(site, optic, np.radians(errors), _days(args.days), hours, law=law)
+    rows = performance.error_table(site, optic, np.radians(errors), _days(args.days), hours, law=law,
+                                   receiver_fixed=desc is not None and desc.receiver_fixed)
     labels = optic.geometry.mirror_labels()
     out = sys.stdout
     out.write('day,solar_hour,error_deg,transversal_deg,total_loss_pct,' + ','.join(labels) + '\n')

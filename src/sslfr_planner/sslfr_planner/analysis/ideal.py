@@ -19,7 +19,7 @@ from sslfr_common.contract import MIRRORS, MOBILE_STRUCTURE
 
 from .. import laws, raytrace
 from ..description import Description
-from ..prototype import commanded_lines, exact_lines, field_geometry, held_lines
+from ..prototype import commanded_lines, exact_lines, field_geometry, held_lines, law_offsets
 from .optics import OpticalParameters, incidence_factor, optical_yield, power
 
 
@@ -80,20 +80,36 @@ def _tilts(desc: Description, sun, beta_m, beta_a):
 
 
 def ideal_absorbed_power(desc: Description, zenith, azimuth, dni, beta_m=None, beta_a=None):
-    """Power [W] with every line at its exact angle (one drive per line, no law error).
+    """Power [W] with every line at its exact angle within the collector's mechanical
+    range (one drive per line, no law error): the collector's own ideal.
 
     With longitudinal movements (seed 000) this is :func:`optics.power` at the central
     mirror's theta_t'/2 with the mirrors focused on the tilted receiver, the tilts
     ``beta_m``, ``beta_a`` [rad] (default: the law's, :func:`longitudinal`); else every
-    line at seed 004 eqs. 3-4 (r = 0: seed 000 eqs. 11-14, seed 003 eqs. 5-6).
+    line at seed 004 eqs. 3-4 (r = 0: seed 000 eqs. 11-14, seed 003 eqs. 5-6). Where the
+    exact angles need the common drive beyond ``movements.mirrors.range`` (seed 004's
+    actuator ends at +-40 deg, theta_T ~ +-80 deg), the drive stops at its range end and
+    every line rides with it (:func:`ideal_lines`).
     """
     o = desc.optics
     sun = raytrace.sun_vector(zenith, azimuth, o.azimuth)
+    lo, hi = desc.movements[MIRRORS].range
     if desc.longitudinal_law != 'horizontal':
         bm, ba = _tilts(desc, sun, beta_m, beta_a)
-        return power(dni, sun, raytrace.central_mirror_tilt(sun, bm), bm, ba, optical_parameters(desc))
-    theta_t = raytrace.transversal_angle(sun)
-    return absorbed_power(desc, zenith, azimuth, dni, exact_lines(desc, theta_t))
+        tilt = np.clip(raytrace.central_mirror_tilt(sun, bm), lo, hi)
+        return power(dni, sun, tilt, bm, ba, optical_parameters(desc))
+    return absorbed_power(desc, zenith, azimuth, dni, ideal_lines(desc, raytrace.transversal_angle(sun)))
+
+
+def ideal_lines(desc: Description, theta_t):
+    """Every line's ideal angle [rad], (..., n_lines), at transversal angles ``theta_t``:
+    its exact angle (:func:`sslfr_planner.prototype.exact_lines`), all lines shifted
+    together where the common drive that carries them at the law's offsets would leave
+    its mechanical range (the drive held at the range end)."""
+    exact = exact_lines(desc, theta_t)
+    drive = np.mean(exact - law_offsets(desc, theta_t), axis=-1)
+    lo, hi = desc.movements[MIRRORS].range
+    return exact + (np.clip(drive, lo, hi) - drive)[..., None]
 
 
 def held_absorbed_power(desc: Description, zenith, azimuth, dni, drive, beta_m=None, beta_a=None):
@@ -132,4 +148,34 @@ def law_absorbed_power(desc: Description, zenith, azimuth, dni, law_zenith=None,
 
 
 __all__ = ['MIRRORS', 'aperture_area', 'optical_parameters', 'longitudinal', 'absorbed_power',
-           'ideal_absorbed_power', 'held_absorbed_power', 'law_absorbed_power']
+           'ideal_absorbed_power', 'ideal_lines', 'held_absorbed_power', 'law_absorbed_power']
+
+
+#: the loss table's tracking errors [deg]: seed 000 Figs. 22-24's span and its 0.06 / 0.36 deg
+LOSS_ERRORS_DEG = (0.0, 0.03, 0.06, 0.09, 0.12, 0.18, 0.24, 0.30, 0.36, 0.48, 0.60, 0.72, 1.0)
+#: the instants of the loss table: the equinoxes and solstices (of 2024) at these solar hours [h]
+LOSS_DAYS = ('2024-03-21', '2024-06-21', '2024-09-21', '2024-12-21')
+LOSS_HOURS = (9.0, 12.0, 15.0)
+
+
+def loss_table(desc: Description, latitude_deg: float, longitude_deg: float, elevation: float = 0.0):
+    """The collector's loss table (:mod:`sslfr_common.tracking_loss`): seed 000 section
+    5.2's study (eqs. 17-24: every line held epsilon below its ideal tilt, one drive) on
+    the 3-D trace of ``desc``'s optics at the site [deg, deg, m], under its longitudinal
+    law; for each error of :data:`LOSS_ERRORS_DEG`, the smallest and the largest loss [%]
+    over :data:`LOSS_DAYS` x :data:`LOSS_HOURS` (sun above the horizon). Rows (error
+    [rad], low [%], high [%]); ~0.1 s."""
+    from datetime import date
+
+    from .performance import AnalysisSite, error_table
+    site = AnalysisSite(latitude_deg, longitude_deg, elevation, desc.optics.azimuth)
+    errors = np.radians(LOSS_ERRORS_DEG)
+    rows = error_table(site, optical_parameters(desc), errors, [date.fromisoformat(d) for d in LOSS_DAYS],
+                       list(LOSS_HOURS), law=desc.longitudinal_law, receiver_fixed=desc.receiver_fixed)
+    out = []
+    for e in errors:
+        losses = [r.loss_total for r in rows if abs(r.error - e) < 1e-12]
+        if not losses:                 # the sun never up at those hours (polar night)
+            return ()
+        out.append((float(e), round(max(0.0, min(losses)), 2), round(min(100.0, max(losses)), 2)))
+    return tuple(out)

@@ -92,12 +92,15 @@ def sun_positions(t, site: AnalysisSite):
     return pos.zenith, pos.azimuth
 
 
-def commands(law: str, zenith, azimuth, t, site: AnalysisSite, geometry: FieldGeometry | None = None):
+def commands(law: str, zenith, azimuth, t, site: AnalysisSite, geometry: FieldGeometry | None = None,
+             receiver_fixed: bool = False):
     """The tracker's TRACKING commands (beta_0, beta_M, beta_a) [rad] and the sun vector.
 
     The planner's own code (:func:`sslfr_planner.tracking_table.tracking_commands`): the
     longitudinal law (``continuous``, ``eq16``, ``optimum_fixed``, ``daily``,
     ``horizontal``) and the mirrors' command in the tilted rows' frame.
+    ``receiver_fixed``: the collector does not move its receiver
+    (:attr:`sslfr_planner.description.Description.receiver_fixed`): beta_a is the fixed tilt.
     Returns (beta_0, beta_M, beta_a, sun (..., 3)).
     """
     from ..tracking_table import tracking_commands
@@ -108,6 +111,9 @@ def commands(law: str, zenith, azimuth, t, site: AnalysisSite, geometry: FieldGe
     z = np.asarray(zenith, dtype=float)
     a = np.asarray(azimuth, dtype=float)
     b0, bm, ba = tracking_commands(z, a, np.asarray(t, dtype=float), _site(site), c)
+    if receiver_fixed:
+        from ..description import FIXED_TILT
+        ba = np.full(np.shape(ba), FIXED_TILT)
     return b0, bm, ba, raytrace.sun_vector(z, a, site.collector_azimuth)
 
 
@@ -137,10 +143,12 @@ def solar_time_instant(day: date, hour: float, site: AnalysisSite) -> float:
     return solar_transit(local_mean_noon(day, s), s) + 3600.0 * (hour - 12.0)
 
 
-def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours, law: str = 'eq16'):
+def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hours, law: str = 'eq16',
+                receiver_fixed: bool = False):
     """Power loss caused by tracking errors (seed 000 eqs. 17-24, Figs. 22-24).
 
-    The collector follows ``law`` (seed 000's tracker: eq. 16); the central mirror is
+    The collector follows ``law`` (seed 000's tracker: eq. 16; ``receiver_fixed``: its
+    receiver does not move, :func:`commands`); the central mirror is
     held epsilon below its ideal tilt (eq. 17, every mirror the same: one drive). As in
     the seed's transversal study, l_abs and eta_opt are held constant: the tube is
     endless, so the loss of mirror i is (Q_i - Q_i^e) / Q_i from the 3-D trace.
@@ -166,7 +174,7 @@ def error_table(site: AnalysisSite, params: OpticalParameters, errors, days, hou
             zen, azi = sun_positions(np.array([t]), site)
             if zen[0] >= np.pi / 2:
                 continue
-            b0, bm, ba, sun = commands(law, zen, azi, np.array([t]), site, params.geometry)
+            b0, bm, ba, sun = commands(law, zen, azi, np.array([t]), site, params.geometry, receiver_fixed)
             tilts = np.concatenate([b0, b0[0] - errs])
             q = optics.power(1.0, sun[0], tilts, bm[0], ba[0], params, per_mirror=True, endless=True)
             ideal, real = q[0], q[1:]
