@@ -28,6 +28,7 @@
 #include <util/atomic.h>
 
 #define PWM_TOP 799u            /* 16 MHz / 800 = 20 kHz */
+#define PWM_START_COUNT ((uint16_t)(ACT_MIN_DUTY * (float)(PWM_TOP + 1u)))   /* the motor does not start at or below */
 #define DIR_BIT _BV(0)          /* PB0 = D8 */
 #define PWM_BIT _BV(1)          /* PB1 = D9 = OC1A */
 #define CONTROL_MS 10u
@@ -40,6 +41,7 @@ static volatile uint16_t g_adc_n;
 
 /* the board's state (read by the harness by symbol: `act`, actuator_state.h) */
 volatile act_state_t act __attribute__((used));
+static volatile uint8_t g_retarget;   /* MOVE_TO gave a new target while driving */
 static float act_blocks[NBLOCKS];   /* the motion watch's 100 ms block means */
 
 ISR(ADC_vect)
@@ -88,7 +90,14 @@ static void pwm_set(float duty)
     }
     if (duty > 0) PORTB |= DIR_BIT; else PORTB &= (uint8_t)~DIR_BIT;
     float a = fabsf(duty);
-    OCR1A = (uint16_t)(a * (float)(PWM_TOP + 1) + 0.5f);
+    uint16_t count = (uint16_t)(a * (float)(PWM_TOP + 1) + 0.5f);
+    /* a drive is at least the first count above the start duty: rounded down to the
+     * start duty itself, a slow approach (a speed under half a count: 0.15 mm/s with a
+     * 0.2 m/s actuator) would leave the motor standing while the loop drives, and the
+     * motion watch would latch STALL */
+    if (count <= PWM_START_COUNT) count = PWM_START_COUNT + 1u;
+    if (count > PWM_TOP + 1u) count = PWM_TOP + 1u;
+    OCR1A = count;
     TCCR1A |= _BV(COM1A1);
 }
 
@@ -119,6 +128,10 @@ static uint8_t watch_update(uint32_t now, uint8_t driving, float angle)
         act.watching = 1;
         act.since = now;
         act.block_start = now;
+    }
+    if (g_retarget) {           /* at the loop's own `now`: a time read later would be ahead of it */
+        g_retarget = 0;
+        act.since = now;
     }
     if ((uint32_t)(now - act.since) > ACT_TIMEOUT_MS)
         return 1;
@@ -250,6 +263,10 @@ static uint8_t handle_move(const proto_frame_t *req, proto_frame_t *ans)
         return session_nack(req, ans, ERR_OUT_OF_RANGE);
     if (!act.has_target || act.duty == 0.0f)
         watch_reset();
+    else if (target != act.target)
+        g_retarget = 1;         /* a new target is a new move: its time-out starts again
+                                   (the stall window keeps its blocks: a tracking loop
+                                   gets a new target every control period) */
     act.target = target;
     act.speed = m.speed * ACT_STEP_RAD;
     act.has_target = 1;

@@ -164,7 +164,9 @@ class MotionWatch:
     ``min_change`` [rad] over that window: the change is the difference of the means of
     the first and last quarters of the window's samples (noise averages out; choose
     ``min_change`` above a few noise sigmas of one reading all the same).
-    *Time-out*: one move (driving without a pause) lasting longer than ``timeout`` [s].
+    *Time-out*: one move (driving without a pause toward one target) lasting longer
+    than ``timeout`` [s]; a new target starts a new move (:meth:`new_target`: a loop
+    tracking a target that moves on every control period may drive without a pause).
     """
 
     window: float
@@ -178,6 +180,11 @@ class MotionWatch:
         self._since = None
         self._hist = None
 
+    def new_target(self) -> None:
+        """A new target while driving: the time-out counts again, the stall window
+        keeps its samples."""
+        self._since = None
+
     def update(self, now: float, driving: bool, angle: float) -> str | None:
         """Feed one sample (steady ``now`` [s], whether the drive is powered, measured
         ``angle`` [rad]); a fault reason or None."""
@@ -185,7 +192,9 @@ class MotionWatch:
             self.reset()
             return None
         if self._since is None:
-            self._since, self._hist = now, []
+            self._since = now
+        if self._hist is None:
+            self._hist = []
         hist = self._hist
         hist.append((now, angle))
         while len(hist) > 1 and now - hist[1][0] >= self.window:

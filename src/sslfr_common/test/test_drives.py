@@ -89,6 +89,15 @@ def test_motion_watch_stall_and_timeout():
             break
     assert why.startswith('time-out') and i * 0.2 > 10.0
     assert w.update(30.0, False, 0.0) is None                # stopped: forgotten
+    for i in range(100):                 # tracking: a new target every 0.2 s, driving through
+        w.new_target()
+        assert w.update(i * 0.2, True, R(0.1) * i) is None
+    for i in range(20):                  # ... and a stall is still one (the window kept)
+        w.new_target()
+        why = w.update(20.0 + i * 0.2, True, R(9.9))
+        if why:
+            break
+    assert why and why.startswith('stall') and 20.0 + i * 0.2 - 19.8 >= 2.0    # 2 s after the last motion
 
 
 def test_inclinometer_offset_noise_resolution():

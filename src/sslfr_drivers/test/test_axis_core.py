@@ -408,3 +408,16 @@ def test_a_wind_stow_goes_to_the_wind_pose_a_silent_supervisor_to_the_stow_posit
     sup.safety.silent_stow_after = 0.5
     act = sup.tick(150.2, 3.5, _board(steps=cal.steps(0.5), moving=True, sensor=0.5), True)   # 2.1 s silent
     assert act.kind == 'move' and act.steps == cal.steps(math.pi / 2)
+
+
+@pytest.mark.parametrize('invert', [False, True])
+def test_steps_of_a_target_stay_inside_the_limits(invert):
+    cal = Calibration(invert=invert)                             # 0.006 deg/step: 40 deg is 6666.67 steps
+    lim = SoftLimits(math.radians(-40.0), math.radians(40.0))
+    for theta in (math.radians(40.0), math.radians(41.0), math.radians(-40.0)):
+        s = lim.steps(cal, theta)
+        assert lim.contains(cal.angle(s), tol=0.0) and abs(cal.angle(s) - lim.clamp(theta)) < cal.step_angle
+    margin = math.radians(0.05)
+    s = lim.steps(cal, math.radians(40.0), margin)
+    assert math.radians(40.0) - margin - cal.step_angle < cal.angle(s) <= math.radians(40.0) - margin
+    assert lim.steps(cal, math.radians(12.0), margin) == cal.steps(math.radians(12.0))   # inside: the nearest

@@ -171,3 +171,28 @@ def test_reference_keeper_records_on_set_zero_and_marks_lost_on_a_board_reset(tm
     again.after_read(homed, False, False, 4)
     assert again.state.startswith('lost')
     assert 'not kept' in keep.after_write(Action('set_zero', 0), True, None, 2.0)
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_actuator_drive_reaches_its_stow_on_the_range_end(seed):
+    """Seed 004's sleeping and stow positions are the range end (40 deg): the step
+    nearest 40 deg lies beyond it (40 / 0.006 is not whole) and the board's step zero,
+    taken from its own reading at SET_ZERO, differs from the host's by the reading
+    noise; the target stays a deadband inside the range, so the board never refuses it."""
+    desc = shipped_description('florianopolis_lepten')
+    mv = desc.movement('mirrors')
+    p = _params(drive=mv.drive, deadband=mv.deadband, lower_limit=mv.range[0], upper_limit=mv.range[1],
+                stow_position=mv.stow, host_loss_stow_position=mv.stow, home_position=mv.stow, max_speed=0.03)
+    cfg, stall = tuning_from(p)
+    sup = AxisSupervisor(cfg, stall=stall)
+    sup.safety.receive(0.0, 0, False, [], 1)
+    board = ActuatorSim(ActuatorConfig.from_description(desc, initial_angle=R(40.0)), rng=random.Random(seed))
+    board.tick(0.0)
+    for end in (mv.range[1], mv.range[0]):
+        times = [T0 + k for k in range(0, 200, 5)]
+        assert sup.store.offer(TrajectoryMsg.for_joint('mirrors', times, [end] * len(times), None), 'mirrors',
+                               T0, cfg.limits) is None
+        t, refused = _loop(sup, board, 60.0 if end > 0 else 180.0, 0.0 if end > 0 else 60.0)
+        assert refused == [] and sup.fault is None, (refused, sup.fault)
+        assert abs(board.angle - end) <= 2.0 * mv.deadband and mv.range[0] <= board.angle <= mv.range[1], \
+            math.degrees(board.angle)

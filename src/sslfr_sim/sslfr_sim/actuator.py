@@ -192,6 +192,8 @@ class ActuatorSim(SimBoard):
                 raise Refuse(m.ErrorCode.OUT_OF_RANGE)
             if self.target is None or self.duty == 0.0:
                 self.watch.reset()
+            elif target != self.target:
+                self.watch.new_target()
             self.target = target
             self.speed_limit = msg.speed * c.step_rad
             self.faults &= ~(m.FaultBits.WATCHDOG | m.FaultBits.LIMIT | m.FaultBits.STALL)

@@ -40,6 +40,11 @@ class Drive:
         """A board at rest at ``board_steps`` needs no MOVE_TO to ``target_steps``: exactly there."""
         return target_steps == board_steps
 
+    def range_margin(self, cfg) -> float:
+        """How far inside its range [rad] a MOVE_TO target stays: 0, the board's step
+        counter is the host's (both set by SET_ZERO / HOME to the same count)."""
+        return 0.0
+
     def reference(self, cfg, board: BoardState, samples: list, last_known: float | None,
                   requested: bool) -> tuple[Action, str]:
         """One re-referencing tick (``requested``: the home service was called)."""
@@ -66,6 +71,15 @@ class LinearActuator(Drive):
         return abs(target_steps - board_steps) <= tol
 
     settled = reached
+
+    def range_margin(self, cfg):
+        """The deadband: the board sets its step zero from its own inclinometer reading
+        at SET_ZERO, the host sends the mean of several, so the board's angle of a step
+        count differs from the host's by the reading noise (a few steps); a target on
+        the range end (the sleeping and stow positions of seed 004's description) would
+        then be refused OUT_OF_RANGE now and then. The loop rests anywhere within the
+        deadband of its target anyway."""
+        return cfg.deadband
 
     def reference(self, cfg, board, samples, last_known, requested):
         if board.sensor is None:

@@ -82,6 +82,22 @@ class SoftLimits:
         """``theta`` [rad] clamped into the limits."""
         return min(self.upper, max(self.lower, theta))
 
+    def steps(self, cal: Calibration, theta: float, margin: float = 0.0) -> int:
+        """The step count [steps] nearest ``theta`` [rad] whose angle lies inside the
+        limits narrowed by ``margin`` [rad] (>= 0) on each side: a target on a limit
+        would otherwise round to the step just beyond it, which the board refuses
+        (OUT_OF_RANGE) when the limit is its mechanical range."""
+        lo, hi = self.lower + margin, self.upper - margin
+        if lo > hi:
+            lo = hi = 0.5 * (self.lower + self.upper)
+        steps = cal.steps(min(hi, max(lo, theta)))
+        inward = 1 if cal.steps(1.0) >= cal.steps(0.0) else -1     # steps grow with the angle?
+        if cal.angle(steps) > hi + 1e-12:
+            steps -= inward
+        elif cal.angle(steps) < lo - 1e-12:
+            steps += inward
+        return steps
+
 
 def move_speed(current: float, target: float, horizon: float, max_speed: float,
                min_speed: float) -> float:

@@ -214,7 +214,7 @@ class AxisSupervisor:
     def _move(self, board: BoardState, target: float, state: str, reason: str = '') -> Action:
         cfg, cal = self.cfg, self.cfg.calibration
         target = cfg.limits.clamp(target)
-        steps = cal.steps(target)
+        steps = cfg.limits.steps(cal, target, self.drive.range_margin(cfg))
         self.state, self.reason = state, reason
         self.commanded = cal.angle(steps)
         speed = move_speed(self.measured(board), target, cfg.lead, cfg.max_speed, cfg.min_speed)
