@@ -291,7 +291,9 @@ def main(argv=None) -> int:  # noqa: C901 - one sequence of checks
         if not ok:
             return 1
         # the start-up's stow (axes referencing, nodes not heard yet) cleared: safety OK
-        wait_for(lambda: obs.safety_level(time.monotonic() - 1.0) == 0 and obs.phase_name(), 60.0)
+        # and the planner's phase past the start-up's STOW (it follows safety's OK a moment later)
+        wait_for(lambda: obs.safety_level(time.monotonic() - 1.0) == 0 and obs.phase_name() not in (None, 'STOW'),
+                 60.0)
         before = obs.safety_level()
         phase = obs.phase_name()
         check(before == 0 and phase, f'safety OK after the start-up, level {before} {obs.safety[-1][2] if obs.safety else ""}; '

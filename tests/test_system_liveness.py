@@ -39,11 +39,11 @@ from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
 SPEED = 30.0
-#: [s wall] between two hangs: bound (5 s) + the restart wait (the DDS lease + 1 s = 4 s,
+#: [s wall] between two hangs: bound (5 s) + the restart wait (the DDS lease + 1 s = 6 s,
 #: sslfr_bringup.dds_profile) + a process's start-up to its first beat on a loaded 2-core
 #: machine (seen up to 9 s for three processes restarted at once) + RESUME_WALL + 2 s of
 #: tracking to check, with room to spare
-SPACING_WALL = 38.0
+SPACING_WALL = 40.0
 #: [s wall] from the restart to tracking again: start-up (rclpy import 1-3 s loaded),
 #: discovery, the drivers' activation, safety back to OK and the return from the stow
 RESUME_WALL = 15.0
