@@ -1,7 +1,45 @@
-"""Test support: a collector no seed describes, written as files (issue 34 item 7)."""
+"""Test support for the prototypes' runs: a collector no seed describes, written as
+files (issue 34 item 7), and what their recorded days are judged on."""
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import yaml
+
+from sslfr_common.contract import Phase
+
+
+def site_of(day) -> tuple[float, float]:
+    """(latitude, longitude) [deg] the planner reported in the day's ``tracker/phase``."""
+    k = np.asarray(day.phase['site_source']) != ''
+    return float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k]))
+
+
+def tracking(day):
+    """(the mirrors' status series, mask): the statuses while TRACKING and on their
+    setpoint (following it, holding it or waiting for its next motor step; moves and
+    stows excluded)."""
+    s = day.axes['mirrors']
+    phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
+    k = np.searchsorted(phase_t, s.t, side='right') - 1
+    on = (k >= 0) & (phase[np.clip(k, 0, None)] == Phase.TRACKING)
+    return s, on & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting'))
+
+
+def planned_steps(day, t0: float, t1: float, joint: str = 'mirrors', least: float = math.radians(0.5)):
+    """The steps of ``joint`` in the planner's recorded trajectories (1 s points) within
+    [t0, t1] [s]: (times [s], positions [rad], indices of the points that jump by more
+    than ``least`` [rad] from the previous one)."""
+    planned = {}
+    for tr in day.trajectories:
+        if joint in tr.joints:
+            planned.update(zip(np.round(tr.times).tolist(), tr.positions[:, tr.joints.index(joint)].tolist()))
+    pt = np.array(sorted(planned))
+    pv = np.array([planned[k] for k in pt])
+    inside = (pt >= t0) & (pt <= t1)
+    pt, pv = pt[inside], pv[inside]
+    return pt, pv, np.flatnonzero(np.abs(np.diff(pv)) > least) + 1
 
 
 def write_fourth_collector(tmp_path):

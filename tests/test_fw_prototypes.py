@@ -20,6 +20,7 @@ import re
 import numpy as np
 import pytest
 
+from collectors_testutil import planned_steps, site_of, tracking
 from fw_support import require
 
 from sslfr_bringup import nodeset
@@ -32,7 +33,6 @@ from sslfr_sim import scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 DATE = '2026-06-21'
-TRACKING = 2
 ANCHOR_MARGIN = 25        # [s wall] the firmware boards start slower (tests/test_fw_system.py)
 #: prototype -> (site config, window UTC: sunrise to sunset with margins, simulated s per wall s)
 DAYS = {'seed003': ('bucaramanga_single_axis.yaml', '11:45', '22:15', 1600.0),
@@ -70,38 +70,15 @@ def _energy(text):
     return tuple(float(v) for v in found.groups())
 
 
-def _tracking(day):
-    """The mirrors' statuses while TRACKING and on their setpoint (following it, holding
-    it or waiting for its next motor step; moves and stows excluded)."""
-    s = day.axes['mirrors']
-    phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
-    k = np.searchsorted(phase_t, s.t, side='right') - 1
-    tracking = (k >= 0) & (phase[np.clip(k, 0, None)] == TRACKING)
-    return s, tracking & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting'))
-
-
-def _site(day):
-    k = np.asarray(day.phase['site_source']) != ''
-    return float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k]))
-
-
 def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     text, day, desc, config, speed = _day('seed003', ros_env, tmp_path / 'out')
     assert 'simulated operator referenced mirrors' in text, text[-3000:]
     assert '/axes/mobile_structure/status' not in day.topics and '/gps/fix' not in day.topics
-    s, ok = _tracking(day)
+    s, ok = tracking(day)
     t, setpoint, measured = (np.asarray(s.t)[ok], np.asarray(s['setpoint'])[ok], np.asarray(s['measured'])[ok])
     assert ok.sum() > 80, ok.sum()                     # a status every 0.2 s wall: 320 simulated s at 1600x
     # the planner's steps (its recorded 1 s trajectories): every 15 minutes while tracking
-    planned = {}
-    for tr in day.trajectories:
-        if 'mirrors' in tr.joints:
-            planned.update(zip(np.round(tr.times).tolist(), tr.positions[:, tr.joints.index('mirrors')].tolist()))
-    pt = np.array(sorted(planned))
-    pv = np.array([planned[k] for k in pt])
-    inside = (pt >= t[0]) & (pt <= t[-1])
-    pt, pv = pt[inside], pv[inside]
-    jump = np.flatnonzero(np.abs(np.diff(pv)) > math.radians(0.5)) + 1
+    pt, pv, jump = planned_steps(day, t[0], t[-1])
     jumps, gaps = pt[jump], np.diff(pt[jump])
     assert len(jumps) >= 30 and np.all(np.abs(gaps - 900.0) <= 2.0), gaps
     m = desc.movement('mirrors')
@@ -147,11 +124,11 @@ def test_seed004_day_on_its_actuator_firmware(ros_env, tmp_path):
     assert '/axes/mobile_structure/status' not in day.topics and '/gps/fix' not in day.topics
     # no move refused, no board fault all day (the report's link line)
     assert 'OUT_OF_RANGE' not in text and FAULT_FREE.search(text), text[-3000:]
-    s, ok = _tracking(day)
+    s, ok = tracking(day)
     assert ok.sum() > 200, ok.sum()
     t, measured, setpoint = np.asarray(s.t)[ok], np.asarray(s['measured'])[ok], np.asarray(s['setpoint'])[ok]
     mv = desc.movement('mirrors')
-    ref = reference(str(config), *_site(day), 30.0)
+    ref = reference(str(config), *site_of(day), 30.0)
     theta_t = np.asarray(ref(t).transversal, dtype=float)
     inside = np.abs(theta_t) <= mv.law_params['transversal_limit']
     t, measured, setpoint, theta_t = t[inside], measured[inside], setpoint[inside], theta_t[inside]

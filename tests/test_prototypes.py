@@ -14,7 +14,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from collectors_testutil import write_fourth_collector
+from collectors_testutil import planned_steps, site_of, tracking, write_fourth_collector
 from conftest import ROOT
 
 from sslfr_bringup import nodeset
@@ -79,42 +79,19 @@ def _energy_text(e) -> str:
             f"{e['law_kwh']:.2f} kWh ({100 * e['law_kwh'] / e['ideal_kwh']:.1f} % of the exact ideal)")
 
 
-def _site(day):
-    k = np.asarray(day.phase['site_source']) != ''
-    return float(np.median(day.phase['latitude'][k])), float(np.median(day.phase['longitude'][k]))
-
-
-def _tracking(day):
-    """The mirrors' statuses while TRACKING and on their setpoint (following it, holding
-    it or waiting for its next motor step; moves and stows excluded)."""
-    s = day.axes['mirrors']
-    phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
-    k = np.searchsorted(phase_t, s.t, side='right') - 1
-    tracking = (k >= 0) & (phase[np.clip(k, 0, None)] == TRACKING)
-    on_setpoint = np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting'))
-    return s, tracking & on_setpoint
-
-
 def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_stepper(prototype_day):
     text, day, desc, config = prototype_day('seed003')
     assert 'simulated operator referenced mirrors' in text, text[-3000:]
     assert set(day.topics) >= {'/axes/mirrors/status'} and '/axes/mobile_structure/status' not in day.topics
     assert '/gps/fix' not in day.topics                      # seed 003 lists no GPS board
-    s, ok = _tracking(day)
+    s, ok = tracking(day)
     assert ok.sum() > 200, ok.sum()
     setpoint = np.asarray(s['setpoint'])[ok]
     t = np.asarray(s.t)[ok]
     # the steps in the planner's recorded trajectories (1 s points; a status is sampled
     # too seldom at 600x to time them): every 15 minutes while tracking (section 2.3.1)
-    planned = {}
-    for tr in day.trajectories:
-        if 'mirrors' in tr.joints:
-            planned.update(zip(np.round(tr.times).tolist(), tr.positions[:, tr.joints.index('mirrors')].tolist()))
-    pt = np.array(sorted(planned))
-    pv = np.array([planned[k] for k in pt])
-    inside = (pt >= t[0]) & (pt <= t[-1])
-    pt, pv = pt[inside], pv[inside]
-    jumps = pt[1:][np.abs(np.diff(pv)) > math.radians(0.5)]
+    pt, _, jump = planned_steps(day, t[0], t[-1])
+    jumps = pt[jump]
     gaps = np.diff(jumps)
     assert len(jumps) >= 30 and np.all(np.abs(gaps - 900.0) <= 2.0), gaps
     rate = abs(setpoint[-1] - setpoint[0]) / (t[-1] - t[0]) * 3600.0
@@ -141,11 +118,11 @@ def test_seed003_day_steps_every_15_minutes_within_72_deg_on_its_switchless_step
 def test_seed004_day_every_line_within_the_budget_of_the_exact_solution(prototype_day):
     text, day, desc, config = prototype_day('seed004')
     assert '/axes/mobile_structure/status' not in day.topics and '/gps/fix' not in day.topics
-    s, ok = _tracking(day)
+    s, ok = tracking(day)
     assert ok.sum() > 200, ok.sum()
     t, measured = np.asarray(s.t)[ok], np.asarray(s['measured'])[ok]
     setpoint = np.asarray(s['setpoint'])[ok]
-    lat, lon = _site(day)
+    lat, lon = site_of(day)
     table = reference(config, lat, lon, 30.0)(t)
     theta_t = np.asarray(table.transversal, dtype=float)
     inside = np.abs(theta_t) <= desc.movement('mirrors').law_params['transversal_limit']
@@ -174,12 +151,12 @@ def test_seed004_every_line_within_the_uncertainty_budget_while_tracking(tmp_pat
     config = nodeset.resolve_config(DAYS['seed004'][0])
     desc = load(nodeset.for_config(nodeset.load(), config).collector)
     text, day = run_sim(config, '17:00', '17:10', tmp_path / 'out', speed=30.0, timeout=200.0)
-    s, ok = _tracking(day)
+    s, ok = tracking(day)
     t = np.asarray(s.t)[ok]
     keep = t >= t[0] + 120.0                       # after the slew from the sleeping position
     t, measured = t[keep], np.asarray(s['measured'])[ok][keep]
     assert len(t) > 30, (len(t), text[-3000:])
-    lat, lon = _site(day)
+    lat, lon = site_of(day)
     theta_t = np.asarray(reference(config, lat, lon, 30.0)(t).transversal, dtype=float)
     offsets = np.asarray(desc.movement('mirrors').law_params['offsets'])
     err = np.degrees(np.abs(measured[:, None] + offsets[None, :] - prototype.exact_lines(desc, theta_t)))
@@ -203,7 +180,7 @@ def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
     assert sorted(n for n in started if n.endswith('_driver')) == ['mirrors_driver', 'mobile_structure_driver']
     assert 'gps' not in started, started
     assert {t for t in day.topics if t.startswith('/axes/')} == {'/axes/mirrors/status', '/axes/mobile_structure/status'}
-    lat, lon = _site(day)
+    lat, lon = site_of(day)
     ref = reference(config, lat, lon, 12.0)
     settled = 0.0                                  # when both axes follow their law
     for axis in ('mirrors', 'mobile_structure'):
