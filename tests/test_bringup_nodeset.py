@@ -146,10 +146,13 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     by = {e['name']: e for e in entries}
     moved = str(tmp_path / 'site.params.yaml')      # the site config, moved under /sslfr1
     assert by['mirrors_driver']['lifecycle'] and not by['planner']['lifecycle']
-    from sslfr_bringup.collector_set import driver_parameters
+    from sslfr_bringup.collector_set import driver_parameters, loss_table_param
     from sslfr_planner.description import load
-    mv = load(nodeset.config_dir() / nodeset.load().collector).movement('mirrors')
-    assert by['mirrors_driver']['parameters'] == [moved, {**driver_parameters(mv), 'port': '/dev/sslfr/mirrors'}]
+    desc = load(nodeset.config_dir() / nodeset.load().collector)
+    table = loss_table_param(desc, nodeset.node_params(nodeset.read_params(site), 'planner'))
+    assert len(table) > 3                           # the collector's own loss table at the site
+    assert by['mirrors_driver']['parameters'] == [moved, {**driver_parameters(desc.movement('mirrors')),
+                                                          'accuracy.loss_table': table, 'port': '/dev/sslfr/mirrors'}]
     assert by['gps']['parameters'] == [moved]      # its port comes from the config's gps section
     assert all(e['namespace'] == '/sslfr1' for e in entries)
     # the node sections reach the namespaced nodes (rcl: a bare `planner:` is the root's only)
@@ -181,8 +184,8 @@ def test_launch_environment_defaults_env_and_arguments(monkeypatch):
     assert mod._environment('', '') == {'ROS_DOMAIN_ID': str(ns.domain_id),
                                          'ROS_AUTOMATIC_DISCOVERY_RANGE': ns.discovery_range,
                                          dds_profile.PROFILE_ENV: profile}
-    # a node process is respawned after its DDS lease (3 s) + 1 s, not the 2 s of old
-    assert mod._respawn_delay(mod._environment('', '')) == 4.0
+    # a node process is respawned after its DDS lease (5 s) + 1 s, not the 2 s of old
+    assert mod._respawn_delay(mod._environment('', '')) == 6.0
     monkeypatch.setenv('ROS_DOMAIN_ID', '7')
     assert mod._environment('', '')['ROS_DOMAIN_ID'] == '7'
     assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
@@ -245,9 +248,9 @@ def test_environment_defaults_non_zero_domain_and_localhost():
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'})['ROS_DOMAIN_ID'] == '7'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'}, domain_id=9)['ROS_DOMAIN_ID'] == '9'
-    # the node set's Fast DDS profile (a 3 s participant lease), unless one is named
+    # the node set's Fast DDS profile (a 5 s participant lease), unless one is named
     assert env[dds_profile.PROFILE_ENV] == str(nodeset.config_dir() / dds_profile.PROFILE_FILE)
-    assert dds_profile.participant_lease(env[dds_profile.PROFILE_ENV]) == 3.0
+    assert dds_profile.participant_lease(env[dds_profile.PROFILE_ENV]) == 5.0
     own = nodeset.ros_environment(ns, base={dds_profile.PROFILE_ENV: '/etc/my_fastdds.xml'})
     assert own[dds_profile.PROFILE_ENV] == '/etc/my_fastdds.xml'
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,10 +99,12 @@ def test_tracking_window_every_axis_within_one_step_of_the_ephemeris(layout, ros
         report[axis] = (float(np.max(err)), float(np.sqrt(np.mean(err ** 2))))
         assert np.max(err) <= TOL, (axis, np.degrees(report[axis]), 'deg (max, rms)')
     # each board link's lines are under the node it works for, in both layouts (a composed
-    # process holds six board nodes: sslfr_common.log_route)
-    linked = {name for name, msg in zip(day.logs['name'], day.logs['msg']) if ': link ' in msg}
-    assert linked >= {f'{a}_driver' for a in JOINTS} | {'absorber_board', 'irradiance', 'gps'}, \
-        sorted(zip(day.logs['name'], day.logs['msg']))[:40]
+    # process holds six board nodes: sslfr_common.log_route): the port (<board>.pty of the
+    # simulated board) names the board, the board its node
+    owner = {n.board: n.name for n in nodeset.load().nodes if n.board}
+    links = [(name, Path(msg.split(': link ')[0]).stem) for name, msg in zip(day.logs['name'], day.logs['msg'])
+             if ': link ' in msg and msg.split(': link ')[0].endswith('.pty')]
+    assert links and all(name == owner.get(board) for name, board in links), links
     print('tracking error vs ephemeris (max, rms) [deg]:',
           {a: tuple(round(math.degrees(v), 5) for v in r) for a, r in report.items()})
 
