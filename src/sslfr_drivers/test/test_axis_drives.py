@@ -52,7 +52,9 @@ def _loop(sup, board, t_end, t=0.0, dt=0.05, active=True):
     return t, refused
 
 
-def test_actuator_drive_tracks_a_trajectory_within_the_deadband():
+def _lepten_rig(initial_deg: float, seed: int):
+    """Seed 004's drive: (description, mirrors movement, the driver's tuning from the
+    description, a supervisor with it, its actuator simulator at ``initial_deg``), safety OK."""
     desc = shipped_description('florianopolis_lepten')
     mv = desc.movement('mirrors')
     p = _params(drive=mv.drive, deadband=mv.deadband, lower_limit=mv.range[0], upper_limit=mv.range[1],
@@ -60,8 +62,13 @@ def test_actuator_drive_tracks_a_trajectory_within_the_deadband():
     cfg, stall = tuning_from(p)
     sup = AxisSupervisor(cfg, stall=stall)
     sup.safety.receive(0.0, 0, False, [], 1)
-    board = ActuatorSim(ActuatorConfig.from_description(desc, initial_angle=R(-20.0)), rng=random.Random(9))
+    board = ActuatorSim(ActuatorConfig.from_description(desc, initial_angle=R(initial_deg)), rng=random.Random(seed))
     board.tick(0.0)
+    return desc, mv, cfg, sup, board
+
+
+def test_actuator_drive_tracks_a_trajectory_within_the_deadband():
+    desc, mv, cfg, sup, board = _lepten_rig(-20.0, 9)
     # a ramp of the lines from -20 deg to -15 deg over 60 s (5 deg/min, far faster than the sun)
     times = [T0 + k for k in range(0, 61, 5)]
     pos = [R(-20.0) + R(5.0) * k / 60 for k in range(0, 61, 5)]
@@ -179,15 +186,7 @@ def test_actuator_drive_reaches_its_stow_on_the_range_end(seed):
     nearest 40 deg lies beyond it (40 / 0.006 is not whole) and the board's step zero,
     taken from its own reading at SET_ZERO, differs from the host's by the reading
     noise; the target stays a deadband inside the range, so the board never refuses it."""
-    desc = shipped_description('florianopolis_lepten')
-    mv = desc.movement('mirrors')
-    p = _params(drive=mv.drive, deadband=mv.deadband, lower_limit=mv.range[0], upper_limit=mv.range[1],
-                stow_position=mv.stow, host_loss_stow_position=mv.stow, home_position=mv.stow, max_speed=0.03)
-    cfg, stall = tuning_from(p)
-    sup = AxisSupervisor(cfg, stall=stall)
-    sup.safety.receive(0.0, 0, False, [], 1)
-    board = ActuatorSim(ActuatorConfig.from_description(desc, initial_angle=R(40.0)), rng=random.Random(seed))
-    board.tick(0.0)
+    desc, mv, cfg, sup, board = _lepten_rig(40.0, seed)
     for end in (mv.range[1], mv.range[0]):
         times = [T0 + k for k in range(0, 200, 5)]
         assert sup.store.offer(TrajectoryMsg.for_joint('mirrors', times, [end] * len(times), None), 'mirrors',
