@@ -17,6 +17,7 @@ import time
 import pytest
 
 from sslfr_common.contract import SAFETY_STATE, TRACKER_TRAJECTORY, WIND
+from sslfr_common.timeconv import to_sec
 from sslfr_sim.runner import SimThread
 from sslfr_sim.sensors import AbsorberSim
 
@@ -76,6 +77,13 @@ def test_a_gust_stows_within_2_s_to_the_wind_pose_and_the_release_waits_the_hold
     from sslfr_interfaces.msg import SafetyState
     sim, box, output = plant
     assert max(m.speed for _, m in box['wind']) < GUST          # the calm default breeze
+    # published at wind_rate (1 Hz) of the 4 Hz samples, and at once on a new gust maximum
+    def gap(a, b):
+        return to_sec(b.header.stamp) - to_sec(a.header.stamp)
+    pairs = [(a, b) for (_, a), (_, b) in zip(box['wind'], box['wind'][1:])]
+    periodic = [gap(a, b) for a, b in pairs if b.gust <= a.gust]
+    assert periodic and min(periodic) >= 0.9, periodic
+    assert all(b.gust > a.gust for a, b in pairs if gap(a, b) < 0.9)
     t_fault = time.monotonic()
     _fault(sim, 'wind', True, value=20.0)
 

@@ -134,6 +134,7 @@ class AccuracyAlarm:
         self.judged_time = 0.0                  # ROS time [s] judged (tracking)
         self.tracking = False
         self._samples: deque = deque()          # (t, error^2) in the window
+        self._sum = 0.0                         # of error^2 over _samples [rad^2]: a running sum
         self._last_t: float | None = None
         self._last_sp = math.nan
         self._move_since: float | None = None   # ROS time the current move began
@@ -176,9 +177,12 @@ class AccuracyAlarm:
                     self.time_above[lvl] += dt
         self.tracking = True
         self._samples.append((t, err * err))
-        while self._samples and self._samples[0][0] < t - self.cfg.window:
-            self._samples.popleft()
-        self.filtered = math.sqrt(sum(e for _, e in self._samples) / len(self._samples))
+        self._sum += err * err
+        while self._samples[0][0] < t - self.cfg.window:      # the new sample always stays
+            self._sum -= self._samples.popleft()[1]
+        if len(self._samples) == 1:
+            self._sum = self._samples[0][1]      # exact again: no rounding carried over a day
+        self.filtered = math.sqrt(max(self._sum, 0.0) / len(self._samples))
         self.peak = max(self.peak, self.filtered)
         return self._judge()
 
@@ -201,6 +205,7 @@ class AccuracyAlarm:
     def _stop_judging(self):
         self.tracking = False
         self._samples.clear()
+        self._sum = 0.0
         self.filtered = math.nan
         if self.level != OK:
             self.level = OK

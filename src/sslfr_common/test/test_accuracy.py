@@ -145,3 +145,22 @@ def test_the_loss_table_parameter_is_refused_unless_a_table():
     cfg = AccuracyConfig.from_params({'accuracy.warn_threshold': D(0.06), 'accuracy.error_threshold': D(0.36),
                                       'accuracy.window': 60.0, 'accuracy.loss_table': to_flat(TABLE)})
     assert cfg.loss_table == TABLE
+
+
+def test_filtered_is_the_rms_of_the_window_over_a_long_day():
+    """The running sum behind ``filtered`` equals the RMS recomputed over the window,
+    after a day of samples with errors spanning five decades (no rounding carried)."""
+    import random
+    rnd = random.Random(7)
+    a = AccuracyAlarm('mirrors', AccuracyConfig(window=30.0))
+    kept, t = [], 0.0
+    for k in range(40000):
+        t += 0.2
+        err = D(rnd.choice((1e-4, 1e-3, 1e-2, 0.05)) * rnd.random()) if k < 39000 else D(1e-6)
+        a.sample(t, True, 0.3, 0.3 + err)
+        if k == 0:
+            continue                             # a start is a move: judged from the next sample
+        assert a.tracking
+        kept = [(ts, e) for ts, e in kept if ts >= t - 30.0] + [(t, err)]
+        if k % 997 == 0 or k > 39990:
+            assert a.filtered == pytest.approx(math.sqrt(sum(e * e for _, e in kept) / len(kept)), rel=1e-9)

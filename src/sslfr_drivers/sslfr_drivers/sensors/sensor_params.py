@@ -89,6 +89,9 @@ ABSORBER_BOARD = _board_table(
     ParamSpec('anemometer_offset', anemometer.OFFSET, 'anemometer calibration: speed added while '
                                                       'the cups turn (starting threshold, typical 0.35) [m/s]',
               'm/s', 0.0, 5.0),
+    ParamSpec('wind_rate', 1.0, 'wind publication rate [Hz]: every pulse sample (4 Hz) enters the '
+                                'means; a sample whose gust is a new maximum is published at once',
+              'Hz', 0.1, 10.0),
     _pulse_pin('flow_meter_pin', 'the flow meter pulses', 'flow meter, no flow and thermal power topics'),
     ParamSpec('flow_meter_k_factor', thermal.K_FACTOR, 'flow meter calibration: pulses per litre '
                                                        '(data sheet; YF-S201 type: 450) [1/L]', '1/L', 0.1, 1.0e5),
