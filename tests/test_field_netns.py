@@ -30,6 +30,21 @@ from fieldnet import Net, can_make_netns
 from sslfr_field import field as field_mod
 from sslfr_field import station as station_mod
 
+def _kill_process_of(root_pid: int, node: str) -> float:
+    """SIGKILL the node process running ``node`` under ``root_pid``; the time [s, wall]."""
+    import signal
+
+    import psutil
+    for p in psutil.Process(root_pid).children(recursive=True):
+        try:
+            if f'__node:={node}' in p.cmdline():
+                p.send_signal(signal.SIGKILL)
+                return time.time()
+        except psutil.Error:
+            continue
+    raise AssertionError(f'no process of {node} under {root_pid}')
+
+
 #: [s] bound for the station to hear a (re)started collector over the shaped link
 SEEN_BOUND = 30.0
 
@@ -220,7 +235,9 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     collector cut off for SSLFR_FIELD_CUT_S (30 s; the issue's 5 minutes: 300) is shown
     lost while it keeps tracking on its own (its bag: the mirrors following through the
     cut, no safety stow), the others staying heard, and is heard again when its link is
-    back. The cut starts once every collector is past its start-up (tracking with safety
+    back. Cut off, its process of the planner and the recorder is killed: restarted, it
+    finds the collector's other processes through the collector's own discovery server
+    (safety OK again, the drivers recorded again, before the link is back). The cut starts once every collector is past its start-up (tracking with safety
     OK or WARN for 3 s at the page): the start-up's own safety STOW is not a stow of the cut."""
     import datetime as dt
     import json
@@ -282,6 +299,11 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
         _wait(lambda: steady(f.ids), 120, 'every collector tracking with safety OK for 3 s', show)
         netw.link('c1', False)
         t_cut = time.time()
+        # and, cut off, c1's process of the planner and the recorder dies: its restart must find
+        # the collector's other processes without the station (the collector's own discovery
+        # server, sslfr_bringup.local_discovery; without it the new planner went unheard and
+        # safety kept c1 stowed for the rest of a 300 s cut)
+        killed = _kill_process_of(procs['c1'].pid, 'planner')
         _wait(lambda: page()['c1']['link'] == 'lost', 30, 'c1 shown lost', show)
         deadline = time.monotonic() + CUT_S
         while time.monotonic() < deadline:           # the cut lasts CUT_S: c1 stays lost all along, the others ok
@@ -309,9 +331,12 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
         assert bag.name.startswith(f'{cid}_')
         reader = BagReader(bag)
         states, levels, why, missed = [], [], {}, []
+        times[cid] = {'status': [], 'safety': []}
         for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
             if t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
                 m = reader.decoder(raw.type)(raw.data)
+                times[cid]['status' if raw.topic.endswith('status') else 'safety'].append(
+                    (raw.log_time * 1e-9, m.state if raw.topic.endswith('status') else m.level))
                 if raw.topic.endswith('status'):
                     states.append(m.state)
                     if m.state == 'link_down':
@@ -325,8 +350,23 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     def safety_log(cid):
         log = tmp_path / cid / 'logs' / 'safety.log'
         return '\n'.join(ln for ln in log.read_text(errors='replace').splitlines() if 'transition' in ln)[-3000:]
+    times: dict = {}
+    # c1's restart during the cut: the new recorder records the drivers' statuses again and the
+    # safety supervisor hears the new planner (STOW while it was silent, then OK): both before the
+    # link is back, so through the collector's own discovery server
+    states, levels, why, _ = during_cut('c1')
+    t_back = next((t for t, lvl in times['c1']['safety'] if t > killed + 1 and lvl <= 1), None)
+    resumed = [t for t, _ in times['c1']['status'] if t > killed + 3]
+    print(f'c1 process of the planner and recorder killed {killed - t_cut:.1f} s into the cut: statuses '
+          f'recorded again {resumed[0] - killed if resumed else float("nan"):.1f} s later, safety OK again '
+          f'{t_back - killed if t_back else float("nan"):.1f} s later, both before the link came back')
+    assert resumed and t_back is not None, (times['c1']['safety'][-5:], why, safety_log('c1'))
+    assert all('planner' in r for r in why), (why, safety_log('c1'))      # STOW: the planner's silence only
     for cid in f.ids:
         states, levels, why, missed = during_cut(cid)
+        if cid == 'c1':                              # before the kill and after safety was OK again
+            states = [st for t, st in times[cid]['status'] if t < killed or t > t_back + 5]
+            levels = [lvl for t, lvl in times[cid]['safety'] if t < killed or t >= t_back]
         # 'waiting': a new horizon whose first point is still ahead (each republication). 'link_down'
         # for one status: the driver got no fresh board STATUS within its poll's 2-3 control periods
         # (the collector's own pty board, not the network: seen once 84 s into a 300 s cut on a loaded

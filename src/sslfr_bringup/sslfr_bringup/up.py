@@ -12,16 +12,19 @@ the axes first, then the rest, within 5 s. This is what the systemd unit runs.
 
 Networking: ``ROS_DOMAIN_ID`` defaults to the node set's (42, never 0) and
 ``ROS_AUTOMATIC_DISCOVERY_RANGE`` to LOCALHOST; docs/deploy.md says how to open the
-graph to a monitoring laptop.
+graph to a monitoring laptop. A collector of a field (``ROS_DISCOVERY_SERVER`` set, docs/field.md)
+also runs its own discovery server (:mod:`sslfr_bringup.local_discovery`).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
-from sslfr_bringup import dds_profile
+from sslfr_bringup import dds_profile, local_discovery
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import find_executable
 from sslfr_bringup.liveness import LivenessWatch
@@ -91,6 +94,19 @@ def build_programs(ns: nodeset_mod.NodeSet, config: Path, *, run_dir: Path,
     return programs, missing
 
 
+def add_local_discovery(env: dict, programs: list, say: Callable[[str], None]) -> None:
+    """A field collector (``ROS_DISCOVERY_SERVER`` set): its own discovery server
+    first among ``programs``, appended to the servers of ``env`` and of this process
+    (its ROS side) (sslfr_bringup.local_discovery)."""
+    argv, servers, note = local_discovery.local_server(env)
+    if note:
+        say(note)
+    if argv is not None:
+        env['ROS_DISCOVERY_SERVER'] = os.environ['ROS_DISCOVERY_SERVER'] = servers
+        programs.insert(0, Program(name=local_discovery.PROGRAM, argv=argv, start=-2, stop=9, restart=True,
+                                   kind='service'))
+
+
 def parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog='sslfr up', description=__doc__.split('\n\n')[0],
                                 epilog='Stop with Ctrl-C or SIGTERM: axes first, then the rest (<= 5 s).')
@@ -148,6 +164,7 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     except dds_profile.ProfileError as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
         return 2
+    add_local_discovery(env, programs, lambda line: print(f'sslfr up: {line}', file=sys.stderr))
     domain = int(env['ROS_DOMAIN_ID'])
     print(f'sslfr up: config {config}, ROS_DOMAIN_ID={domain}, '
           + (f'ROS_DISCOVERY_SERVER={env["ROS_DISCOVERY_SERVER"]}' if env.get('ROS_DISCOVERY_SERVER') else

