@@ -396,3 +396,46 @@ def test_sslfr_up_speaks_sd_notify_to_its_watcher(tmp_path, ros_env):
     assert len(beats) >= 3 and max(b - a for a, b in zip(beats, beats[1:])) < 2.0, beats
     assert got[-1][1].fields == {'STOPPING': '1'}, got[-3:]
     assert 'node set up: 2 node processes, every executor turning' in out
+
+
+STUCK_NODE = textwrap.dedent('''
+    import threading
+    from rclpy.node import Node
+    from sslfr_common.node import run_node
+
+    def stuck_in_callback():
+        threading.Event().wait()               # a callback that never returns
+
+    class Stuck(Node):
+        def __init__(self, **kw):
+            super().__init__('stuck', **kw)
+            self.create_timer(1.5, stuck_in_callback)
+
+    raise SystemExit(run_node('stuck', Stuck))
+''')
+
+
+def test_a_hung_node_process_writes_its_stacks_to_its_log_before_the_kill(tmp_path, ros_env):
+    """A real node process (sslfr_common.node.run_node) whose callback never returns stops
+    beating; before the SIGKILL the supervisor asks it for every thread's stack
+    (faulthandler on STACK_DUMP_SIGNAL), which lands in its log: the stuck call named."""
+    from sslfr_bringup.liveness import LivenessWatch
+    script = tmp_path / 'stuck.py'
+    script.write_text(STUCK_NODE)
+    prog = Program(name='stuck', argv=[sys.executable, str(script)], start=0, stop=1)
+    out = io.StringIO()
+    sup = Supervisor([prog], ros_env, backoff=(30.0,), stable_after=30.0, out=out, log_dir=tmp_path / 'logs',
+                     liveness=LivenessWatch(timeout=2.0, startup_timeout=60.0))
+    try:
+        sup.start()
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and not any(ev == 'hung' for _, _, ev, _ in sup.events):
+            sup.step()
+            time.sleep(0.05)
+        assert any(ev == 'hung' for _, _, ev, _ in sup.events), out.getvalue()
+        log = (tmp_path / 'logs' / 'stuck.log').read_text(errors='replace')
+        assert 'its stacks to its log, then killing it (SIGKILL)' in out.getvalue()
+        assert 'stuck_in_callback' in log and 'spin_until_stopped' in log, log[-3000:]
+    finally:
+        sup.stop()
+        sup.close()

@@ -54,7 +54,7 @@ from typing import Callable, TextIO
 
 from sslfr_common.cliargs import CliError, one_line
 from sslfr_common.contract import CLOCK, DIAGNOSTICS
-from sslfr_common.sdnotify import Notifier, NotifyListener
+from sslfr_common.sdnotify import STACK_DUMP_SIGNAL, Notifier, NotifyListener
 
 from sslfr_bringup.liveness import LivenessWatch
 
@@ -350,13 +350,23 @@ class Supervisor:
             if not p.alive() or p.held:
                 continue
             p.hang_cause = late.cause
-            self.say(f'{p.name}: {late.cause}: killing it (SIGKILL) to restart it', 2 if p.critical else 3)
+            # a process that has beaten runs run_nodes' stack dump handler: its threads'
+            # stacks to its log first (a stopped process cannot write them)
+            dump = not late.starting
+            self.say(f'{p.name}: {late.cause}: ' + ('its stacks to its log, then ' if dump else '')
+                     + 'killing it (SIGKILL) to restart it', 2 if p.critical else 3)
+            self._event(p, 'hung', late.cause)          # when found (the dump takes up to 0.3 s)
+            try:
+                if dump:
+                    os.kill(p.proc.pid, STACK_DUMP_SIGNAL)
+                    p.proc.wait(0.3)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                pass
             try:
                 os.killpg(p.proc.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
             p.proc.wait(5)
-            self._event(p, 'hung', late.cause)
 
     def node_set_ready(self) -> bool:
         """Every node process runs and (when watched) has beaten at least once."""

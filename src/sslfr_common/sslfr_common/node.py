@@ -33,6 +33,7 @@ and ``demo_nodes_py``), with what a tracker on a Pi needs on top of it:
 """
 from __future__ import annotations
 
+import faulthandler
 import logging
 import os
 import signal
@@ -54,7 +55,7 @@ from rclpy.signals import SignalHandlerOptions
 from .contract import Qos, Topic
 from .executor import LeanExecutor
 from .log_route import NODE_ATTR
-from .sdnotify import Notifier
+from .sdnotify import STACK_DUMP_SIGNAL, Notifier
 from .timeconv import duration, stamp, stamp_from_ns, steady_now, to_ns, to_sec  # noqa: F401 - re-exported
 
 #: Exceptions from a node's constructor that mean "invalid configuration" (exit 2).
@@ -393,6 +394,9 @@ def run_nodes(nodes: list[tuple[str, Callable[[], object]]], *, args: list[str] 
         print(f'{nodes[0][0]}: not starting: {exc}', file=sys.stderr, flush=True)
         return 2
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # a hung process's every thread's stack to its log, asked for before it is killed
+    # (works with the GIL held by a stuck thread; sslfr_bringup.supervisor)
+    faulthandler.register(STACK_DUMP_SIGNAL, all_threads=True)
     stop = StopRequest()
     built: list = []
     ex = bridge = stats = notifier = None
