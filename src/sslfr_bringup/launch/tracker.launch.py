@@ -8,7 +8,9 @@ the same description and applies it the same way:
 
 - discovery is contained as in `./sslfr up`: ROS_DOMAIN_ID and
   ROS_AUTOMATIC_DISCOVERY_RANGE are the node set's (domain 42, LOCALHOST: nothing
-  leaves the Pi) unless set in the environment or given as launch arguments;
+  leaves the Pi) unless set in the environment or given as launch arguments; a
+  collector of a field (``ROS_DISCOVERY_SERVER`` in the environment) gets its own
+  discovery server on 127.0.0.1 as with `./sslfr up` (sslfr_bringup.local_discovery);
 - under ``namespace:=/ns`` the site config's node sections are moved with the nodes
   (rcl matches a bare ``planner:`` section only in the root namespace), so several
   collectors, each with its own config, share one domain;
@@ -77,7 +79,8 @@ def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
     if discovery_range:
         base['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery_range
     env = nodeset.ros_environment(ns, base={**os.environ, **base})
-    return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', dds_profile.PROFILE_ENV)}
+    return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DISCOVERY_SERVER',
+                                dds_profile.PROFILE_ENV) if k in env}
 
 
 def _respawn_delay(env: dict[str, str]) -> float:
@@ -90,12 +93,14 @@ def _respawn_delay(env: dict[str, str]) -> float:
 
 def generate_launch_description():
     from launch import LaunchDescription
-    from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler, SetEnvironmentVariable
+    from launch.actions import (DeclareLaunchArgument, ExecuteProcess, LogInfo, OpaqueFunction, RegisterEventHandler,
+                                SetEnvironmentVariable)
     from launch.event_handlers import OnShutdown
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import LifecycleNode, Node
 
     def _setup(context):
+        import os
         import tempfile
 
         def arg(name):
@@ -105,7 +110,17 @@ def generate_launch_description():
         import shutil
         write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
         env = _environment(arg('domain_id'), arg('discovery_range'))
+        # a collector of a field: its own discovery server first (sslfr_bringup.local_discovery)
+        from sslfr_bringup import local_discovery
+        server, servers, note = local_discovery.local_server({**os.environ, **env})
+        if servers:
+            env['ROS_DISCOVERY_SERVER'] = servers
         actions = [SetEnvironmentVariable(k, v) for k, v in env.items()]
+        if note:
+            actions.append(LogInfo(msg=note))
+        if server:
+            actions.append(ExecuteProcess(cmd=server, name=local_discovery.PROGRAM, output='screen',
+                                          respawn=True, respawn_delay=1.0))
         # the run directory goes with the launch (its files are read at a process's start)
         actions.append(RegisterEventHandler(OnShutdown(
             on_shutdown=lambda event, context: shutil.rmtree(write_dir, ignore_errors=True))))

@@ -49,5 +49,6 @@ def local_server(env: dict, port: int | None = None, exe: str | None = None):
                             'unreachable will not find the others')
     port = port or free_udp_port()
     servers, sid = append_server(servers, LOCAL_ADDRESS, port)
-    return ([exe, '-i', str(sid), '-l', LOCAL_ADDRESS, '-p', str(port)], servers,
-            f'local discovery server id {sid} on {LOCAL_ADDRESS}:{port}')
+    # the server itself is no client of the station's (only this collector's processes use it)
+    return (['env', '-u', 'ROS_DISCOVERY_SERVER', exe, '-i', str(sid), '-l', LOCAL_ADDRESS, '-p', str(port)],
+            servers, f'local discovery server id {sid} on {LOCAL_ADDRESS}:{port}')

@@ -10,7 +10,8 @@ def test_appended_after_the_station_servers_with_the_next_id():
     argv, servers, note = ld.local_server({'ROS_DISCOVERY_SERVER': '10.0.0.2:11811;10.0.0.3:11812'},
                                           port=40123, exe='/x/fast-discovery-server')
     assert servers == '10.0.0.2:11811;10.0.0.3:11812;127.0.0.1:40123'
-    assert argv == ['/x/fast-discovery-server', '-i', '2', '-l', '127.0.0.1', '-p', '40123']
+    assert argv == ['env', '-u', 'ROS_DISCOVERY_SERVER', '/x/fast-discovery-server', '-i', '2', '-l', '127.0.0.1',
+                    '-p', '40123']
     assert 'id 2' in note and '127.0.0.1:40123' in note
     # an empty position keeps its id (Fast DDS: the position is the id)
     assert ld.append_server(';10.0.0.3:11812', '127.0.0.1', 1) == (';10.0.0.3:11812;127.0.0.1:1', 2)
