@@ -48,6 +48,7 @@ EXPECTED = {
     ('absorber_board', 'anemometer_pin'): (-1, -1, 17, ()),
     ('absorber_board', 'anemometer_slope'): (0.765, 0.01, 20.0, ()),
     ('absorber_board', 'anemometer_offset'): (0.35, 0.0, 5.0, ()),
+    ('absorber_board', 'wind_rate'): (1.0, 0.1, 10.0, ()),
     ('absorber_board', 'flow_meter_pin'): (-1, -1, 17, ()),
     ('absorber_board', 'flow_meter_k_factor'): (450.0, 0.1, 1.0e5, ()),
     ('absorber_board', 'flow_window'): (5.0, 0.5, 600.0, ()),
