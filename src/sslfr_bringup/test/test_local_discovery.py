@@ -30,6 +30,6 @@ def test_missing_server_program_is_said_not_hidden():
 
 def test_free_port_is_bindable():
     import socket
-    port = ld.free_udp_port()
+    port = ld.free_udp_ports(1)[0]
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(('127.0.0.1', port))

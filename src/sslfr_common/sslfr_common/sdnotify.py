@@ -30,11 +30,11 @@ __all__ = ['Notifier', 'NotifyListener', 'Notification', 'beat_period', 'parse']
 
 #: [s] longest interval between two WATCHDOG=1 beats, whatever the bound
 MAX_BEAT_PERIOD = 1.0
+#: [s] shortest one (a very short bound still does not make every executor turn send)
+MIN_BEAT_PERIOD = 0.1
 #: asks a node process that stopped beating to write every thread's Python stack to its
 #: stderr (faulthandler, registered by sslfr_common.node.run_nodes) before it is killed
 STACK_DUMP_SIGNAL = signal.SIGUSR1
-#: [s] shortest one (a very short bound still does not make every executor turn send)
-MIN_BEAT_PERIOD = 0.1
 _CREDS = struct.Struct('3i')          # struct ucred: pid, uid, gid
 
 

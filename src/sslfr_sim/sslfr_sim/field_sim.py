@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain
+from sslfr_bringup.local_discovery import free_udp_ports
 from sslfr_bringup.supervisor import Program
 from sslfr_common.cliargs import one_line
 from sslfr_field import field as field_mod
@@ -27,21 +28,6 @@ from sslfr_field import station as station_mod
 STATION_NODES = station_mod.STATION_NODES
 #: [s] the ordered stop: each collector's own sim stops its node set (<= 5 s) first
 FIELD_STOP_TIMEOUT = 15.0
-
-
-def free_udp_ports(n: int) -> list[int]:
-    """``n`` distinct UDP ports free on 127.0.0.1 now (for the discovery servers)."""
-    socks, ports = [], []
-    try:
-        for _ in range(n):
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(('127.0.0.1', 0))
-            socks.append(s)
-            ports.append(s.getsockname()[1])
-    finally:
-        for s in socks:
-            s.close()
-    return ports
 
 
 def free_tcp_port() -> int:
