@@ -83,11 +83,15 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     assert len(jumps) >= 30 and np.all(np.abs(gaps - 900.0) <= 2.0), gaps
     m = desc.movement('mirrors')
     step = m.step or 0.0
-    # every step reached within one motor step: the last status before the next step
-    # (the step itself lasts milliseconds of wall time, a status may fall within it)
+    # every step reached within one motor step: the last status that still carries the
+    # step's setpoint. The driver commands one control period ahead (AxisTuning.lead, 1 /
+    # control_rate wall s: tens of simulated s at this speed), so a status shortly before the
+    # next planned step may already carry that step with the drive on its way (seen: 1.46 of
+    # 1.85 deg).
     reached = 0
+    held = dict(zip(pt[jump].tolist(), pv[jump].tolist()))
     for a, b in zip(jumps[:-1], jumps[1:]):
-        k = np.flatnonzero((t > a) & (t < b))
+        k = np.flatnonzero((t > a) & (t < b) & (np.abs(setpoint - held[a]) <= step + 1e-6))
         if len(k):
             reached += 1
             assert abs(measured[k[-1]] - setpoint[k[-1]]) <= step + 1e-6, (a, math.degrees(measured[k[-1]]),

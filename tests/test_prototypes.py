@@ -182,7 +182,7 @@ def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
     assert {t for t in day.topics if t.startswith('/axes/')} == {'/axes/mirrors/status', '/axes/mobile_structure/status'}
     lat, lon = site_of(day)
     ref = reference(config, lat, lon, 12.0)
-    settled = 0.0                                  # when both axes follow their law
+    settled = 0.0                  # when both axes are on their law (the start-up slew done)
     for axis in ('mirrors', 'mobile_structure'):
         s = day.axes[axis]
         phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
@@ -191,7 +191,6 @@ def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
               & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting')))
         assert ok.sum() > 60, (axis, ok.sum(), text[-3000:])
         t = np.asarray(s.t)[ok]
-        settled = max(settled, t[0])
         table = ref(t)
         law = np.asarray(getattr(table, axis), dtype=float)
         if axis == 'mobile_structure':    # seed 000 eq. 16: the rows at theta_z / 2, facing the equator
@@ -208,6 +207,9 @@ def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
         # the drive holds it to its step (open-loop steppers: the position is the step count)
         err = np.abs(measured - setpoint)
         assert np.percentile(err, 95) <= step + 1e-9, (axis, np.degrees(np.percentile(err, 95)), np.degrees(step))
+        # (a start-up slew is 'following' too: seen 10.5 deg away at its first status, and
+        # a slew still under way when the other axis settled cost 2.3 % of the energy)
+        settled = max(settled, t[np.flatnonzero(err <= step + 1e-9)[0]])
     # safety watches what the collector has: no reason names a board it lacks, and
     # nothing stops the run between the start-up and the end of the window
     st = np.asarray(day.safety.t)
@@ -222,10 +224,14 @@ def test_a_two_movement_collector_runs_from_its_description_alone(tmp_path):
     for axis in rep.joints:
         assert rep.tracking[axis]['ideal'].samples > 60 and rep.tracking[axis]['ideal'].p95 < math.radians(0.1)
     assert rep.energy['ideal_kwh'] > 0.05 and rep.energy['achieved_kwh'] > 0.0, rep.energy
-    # once both follow (the start-up slew aside), the absorbed energy on the described
+    # once both are on their law (the start-up slews aside), the absorbed energy on the described
     # optics with the measured angles is the ideal's (the drives' errors are ~0.02 deg)
     bt, beam = np.asarray(day.beam.t), np.asarray(day.beam['g'], dtype=float)
     k = (bt >= settled) & (bt < end - 2.0)
     e = energy_estimate(rep.site, bt[k], beam[k], {a: (day.axes[a].t, day.axes[a].cols) for a in rep.joints},
                         str(config))
-    assert e['ideal_kwh'] > 0.05 and e['achieved_kwh'] >= 0.99 * e['ideal_kwh'], e
+    off = {a: [(round(float(ti - DAY0), 1), st, round(math.degrees(mi - si), 2))
+               for ti, st, mi, si in zip(day.axes[a].t, day.axes[a]['state'], day.axes[a]['measured'],
+                                         day.axes[a]['setpoint'])
+               if ti >= settled and not abs(mi - si) <= desc.movement(a).step] for a in rep.joints}
+    assert e['ideal_kwh'] > 0.05 and e['achieved_kwh'] >= 0.99 * e['ideal_kwh'], (e, settled - DAY0, off)
