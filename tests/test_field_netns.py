@@ -237,8 +237,12 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     cut, no safety stow), the others staying heard, and is heard again when its link is
     back. Cut off, its process of the planner and the recorder is killed: restarted, it
     finds the collector's other processes through the collector's own discovery server
-    (safety OK again, the drivers recorded again, before the link is back). The cut starts once every collector is past its start-up (tracking with safety
-    OK or WARN for 3 s at the page): the start-up's own safety STOW is not a stow of the cut."""
+    (safety OK again, the drivers recorded again, before the link is back), and the
+    station hears the new planner after the rejoin (the page's phase and safety ages, not
+    only its last values). Then c2's process of the planner is killed with its link up:
+    the station hears its restart. The cut starts once every collector is past its
+    start-up (tracking with safety OK or WARN for 3 s at the page): the start-up's own
+    safety STOW is not a stow of the cut."""
     import datetime as dt
     import json
     import urllib.request
@@ -320,6 +324,19 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
         # phase is republished every second): tracking with safety OK/WARN once they are (the bag
         # below says it was so all along the cut)
         _wait(lambda: settled(page()['c1']), 30, 'c1 shown tracking with safety OK or WARN after the rejoin', show)
+        # the page hears c1's processes again, not only its last values: the restarted planner's
+        # phase and safety's state, each within a second and a half
+        fresh = lambda c: all((a := c.get(k)) is not None and a < 1.5 for k in ('phase_age_s', 'safety_age_s'))  # noqa: E731
+        _wait(lambda: fresh(page()['c1']), 30, 'c1\'s planner (restarted) and safety heard at the station', show)
+        # a collector's process restarted while its link is up is found by the station too (c2's
+        # process of the planner killed: the page sees its planner silent, then hears the new one)
+        _kill_process_of(procs['c2'].pid, 'planner')
+        t_kill2 = time.monotonic()
+        _wait(lambda: (page()['c2'].get('phase_age_s') or 0) > 3.0, 30, 'the station sees c2\'s planner silent', show)
+        t_new = _wait(lambda: fresh(page()['c2']), 60, 'c2\'s restarted planner heard at the station', show)
+        s = page()
+        assert all(s[c]['link'] == 'ok' for c in f.ids), {c: s[c]['link'] for c in f.ids}
+        print(f'c2\'s process of the planner killed: restarted and heard at the station {t_new - t_kill2:.1f} s later')
     finally:
         for p in procs.values():
             p.stop(timeout=30)

@@ -54,6 +54,8 @@ class CollectorView:
     absorbed: DayIntegral = field(default_factory=DayIntegral)   # J today (UTC day of ROS time)
     thermal: DayIntegral = field(default_factory=DayIntegral)    # J today, delivered
     last_heard: float | None = None                   # steady time [s]
+    phase_heard: float | None = None                  # steady time [s] of the last tracker/phase (the planner)
+    safety_heard: float | None = None                 # steady time [s] of the last safety/state
     messages: int = 0
 
 
@@ -80,10 +82,12 @@ class FieldState:
     def on_phase(self, cid: str, now: float, phase: str, mode: str, reason: str) -> None:
         v = self._heard(cid, now)
         v.phase, v.mode, v.phase_reason = phase, mode, reason
+        v.phase_heard = now
 
     def on_safety(self, cid: str, now: float, level: str, reasons) -> None:
         v = self._heard(cid, now)
         v.safety_level, v.safety_reasons = level, [str(r) for r in reasons]
+        v.safety_heard = now
 
     def on_axis(self, cid: str, now: float, axis: str, state: str, error: float, measured: float) -> None:
         if axis not in JOINTS:
@@ -145,6 +149,11 @@ class FieldState:
                                          'thermal_kwh': None if thermal is None else round(thermal, 4)},
                         'link': self.link(cid, now),
                         'last_heard_s': None if v.last_heard is None else round(now - v.last_heard, 2),
+                        # the planner republishes the phase every second, safety its state ten
+                        # times a second: an old one on a live link is a process the station
+                        # no longer hears (the page says so; its values are the last heard)
+                        'phase_age_s': None if v.phase_heard is None else round(now - v.phase_heard, 2),
+                        'safety_age_s': None if v.safety_heard is None else round(now - v.safety_heard, 2),
                         'messages': v.messages})
         counts = {}
         for c in out:

@@ -29,6 +29,8 @@ def test_live_state_link_health_and_values():
     snap = st.snapshot(12.0)
     c1, c2 = snap['collectors']
     assert c1['link'] == 'ok' and c1['last_heard_s'] == pytest.approx(1.2)
+    assert c1['phase_age_s'] == pytest.approx(2.0) and c2['phase_age_s'] is None   # the planner's last phase
+    assert c1['safety_age_s'] == pytest.approx(1.5) and c2['safety_age_s'] is None
     assert c1['phase'] == 'TRACKING' and c1['safety_level'] == 'STOW' and c1['safety_reasons'][0].startswith('temp')
     assert c1['axes'] == {'mirrors': {'state': 'following', 'error': 0.001, 'measured': None}}
     assert c1['temperatures'] == {'outlet': 152.0} and c1['beam'] is None

@@ -34,8 +34,10 @@ function render(data) {
     name.append(el('div', c.namespace));
     tr.append(name);
     tr.append(el('td', c.link + (c.last_heard_s !== null ? ' (' + c.last_heard_s.toFixed(1) + ' s)' : ''), c.link));
-    tr.append(el('td', (c.phase || '-') + ' / ' + (c.mode || '-')));
-    const safety = el('td', c.safety_level || '-', 'level-' + c.safety_level);
+    // phase (1 Hz) and safety state (10 Hz) older than 3 s: that process is not heard (its last values shown)
+    const silent = (age, who) => age !== null && age > 3 ? ' (' + who + ' silent ' + age.toFixed(0) + ' s)' : '';
+    tr.append(el('td', (c.phase || '-') + ' / ' + (c.mode || '-') + silent(c.phase_age_s, 'planner')));
+    const safety = el('td', (c.safety_level || '-') + silent(c.safety_age_s, 'safety'), 'level-' + c.safety_level);
     if (c.safety_reasons.length) safety.append(el('div', c.safety_reasons.join('; ')));
     tr.append(safety);
     tr.append(el('td', Object.entries(c.axes).map(([a, s]) => a + ' ' + deg(s.error) + ' (' + s.state + ')').join(', ') || '-'));
