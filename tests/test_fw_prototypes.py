@@ -97,8 +97,16 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
             assert abs(measured[k[-1]] - setpoint[k[-1]]) <= step + 1e-6, (a, math.degrees(measured[k[-1]]),
                                                                           math.degrees(setpoint[k[-1]]))
     assert reached >= 30, reached
+    # held between the steps: the statuses of a motor at rest on a setpoint already held at
+    # the status before (0.2 s wall earlier). Right after a step a status may carry the new
+    # setpoint with the position polled before the move: at 1600x the step's wall-time
+    # latency (poll, command, motion in simavr, next poll) is a large part of the 0.56 s
+    # between steps, and on a loaded machine more than a tenth of the statuses fell in it
+    sp_all = np.asarray(s['setpoint'])
+    resting = ok & np.r_[False, np.abs(np.diff(sp_all)) <= 1e-9] & ~np.asarray(s['moving'], dtype=bool)
     err = np.abs(measured - setpoint)
-    assert np.percentile(err, 90) <= step + 1e-6, math.degrees(np.percentile(err, 90))
+    still = np.abs(np.asarray(s['measured'])[resting] - sp_all[resting])
+    assert len(still) > 40 and np.percentile(still, 90) <= step + 1e-6, (len(still), math.degrees(np.percentile(still, 90)))
     rate = abs(setpoint[-1] - setpoint[0]) / (t[-1] - t[0]) * 3600.0
     assert 6.5 <= math.degrees(rate) <= 8.5, math.degrees(rate)                # ~7.4 deg/h
     assert np.all((measured >= m.range[0] - 1e-6) & (measured <= m.range[1] + 1e-6))
@@ -114,7 +122,8 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     print(f'seed 003 day on firmware: {len(jumps)} steps every {np.median(gaps):.0f} s, {reached} reached '
           f'within one motor step ({math.degrees(step):.4f} deg); drive rate {math.degrees(rate):.2f} deg/h; largest '
           f'line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - setpoint| p90 '
-          f'{math.degrees(np.percentile(err, 90)):.4f} deg; absorbed {achieved:.3f} kWh vs ideal {ideal:.3f} '
+          f'{math.degrees(np.percentile(err, 90)):.4f} deg ({math.degrees(np.percentile(still, 90)):.4f} deg at rest, '
+          f'{len(still)} statuses); absorbed {achieved:.3f} kWh vs ideal {ideal:.3f} '
           f'({100 * achieved / ideal:.1f} %), law {law:.3f} ({100 * achieved / law:.1f} % of it)')
 
 

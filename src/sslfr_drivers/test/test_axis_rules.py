@@ -351,3 +351,30 @@ def test_host_loss_stow_record_from_the_parameters_and_refused_values():
             raise RuntimeError('NACK UNKNOWN_TYPE')          # an older firmware
     line = configure_host_loss(Link(), p)
     assert 'NOT set' in line and 'stowed by itself' in line
+
+
+def test_a_lost_status_answer_reuses_the_previous_one_while_fresh_or_at_rest():
+    """One late STATUS while idle (polls every idle_poll_period, 0.2 s, longer than 3
+    control periods) keeps the board state of the previous poll (a CI run refused an
+    operator's jog as 'board not answering' on one); a moving or homing board's older
+    STATUS is not reused."""
+    from sslfr_drivers.axis.board_session import reusable_status
+    period, idle = 0.05, 0.2
+    rest = BoardState(steps=10, target=10, moving=False, homed=True, homing=False, sensor=None)
+    moving = BoardState(steps=10, target=90, moving=True, homed=True, homing=False, sensor=None)
+    homing = BoardState(steps=10, target=10, moving=True, homed=False, homing=True, sensor=None)
+    max_age, rest_age = 3 * period, idle + 2 * period
+    for s in (rest, moving, homing):
+        assert reusable_status(0.1, s, max_age, rest_age)               # within 3 control periods: any
+    assert reusable_status(0.25, rest, max_age, rest_age)                # one idle poll + 2 periods: at rest
+    assert not reusable_status(0.25, moving, max_age, rest_age)
+    assert not reusable_status(0.25, homing, max_age, rest_age)
+    assert not reusable_status(0.31, rest, max_age, rest_age)            # two answers lost: none
+
+
+def test_a_refused_jog_says_which_of_driver_and_board_is_missing():
+    from sslfr_drivers.axis.operator_input import check_jog
+    rest = BoardState(steps=10, target=10, moving=False, homed=True, homing=False, sensor=None)
+    assert check_jog('maintenance', False, rest, None, 0.01, 0.0, 0.1) == 'jog refused: driver not active'
+    assert check_jog('maintenance', True, None, None, 0.01, 0.0, 0.1) == 'jog refused: board not answering'
+    assert check_jog('maintenance', True, rest, None, 0.01, 0.0, 0.1) == ''

@@ -176,7 +176,7 @@ _FIELDS = {
                'state': lambda m: m.state, 'link_state': lambda m: int(m.link_state),
                'frames_lost': lambda m: int(m.frames_lost), 'frames_bad': lambda m: int(m.frames_bad),
                'homed': lambda m: bool(m.homed), 'fault_bits': lambda m: int(m.fault_bits),
-               'steps': lambda m: int(m.steps)},
+               'steps': lambda m: int(m.steps), 'moving': lambda m: bool(m.moving)},
     'phase': {'phase': lambda m: int(m.phase), 'name': lambda m: m.phase_name, 'reason': lambda m: str(m.reason),
               'mode': lambda m: m.mode, 'site_source': lambda m: str(m.site_source),
               'latitude': lambda m: float(m.latitude), 'longitude': lambda m: float(m.longitude),

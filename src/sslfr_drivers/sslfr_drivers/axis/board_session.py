@@ -69,6 +69,17 @@ def board_from_status(status: m.Status) -> BoardState:
                       int(status.limit_bits), int(status.fault_bits))
 
 
+def reusable_status(age: float, state: BoardState, max_age: float, rest_age: float) -> bool:
+    """Whether a STATUS ``age`` [s] old stands in for a lost answer: younger than
+    ``max_age`` [s], or, of a board at rest (neither moving nor homing: it moves only
+    on a command, which the next answered poll shows), younger than ``rest_age`` [s].
+    While idle the driver polls seldom, and one late answer would otherwise leave it
+    without a board state until the next poll (an operator's jog refused meanwhile)."""
+    if age <= max_age:
+        return True
+    return not state.moving and not state.homing and age <= rest_age
+
+
 class AxisBoardSession:
     """One axis board reached on ``port`` (see module docstring).
 
@@ -155,23 +166,26 @@ class AxisBoardSession:
         self.link.stop()
 
     # ------------------------------------------------------------------ state
-    def read(self, now: float, period: float) -> BoardReading:
+    def read(self, now: float, period: float, idle_period: float = 0.0) -> BoardReading:
         """The read of one control tick at steady ``now`` [s] with control ``period``
-        [s]: STATUS with a ``2 * period`` time-out (a lost answer reuses a STATUS up
-        to ``3 * period`` old, see :meth:`poll`) and the reset / reconnect events."""
-        board = self.poll(now, 2 * period, 3 * period)
+        [s]: STATUS with a ``2 * period`` time-out and the reset / reconnect events. A
+        lost answer reuses the previous STATUS (:func:`reusable_status`) up to ``3 *
+        period`` old, or, of a board at rest, up to one idle poll (``idle_period`` [s],
+        the longest wait between polls while nothing moves) + ``2 * period`` old."""
+        board = self.poll(now, 2 * period, 3 * period, idle_period + 2 * period)
         reading = BoardReading(board, self.take_reset(), self.take_reconnect())
         if self.reference is not None:
             self.reference.after_read(board, reading.reset, reading.reconnected, self.link.boot_count)
         return reading
 
-    def poll(self, now: float, timeout: float, max_age: float) -> BoardState | None:
+    def poll(self, now: float, timeout: float, max_age: float, rest_age: float = 0.0) -> BoardState | None:
         """STATUS now (one try of ``timeout`` [s]).
 
-        When the answer is lost (noisy link) the previous STATUS is returned if it
-        is younger than ``max_age`` [s] (steady ``now`` [s]) and the link is still
-        UP with no reset seen since; otherwise None (link down, reconnecting, or
-        re-reading INFO/STATUS after a board reset).
+        When the answer is lost (noisy link, a late board) the previous STATUS is
+        returned if :func:`reusable_status` allows it (``max_age``, ``rest_age`` [s],
+        steady ``now`` [s]) and the link is still UP with no reset seen since;
+        otherwise None (link down, reconnecting, or re-reading INFO/STATUS after a
+        board reset).
         """
         if self.link.state != LinkState.UP:
             self._last_ok = None
@@ -181,8 +195,8 @@ class AxisBoardSession:
         except (LinkError, ProtocolError):
             self.poll_failures += 1
             last = self._last_ok
-            if (last is not None and now - last[0] <= max_age and self.link.state == LinkState.UP
-                    and self.link.resets == self._seen_resets):
+            if (last is not None and reusable_status(now - last[0], last[1], max_age, rest_age)
+                    and self.link.state == LinkState.UP and self.link.resets == self._seen_resets):
                 self.stale_polls += 1
                 return last[1]
             return None

@@ -24,13 +24,15 @@ def operator_mode(phase: int, mode: str) -> str:
 def check_jog(mode: str, active: bool, board: BoardState | None, fault: str | None, delta: float,
               speed: float, max_jog: float) -> str:
     """Why a jog of ``delta`` [rad] at ``speed`` [rad/s] is refused ('' when it is not),
-    in this order: not in maintenance mode; not active or no board answer; a latched
+    in this order: not in maintenance mode; not active; no board answer; a latched
     fault; axis not homed; ``delta`` not finite or ``|delta| > max_jog`` [rad];
     ``speed`` not finite or negative. The soft limits are checked on the target."""
     if mode != 'maintenance':
         return 'jog refused: not in maintenance mode (tracker/phase)'
-    if not active or board is None:
-        return 'jog refused: driver not active or board not answering'
+    if not active:
+        return 'jog refused: driver not active'
+    if board is None:
+        return 'jog refused: board not answering'
     if fault:
         return f'jog refused: fault: {fault}'
     if not board.homed:
