@@ -137,12 +137,14 @@ def test_field_page_in_chromium_against_simulated_collectors(browser, field):  #
     for cid in ids:
         bags = [b.name for b in (out / cid / 'bags').iterdir()]
         assert bags and all(b.startswith(f'{cid}_') for b in bags), bags
-    (station_bag,) = [b for b in (out / 'station' / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
-    reader = BagReader(station_bag)
+    station_bags = sorted(b for b in (out / 'station' / 'bags').iterdir() if (b / 'metadata.yaml').exists())
+    assert station_bags                      # one per UTC day: a run across midnight has two
     seen: dict[str, set] = {}
-    for raw in reader.messages(['/diagnostics']):
-        for s in reader.decoder(raw.type)(raw.data).status:
-            seen.setdefault(s.hardware_id, set()).add(s.name)
+    for bag in station_bags:
+        reader = BagReader(bag)
+        for raw in reader.messages(['/diagnostics']):
+            for s in reader.decoder(raw.type)(raw.data).status:
+                seen.setdefault(s.hardware_id, set()).add(s.name)
     for cid in ids:
         names = seen.get(cid, set())
         assert {'safety: safety supervisor', 'planner: day cycle', 'mirrors_driver: axis mirrors'} <= names, \

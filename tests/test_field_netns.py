@@ -344,13 +344,16 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     from sslfr_recording.bag import BagReader
 
     def during_cut(cid):
-        (bag,) = [b for b in (tmp_path / cid / 'bags').iterdir() if (b / 'metadata.yaml').exists()]
-        assert bag.name.startswith(f'{cid}_')
-        reader = BagReader(bag)
+        # one bag per UTC day: a run across midnight has two
+        bags = sorted(b for b in (tmp_path / cid / 'bags').iterdir() if (b / 'metadata.yaml').exists())
+        assert bags and all(b.name.startswith(f'{cid}_') for b in bags), bags
         states, levels, why, missed = [], [], {}, []
         times[cid] = {'status': [], 'safety': []}
-        for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
-            if t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
+        for bag in bags:
+            reader = BagReader(bag)
+            for raw in reader.messages([f'/{cid}/axes/mirrors/status', f'/{cid}/safety/state']):
+                if not t_cut + 1 <= raw.log_time * 1e-9 <= t_cut_end - 1:
+                    continue
                 m = reader.decoder(raw.type)(raw.data)
                 times[cid]['status' if raw.topic.endswith('status') else 'safety'].append(
                     (raw.log_time * 1e-9, m.state if raw.topic.endswith('status') else m.level))

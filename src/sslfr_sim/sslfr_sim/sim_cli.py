@@ -200,7 +200,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--nodeset', default=None, help='node-set description (default: config/nodeset.yaml)')
     p.add_argument('--date', type=sim_date, default=None, help='simulated day YYYY-MM-DD (default 2026-06-21)')
     p.add_argument('--start', default=None, help='start HH:MM UTC (default 04:00)')
-    p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00)')
+    p.add_argument('--end', default=None, help='end HH:MM UTC (default 20:00; with --wall-clock the next such '
+                                               'time, tomorrow\'s when not after now; default now + 10 min)')
     p.add_argument('--speed', type=ranged_float(0.0, 5000.0, lo_open=True), default=None,
                    help='simulated seconds per wall second, (0, 5000] (default 400)')
     p.add_argument('--record', type=output_dir, default=None, help='bag output directory (default OUT/bags)')
@@ -306,6 +307,18 @@ def operator_references(ns, ros, say) -> None:
         say(f'sslfr sim: simulated operator referenced {axis}: {message}')
 
 
+def wall_clock_window(now: float, end: str | None) -> tuple[str, float, float]:
+    """A ``--wall-clock`` run from ``now`` [s since the epoch]: (UTC date, start, end [s
+    since that date's midnight]). ``end`` HH:MM[:SS] UTC is the next such time (tomorrow's
+    when it is not after now: a run across midnight); None: 10 minutes."""
+    date = dt.datetime.fromtimestamp(now, dt.timezone.utc).date().isoformat()
+    start_s = now - day_epoch(date)
+    end_s = parse_hhmm(end) if end else start_s + 600.0
+    if end_s <= start_s:
+        end_s += 86400.0
+    return date, start_s, end_s
+
+
 def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequence of a simulated day
     t_wall0 = time.monotonic()
     try:
@@ -321,14 +334,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         if args.wall_clock:
             if args.date or args.start or args.speed not in (None, 1.0):
                 raise ValueError('--wall-clock runs from now at real time: no --date, --start or --speed')
-            now = time.time() + (time.monotonic() - mono0)
-            date = dt.datetime.fromtimestamp(now, dt.timezone.utc).date().isoformat()
-            start_s = now - day_epoch(date)
-            end_s = parse_hhmm(args.end) if args.end else start_s + 600.0
+            date, start_s, end_s = wall_clock_window(time.time() + (time.monotonic() - mono0), args.end)
             speed = 1.0
-            if end_s <= start_s:
-                raise ValueError(f'--end {args.end} UTC is not after now ({_hhmm(start_s)} UTC): '
-                                 '--wall-clock runs within today')
         else:
             date = args.date or str(simcfg.get('date', '2026-06-21'))
             start_s = parse_hhmm(args.start or str(simcfg.get('start', '04:00')))
@@ -733,8 +740,11 @@ def _page_url(logs: Path) -> str | None:
 
 
 def _hhmm(sod: float) -> str:
+    """HH:MM:SS of ``sod`` [s since the run's UTC midnight]; '(+N d)' past that day."""
     sod = max(0.0, sod)
-    return f'{int(sod // 3600):02d}:{int(sod % 3600 // 60):02d}:{int(sod % 60):02d}'
+    days, sod = divmod(sod, 86400.0)
+    more = f' (+{int(days)} d)' if days else ''
+    return f'{int(sod // 3600):02d}:{int(sod % 3600 // 60):02d}:{int(sod % 60):02d}{more}'
 
 
 class _Tee:

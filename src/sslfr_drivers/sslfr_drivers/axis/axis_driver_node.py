@@ -227,8 +227,7 @@ class AxisDriver(ManagedNode):
         """One read -> update -> write (control thread); returns the seconds until the
         next one. The lock is held for the decisions only, never during board I/O."""
         session, period = self.session, 1.0 / self.p['control_rate']
-        reading = (session.read(steady_now(self.steady), period, self.p['idle_poll_period']) if session
-                   else BoardReading(None))
+        reading = session.read(steady_now(self.steady), period, self.p['idle_poll_period']) if session else BoardReading(None)
         with self._lock:
             now_steady, now_ros = steady_now(self.steady), to_sec(self.get_clock().now())   # as read
             for line in self.sup.note_link_events(reading.reset, reading.reconnected):
