@@ -378,3 +378,35 @@ def test_a_refused_jog_says_which_of_driver_and_board_is_missing():
     assert check_jog('maintenance', False, rest, None, 0.01, 0.0, 0.1) == 'jog refused: driver not active'
     assert check_jog('maintenance', True, None, None, 0.01, 0.0, 0.1) == 'jog refused: board not answering'
     assert check_jog('maintenance', True, rest, None, 0.01, 0.0, 0.1) == ''
+
+
+def test_the_session_reuses_a_resting_status_for_one_lost_answer_but_not_after_a_command():
+    """AxisBoardSession.poll on a link whose STATUS answers are lost on demand: an idle
+    board's previous STATUS stands in for one lost answer (0.25 s old with 0.05 s
+    control periods); once a command went out after it (here a HOME), it does not: the
+    board may be moving."""
+    from sslfr_drivers.axis.board_session import AxisBoardSession
+    from sslfr_drivers.axis.commands import ActionKind
+    from sslfr_drivers.link import messages as msg
+    from sslfr_drivers.link.board_link import LinkError, LinkState
+
+    class Link:
+        state, resets, lose = LinkState.UP, 0, False
+
+        def request(self, message, **_kw):
+            if isinstance(message, msg.GetStatus):
+                if self.lose:
+                    raise LinkError('time-out')
+                return msg.Status(10, 10, 0.0, int(msg.StatusFlags.HOMED), 0, 0, float('nan'), 1000)
+            return msg.Ack(message.TYPE)
+
+    s = AxisBoardSession.__new__(AxisBoardSession)
+    s.link, s.reference, s.request_timeout = Link(), None, 0.1
+    s._seen_resets, s._last_ok, s._commanded, s.poll_failures, s.stale_polls = 0, None, False, 0, 0
+    period, idle = 0.05, 0.2
+    assert s.poll(0.0, 2 * period, 3 * period, idle + 2 * period).homed
+    s.link.lose = True
+    assert s.poll(0.25, 2 * period, 3 * period, idle + 2 * period) is not None and s.stale_polls == 1
+    assert s.write(Action(ActionKind.HOME, switch=int(msg.Switch.LOW), speed=100.0)).ok
+    assert s.poll(0.25, 2 * period, 3 * period, idle + 2 * period) is None
+    assert s.poll(0.1, 2 * period, 3 * period, idle + 2 * period) is not None    # within 3 periods: as before

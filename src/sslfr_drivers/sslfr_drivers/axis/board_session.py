@@ -72,7 +72,8 @@ def board_from_status(status: m.Status) -> BoardState:
 def reusable_status(age: float, state: BoardState, max_age: float, rest_age: float) -> bool:
     """Whether a STATUS ``age`` [s] old stands in for a lost answer: younger than
     ``max_age`` [s], or, of a board at rest (neither moving nor homing: it moves only
-    on a command, which the next answered poll shows), younger than ``rest_age`` [s].
+    on a command, and the session does not extend the reuse past one), younger than
+    ``rest_age`` [s].
     While idle the driver polls seldom, and one late answer would otherwise leave it
     without a board state until the next poll (an operator's jog refused meanwhile)."""
     if age <= max_age:
@@ -115,6 +116,7 @@ class AxisBoardSession:
         self.poll_failures = 0
         self.stale_polls = 0
         self._last_ok: tuple[float, BoardState] | None = None
+        self._commanded = False           # a command went out after the last answered STATUS
         self._seen_resets = 0
         self._seen_reconnects = 0
 
@@ -182,8 +184,9 @@ class AxisBoardSession:
         """STATUS now (one try of ``timeout`` [s]).
 
         When the answer is lost (noisy link, a late board) the previous STATUS is
-        returned if :func:`reusable_status` allows it (``max_age``, ``rest_age`` [s],
-        steady ``now`` [s]) and the link is still UP with no reset seen since;
+        returned if :func:`reusable_status` allows it (``max_age``; ``rest_age`` [s] only
+        when no command went out since it; steady ``now`` [s]) and the link is still UP
+        with no reset seen since;
         otherwise None (link down, reconnecting, or re-reading INFO/STATUS after a
         board reset).
         """
@@ -195,6 +198,7 @@ class AxisBoardSession:
         except (LinkError, ProtocolError):
             self.poll_failures += 1
             last = self._last_ok
+            rest_age = 0.0 if self._commanded else rest_age     # a command may have ended the rest
             if (last is not None and reusable_status(now - last[0], last[1], max_age, rest_age)
                     and self.link.state == LinkState.UP and self.link.resets == self._seen_resets):
                 self.stale_polls += 1
@@ -202,7 +206,7 @@ class AxisBoardSession:
             return None
         self.last_status = status
         state = board_from_status(status)
-        self._last_ok = (now, state)
+        self._last_ok, self._commanded = (now, state), False
         return state
 
     def take_reset(self) -> bool:
@@ -271,6 +275,7 @@ class AxisBoardSession:
         msg = board_command(act)
         if msg is None:
             return WriteResult(True) if wait else None
+        self._commanded = True
         if not wait:
             try:
                 self.link.submit(msg)
