@@ -184,8 +184,8 @@ def test_launch_environment_defaults_env_and_arguments(monkeypatch):
     assert mod._environment('', '') == {'ROS_DOMAIN_ID': str(ns.domain_id),
                                          'ROS_AUTOMATIC_DISCOVERY_RANGE': ns.discovery_range,
                                          dds_profile.PROFILE_ENV: profile}
-    # a node process is respawned after its DDS lease (5 s) + 1 s, not the 2 s of old
-    assert mod._respawn_delay(mod._environment('', '')) == 6.0
+    # a node process is respawned after its DDS lease (7.5 s) + 1 s, not the 2 s of old
+    assert mod._respawn_delay(mod._environment('', '')) == 8.5
     monkeypatch.setenv('ROS_DOMAIN_ID', '7')
     assert mod._environment('', '')['ROS_DOMAIN_ID'] == '7'
     assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
@@ -248,9 +248,9 @@ def test_environment_defaults_non_zero_domain_and_localhost():
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'})['ROS_DOMAIN_ID'] == '7'
     assert nodeset.ros_environment(ns, base={'ROS_DOMAIN_ID': '7'}, domain_id=9)['ROS_DOMAIN_ID'] == '9'
-    # the node set's Fast DDS profile (a 5 s participant lease), unless one is named
+    # the node set's Fast DDS profile (a 7.5 s participant lease), unless one is named
     assert env[dds_profile.PROFILE_ENV] == str(nodeset.config_dir() / dds_profile.PROFILE_FILE)
-    assert dds_profile.participant_lease(env[dds_profile.PROFILE_ENV]) == 5.0
+    assert dds_profile.participant_lease(env[dds_profile.PROFILE_ENV]) == 7.5
     own = nodeset.ros_environment(ns, base={dds_profile.PROFILE_ENV: '/etc/my_fastdds.xml'})
     assert own[dds_profile.PROFILE_ENV] == '/etc/my_fastdds.xml'
 

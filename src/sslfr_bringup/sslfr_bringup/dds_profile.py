@@ -8,7 +8,8 @@ segment that some publishers no longer write to: it never hears them (Fast DDS
 2.14, reproduced with the recorder and the safety node; docs/deploy.md "Restart after
 a hang"). So a node process is restarted no sooner than the lease (+ a margin) after
 its death. The node set's profile (config/fastdds_profile.xml) shortens the lease
-from Fast DDS's 20 s to 3 s so that this wait stays short.
+from Fast DDS's 20 s to 7.5 s (announced every 3 s, as Fast DDS does) so that this
+wait stays short.
 """
 from __future__ import annotations
 

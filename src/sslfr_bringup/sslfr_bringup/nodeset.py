@@ -787,7 +787,7 @@ def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
     unless the caller's environment (or ``domain_id``) sets them. With
     ``ROS_DISCOVERY_SERVER`` (a collector of a field, docs/field.md) no discovery range
     is added: the discovery servers decide who is found. The node set's Fast DDS
-    profile (config/fastdds_profile.xml: a 5 s participant lease, see
+    profile (config/fastdds_profile.xml: a 7.5 s participant lease, see
     :mod:`sslfr_bringup.dds_profile`) unless the environment names its own."""
     env = dict(os.environ if base is None else base)
     if domain_id is not None:

@@ -22,10 +22,10 @@ def _lease(sec: str, nsec: str = '0', default: str = ' is_default_profile="true"
             '</discovery_config></builtin></rtps></participant>')
 
 
-def test_the_node_sets_profile_has_a_5_s_lease_and_a_6_s_restart_wait():
+def test_the_node_sets_profile_has_a_7_5_s_lease_and_an_8_5_s_restart_wait():
     path = nodeset.config_dir() / dds_profile.PROFILE_FILE
-    assert dds_profile.participant_lease(path) == 5.0
-    assert dds_profile.restart_wait({dds_profile.PROFILE_ENV: str(path)}) == 6.0
+    assert dds_profile.participant_lease(path) == 7.5
+    assert dds_profile.restart_wait({dds_profile.PROFILE_ENV: str(path)}) == 8.5
 
 
 def test_lease_from_a_profile(tmp_path):
