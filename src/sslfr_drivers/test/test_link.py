@@ -49,6 +49,37 @@ def test_pty_transport_both_ways_and_loss():
         SerialTransport('/dev/does-not-exist').open()
 
 
+def test_pty_read_returns_a_burst_whole_times_out_empty_and_is_interrupted():
+    """A POSIX port is read with one select and one read: a burst written at once comes
+    back in one read; an idle read ends empty after its time-out (not before);
+    interrupt() from another thread ends a long read at once, and data written after
+    it is read by the next read."""
+    import threading
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    t = SerialTransport(os.ttyname(slave))
+    t.open()
+    try:
+        burst = b''.join(encode_frame(Frame(1, i, bytes([i]) * 5)) for i in range(8))
+        os.write(master, burst)
+        time.sleep(0.05)
+        assert t.read(0.5) == burst
+        t0 = time.monotonic()
+        assert t.read(0.1) == b''
+        assert 0.09 <= time.monotonic() - t0 < 0.5
+        assert t.interruptible
+        threading.Timer(0.1, t.interrupt).start()
+        t0 = time.monotonic()
+        assert t.read(5.0) == b''
+        assert time.monotonic() - t0 < 1.0
+        os.write(master, b'after')
+        assert t.read(1.0) == b'after'
+    finally:
+        t.close()
+        os.close(master)
+        os.close(slave)
+
+
 def test_reader_thread_feeds_a_framing_protocol():
     """The reader owns the port; a protocol object only parses (pyserial's
     serial/threaded shape): frames split over 7-byte writes and after junk arrive whole."""

@@ -25,13 +25,19 @@ then closes it and reopens it with back-off.
 from __future__ import annotations
 
 import logging
+import os
 import queue
+import select
 import threading
 import urllib.parse
 
 import serial
 
 _log = logging.getLogger(__name__)
+
+#: [bytes] most taken by one read of a POSIX port: a burst of frames at 115200 bit/s
+#: between two reads of a loaded reader
+READ_CHUNK = 4096
 
 
 class TransportError(OSError):
@@ -155,10 +161,21 @@ class SerialTransport(Transport):
             raise TransportError(f'write to {self.url} failed: {exc}') from None
 
     def read(self, timeout: float) -> bytes:
-        """Return what is available (at least 1 byte) or ``b''`` after ``timeout`` [s]."""
+        """Return what is available (at least 1 byte) or ``b''`` after ``timeout`` [s].
+
+        A POSIX port (a device, a pty) is read with one ``select`` on its descriptor
+        and pyserial's abort pipe (:meth:`interrupt`) and one ``os.read`` of what is
+        there: pyserial's own path changes the port's timeout (``flock``,
+        ``tcgetattr``, ``tcsetattr``) whenever the wait changes, which here is at
+        every read, then reads a byte, asks how many wait and reads them (seven
+        system calls instead of two, at every frame of every board). Other URLs
+        (``loop://``, ``socket://``) take pyserial's path."""
         ser = self._ser
         if ser is None:
             raise TransportError(f'{self.url} is not open')
+        fd, abort = getattr(ser, 'fd', None), getattr(ser, 'pipe_abort_read_r', None)
+        if isinstance(fd, int) and isinstance(abort, int):
+            return self._read_fd(fd, abort, timeout)
         try:
             if ser.timeout != timeout:
                 ser.timeout = timeout
@@ -170,6 +187,27 @@ class SerialTransport(Transport):
             return data
         except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
             raise TransportError(f'read from {self.url} failed: {exc}') from None
+
+    def _read_fd(self, fd: int, abort: int, timeout: float) -> bytes:
+        try:
+            ready, _, _ = select.select([fd, abort], [], [], max(0.0, timeout))
+            if abort in ready:
+                os.read(abort, 1000)         # interrupted: the poke's byte(s) consumed
+                if fd not in ready:
+                    return b''
+            if not ready:
+                return b''
+            data = os.read(fd, READ_CHUNK)
+        except BlockingIOError:
+            return b''                       # ready, then taken by nobody else: nothing after all
+        except InterruptedError:
+            return b''
+        except (OSError, ValueError) as exc:  # ValueError: the descriptor was closed meanwhile
+            raise TransportError(f'read from {self.url} failed: {exc}') from None
+        if not data:                         # readable but empty: the device is gone (as pyserial)
+            raise TransportError(f'read from {self.url} failed: the device reports readiness but '
+                                 'returned no data (unplugged, or another process on the port?)')
+        return data
 
 
 # --------------------------------------------------------------------------- XBee

@@ -190,9 +190,10 @@ class BagWriter:
             entry = self._topics.get(topic)
             if entry is None:
                 raise KeyError(f'topic {topic!r} was not declared with add_topic()')
-            f = self._file
-            if f is not None and f.info.message_count and self.options.split.should_split(
-                    f.size(), f.info.starting_time_ns, log_time_ns):
+            f, split = self._file, self.options.split
+            # the file's size (a seek of the OS file) only when a size limit asks for it
+            if f is not None and f.info.message_count and split.should_split(
+                    f.size() if split.max_bytes else 0, f.info.starting_time_ns, log_time_ns):
                 self._close_file()
                 f = None
             if f is None:
