@@ -1,10 +1,11 @@
 """System scenarios, liveness: ``--fault hang:NODE`` (SIGSTOP) on every process of the
 ``composed`` and ``separate`` layouts (config/nodeset.yaml ``layouts``).
 
-Each simulated run carries some of a layout's hangs one after the other (each given
-SPACING_WALL to show its reaction and recover; the separate layout's seven take two
-runs, so that a run stays within the suite's per-test time); together the runs hang
-every process of both layouts once. For every hung process:
+One simulated run per layout hangs every process of the layout once, in two steps
+(groups of processes hung at the same moment, each step given :func:`spacing` to show
+its reaction and recover): first every process but the recorder's and safety's (in
+``composed`` safety's process alone), then the rest, the recorder's process last since
+its own gap is the whole bag's. For every hung process:
 
 - the supervisor SIGKILLs it within the bound (``defaults.watchdog_timeout`` of silence
   since its last beat, which came at most one beat period before the hang), with the
@@ -12,7 +13,7 @@ every process of both layouts once. For every hung process:
 - while a node that safety watches is silent, safety raises its reason (STOW for the
   planner, the drivers and the absorber board; WARN for gps and irradiance); when
   safety itself hangs the axes stop on their own heartbeat watchdog;
-- tracking resumes within RESUME_WALL of the restart;
+- tracking resumes within RESUME_WALL of the restart (of the step's last process);
 - the bag keeps everything but the hung process's own gap: a gap of a continuous topic
   lies within the hang of a process that publishes it (or of the recorder's process).
 
@@ -39,11 +40,13 @@ from sslfr_sim.sim_cli import day_epoch, parse_hhmm
 DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
 SPEED = 30.0
-#: [s wall] between two hangs: bound (5 s) + the restart wait (the DDS lease + 1 s = 6 s,
-#: sslfr_bringup.dds_profile) + a process's start-up to its first beat on a loaded 2-core
-#: machine (seen up to 9 s for three processes restarted at once) + RESUME_WALL + 2 s of
-#: tracking to check, with room to spare
-SPACING_WALL = 40.0
+#: [s wall] between two hangs of one process: bound (5 s) + the restart wait (the DDS
+#: lease + 1 s = 8.5 s, sslfr_bringup.dds_profile) + a process's start-up to its first
+#: beat on a loaded 2-core machine (seen up to 9 s for three processes restarted at once)
+#: + RESUME_WALL + 2 s of tracking to check, with room to spare
+SPACING_WALL = 43.0
+#: [s wall] more per further process restarted at once (their start-ups share two cores)
+SPACING_PER_PROCESS = 2.5
 #: [s wall] from the restart to tracking again: start-up (rclpy import 1-3 s loaded),
 #: discovery, the drivers' activation, safety back to OK and the return from the stow
 RESUME_WALL = 15.0
@@ -66,15 +69,20 @@ WATCHED = {'planner': 2, 'mirrors_driver': 2, 'mobile_structure_driver': 2, 'sec
            'absorber_board': 2, 'irradiance': 1, 'gps': 1}
 
 #: the runs: (layout, hangs), the hangs as groups of nodes whose processes are hung at
-#: once (independent processes; one group per step; a node names its process); the
-#: recorder's process comes last in its run (its own gap is the whole bag's)
+#: once (one group per step; a node names its process); the recorder's process comes
+#: last in its run (its own gap is the whole bag's). Safety is never hung with a node it
+#: watches: its reaction to their silence is checked.
 RUNS = {
-    'composed': ('composed', [('safety',), ('mirrors_driver',), ('planner',)]),   # safety, hardware, operations
-    'separate-1': ('separate', [('planner',), ('mirrors_driver',), ('absorber_board',),
-                                ('gps', 'irradiance', 'web')]),
-    'separate-2': ('separate', [('mobile_structure_driver', 'secondary_reflector_driver'), ('safety',),
-                                ('recorder',)]),
+    'composed': ('composed', [('safety',), ('mirrors_driver', 'planner')]),   # safety; hardware + operations
+    'separate': ('separate', [('planner', 'mirrors_driver', 'mobile_structure_driver', 'secondary_reflector_driver',
+                               'absorber_board', 'gps', 'irradiance', 'web'), ('safety', 'recorder')]),
 }
+
+
+def spacing(processes) -> float:
+    """[s wall] from a step's hang to the next: SPACING_WALL for one process restarted,
+    SPACING_PER_PROCESS more for each further one."""
+    return SPACING_WALL + SPACING_PER_PROCESS * (len(set(processes)) - 1)
 
 
 def _process_of(procs: dict, node: str) -> str:
@@ -108,14 +116,13 @@ def _run(key, tmp_path_factory):
     ns = nodeset.load()
     procs = {p.name: [n.name for n in p.nodes] for p in ns.processes(layout)}
     start = parse_hhmm('10:00')
-    first = start + 5 * 60
-    step = SPACING_WALL * SPEED
-    plan = []                                     # (sim s of day, processes hung)
-    for i, group in enumerate(groups):
-        at = first + i * step
+    at = start + 5 * 60
+    plan = []                                     # (sim s of day, nodes, processes hung)
+    for group in groups:
         names = [_process_of(procs, g) for g in group]
         plan.append((at, group, names))
-    end = first + len(plan) * step
+        at += spacing(names) * SPEED
+    end = at
     dom, fh = acquire_test_domain()
     tmp = tmp_path_factory.mktemp(f'liveness-{layout}')
     env = dict(os.environ, ROS_DOMAIN_ID=str(dom), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -149,15 +156,7 @@ def _run(key, tmp_path_factory):
             'live': live, 'plan': plan, 'procs': procs, 'end': DAY0 + end, 'ns': ns}
 
 
-#: `make test` runs the run that hangs the two processes once seen deaf after their
-#: restart (recorder, safety) within the suite's time budget; SSLFR_LIVENESS=1 runs all
-#: three (about 7.5 minutes)
-DEFAULT_RUNS = ('separate-2',)
-
-
-@pytest.fixture(scope='module', params=[pytest.param(k, marks=() if k in DEFAULT_RUNS else pytest.mark.skipif(
-    os.environ.get('SSLFR_LIVENESS') != '1', reason='the other liveness runs: SSLFR_LIVENESS=1 (7.5 min in all)'))
-    for k in RUNS])
+@pytest.fixture(scope='module', params=list(RUNS))
 def run(request, tmp_path_factory):
     return _run(request.param, tmp_path_factory)
 
@@ -172,19 +171,26 @@ def _hangs(run):
     s = run['summary']
     events = s['process_events']
     out = []
+    def fired(node, at):
+        f = [f for f in s['faults'] if f['spec'] == f'hang:{node}@{_hhmm(at)}' and f['what'] == 'start']
+        assert f and f[0]['result'] == 'ok', (node, s['faults'], run['text'][-3000:])
+        return f[0]
     for at, group, names in run['plan']:
-        fired = [f for f in s['faults'] if f['spec'] == f'hang:{group[0]}@{_hhmm(at)}' and f['what'] == 'start']
-        assert fired and fired[0]['result'] == 'ok', (group, s['faults'], run['text'][-3000:])
-        t_sim, t_wall = fired[0]['sim_time'], fired[0]['wall']
-        for name in dict.fromkeys(names):
-            mine = [e for e in events if e[1] == name and e[0] >= t_wall - 0.5]
+        first = fired(group[0], at)                  # the step's start (its key: the sim time)
+        t_sim, t_wall0 = first['sim_time'], first['wall']
+        node_of = {}                               # process -> the first of its nodes in the step
+        for node, name in zip(group, names):
+            node_of.setdefault(name, node)
+        for name, node in node_of.items():
+            t_wall = fired(node, at)['wall']       # this process's own SIGSTOP (a step's go one by one)
+            mine = [e for e in events if e[1] == name and e[0] >= t_wall0 - 0.5]
             hung = [e for e in mine if e[2] == 'hung']
             assert hung, (name, mine, run['text'][-3000:])
             back = [e for e in mine if e[2] == 'turning' and e[0] > hung[0][0]]
             assert back, (name, mine)
 
             def sim(w):
-                return t_sim + (w - t_wall) * SPEED
+                return t_sim + (w - t_wall0) * SPEED
             out.append((name, run['procs'][name], t_sim, sim(hung[0][0]), sim(back[0][0]),
                         hung[0][0] - t_wall, hung[0][3]))
     return out
@@ -250,9 +256,12 @@ def test_tracking_resumes_after_each_restart(run):
                              float(np.median(day.phase['longitude'][k])), 22.0)
     hangs = _hangs(run)
     starts = sorted({h[2] for h in hangs}) + [run['end']]
-    for name, _nodes, t_hang, _k, t_back, _, _ in hangs:
+    last_back = {}                  # per step: the last of its processes back (tracking needs them all)
+    for _name, _nodes, t_hang, _k, t_back, _, _ in hangs:
+        last_back[t_hang] = max(last_back.get(t_hang, t_back), t_back)
+    for name, _nodes, t_hang, _k, _b, _, _ in hangs:
         t_next = min(t for t in starts if t > t_hang)
-        lo = t_back + RESUME_WALL * SPEED
+        lo = last_back[t_hang] + RESUME_WALL * SPEED
         assert lo < t_next - 60, (name, 'no time left to see tracking before the next hang')
         for axis in ('mirrors', 'mobile_structure', 'secondary_reflector'):
             live = sorted((_stamp(m), m.measured) for m in run['live'][axis] if lo <= _stamp(m) <= t_next - 2 * LAG)

@@ -135,6 +135,8 @@ def _orphan_guard(argv: list[str]) -> list[str]:
 #: A node exiting with this code refused its configuration (sslfr_common.node): it
 #: would refuse it again, so the set stops instead of restarting it forever.
 EXIT_CONFIG_REFUSED = 2
+#: [s] longest wait for the stack dumps of the processes found hung in one pass
+STACK_DUMP_WAIT = 0.3
 
 
 def catches(pid: int, sig: int) -> bool:
@@ -344,6 +346,7 @@ class Supervisor:
                 first = self.liveness.beats(p.name) == 0
                 if self.liveness.note(p.name, n.fields, now) and first and self.liveness.beats(p.name):
                     self._event(p, 'turning', f'first executor beat {now - p.started_at:.1f} s after its start')
+        hung = []
         for late in self.liveness.overdue(now):
             p = self.programs[late.key]
             self.liveness.forget(p.name)
@@ -356,16 +359,26 @@ class Supervisor:
             self.say(f'{p.name}: {late.cause}: ' + ('its stacks to its log, then ' if dump else '')
                      + 'killing it (SIGKILL) to restart it', 2 if p.critical else 3)
             self._event(p, 'hung', late.cause)          # when found (the dump takes up to 0.3 s)
-            try:
-                if dump:
+            if dump:
+                try:
                     os.kill(p.proc.pid, STACK_DUMP_SIGNAL)
-                    p.proc.wait(0.3)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
+                except ProcessLookupError:
+                    pass
+            hung.append(p)
+        # the dumps of every process found in this pass written at once: one wait of at
+        # most STACK_DUMP_WAIT for all (several hung at once are not killed one by one)
+        deadline = time.monotonic() + STACK_DUMP_WAIT
+        for p in hung:
+            try:
+                p.proc.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
                 pass
+        for p in hung:
             try:
                 os.killpg(p.proc.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+        for p in hung:
             p.proc.wait(5)
 
     def node_set_ready(self) -> bool:
