@@ -239,14 +239,16 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     finds the collector's other processes through the collector's own discovery server
     (safety OK again, the drivers recorded again, before the link is back), and the
     station hears the new planner after the rejoin (the page's phase and safety ages, not
-    only its last values). Then c2's process of the planner is killed with its link up:
-    the station hears its restart. The cut starts once every collector is past its
+    only its last values). Then the station's primary discovery server is killed (and
+    kept dead): every collector stays heard, and c2's process of the planner, killed, is
+    heard again after its restart, through the backup server. The cut starts once every collector is past its
     start-up (tracking with safety OK or WARN for 3 s at the page): the start-up's own
     safety STOW is not a stow of the cut."""
     import datetime as dt
     import json
     import urllib.request
 
+    import psutil
     import yaml
 
     from conftest import ROOT, NodeProcess
@@ -328,7 +330,18 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
         # phase and safety's state, each within a second and a half
         fresh = lambda c: all((a := c.get(k)) is not None and a < 1.5 for k in ('phase_age_s', 'safety_age_s'))  # noqa: E731
         _wait(lambda: fresh(page()['c1']), 30, 'c1\'s planner (restarted) and safety heard at the station', show)
-        # a collector's process restarted while its link is up is found by the station too (c2's
+        # the primary discovery server killed (the station's supervisor paused meanwhile, so that
+        # it stays dead): the running links keep working ...
+        station_sup = psutil.Process(procs['station'].pid)
+        servers = [p for p in station_sup.children(recursive=True) if 'fast-discovery-server' in ' '.join(p.cmdline())]
+        primary = [p for p in servers if p.cmdline()[p.cmdline().index('-i') + 1] == '0']
+        assert len(servers) == 2 and len(primary) == 1, [p.cmdline() for p in servers]
+        station_sup.suspend()
+        primary[0].kill()
+        t_prim = time.monotonic()
+        _wait(lambda: time.monotonic() - t_prim > 3.0 and all(fresh(page()[c]) for c in f.ids), 20,
+              'every collector heard 3 s after the primary server died', show)
+        # ... and a collector's process restarted meanwhile is found through the backup (c2's
         # process of the planner killed: the page sees its planner silent, then hears the new one)
         _kill_process_of(procs['c2'].pid, 'planner')
         t_kill2 = time.monotonic()
@@ -336,8 +349,14 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
         t_new = _wait(lambda: fresh(page()['c2']), 60, 'c2\'s restarted planner heard at the station', show)
         s = page()
         assert all(s[c]['link'] == 'ok' for c in f.ids), {c: s[c]['link'] for c in f.ids}
-        print(f'c2\'s process of the planner killed: restarted and heard at the station {t_new - t_kill2:.1f} s later')
+        print(f'the primary discovery server killed; then c2\'s process of the planner killed: restarted and '
+              f'heard at the station through the backup {t_new - t_kill2:.1f} s later')
+        station_sup.resume()
     finally:
+        try:
+            psutil.Process(procs['station'].pid).resume()
+        except Exception:  # noqa: BLE001 - gone or never paused
+            pass
         for p in procs.values():
             p.stop(timeout=30)
     # c1 kept tracking on its own while cut off: its own bag says so, as c2's (never cut) does

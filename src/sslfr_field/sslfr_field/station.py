@@ -65,9 +65,17 @@ def collector_environment(f: field_mod.Field, base: dict | None = None) -> dict:
 
 
 def local_addresses() -> set[str]:
-    """This machine's IP addresses (loopback included), to know which discovery
-    servers of a field run here."""
+    """This machine's IP addresses (loopback included): every interface's (psutil),
+    and what its host name resolves to, to know which discovery servers of a field
+    run here. (The host name alone often resolves to 127.0.1.1 only: a station whose
+    backup shared its address with the primary then ran no backup.)"""
     out = {'127.0.0.1', '::1'}
+    try:
+        import psutil
+        for addrs in psutil.net_if_addrs().values():
+            out.update(a.address.split('%')[0] for a in addrs if a.family in (socket.AF_INET, socket.AF_INET6))
+    except (ImportError, OSError):
+        pass
     try:
         for info in socket.getaddrinfo(socket.gethostname(), None):
             out.add(info[4][0])
@@ -89,7 +97,9 @@ def servers_here(f: field_mod.Field, role: str, here: set[str] | None = None) ->
     if role == 'both':
         return [primary, backup]
     here = local_addresses() if here is None else here
-    local = ipaddress.ip_address(st.backup_address).is_loopback or st.backup_address in here
+    # the primary runs here in 'auto': a backup at the primary's address does too
+    local = (ipaddress.ip_address(st.backup_address).is_loopback or st.backup_address in here
+             or st.backup_address == st.address)
     return [primary, backup] if local else [primary]
 
 

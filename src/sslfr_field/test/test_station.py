@@ -28,6 +28,19 @@ def test_discovery_servers_here(tmp_path):
     assert station.servers_here(f, 'backup') == [(1, '192.168.10.3', 11812)]
     f2 = field(tmp_path, backup='127.0.0.1')
     assert len(station.servers_here(f2, 'auto', here=set())) == 2       # a loopback backup runs here
+    # a backup at the primary's address runs beside it, whatever the host name resolves to
+    f3 = field(tmp_path, backup='192.168.10.2')
+    assert station.servers_here(f3, 'auto', here={'127.0.0.1'}) == [(0, '192.168.10.2', 11811),
+                                                                     (1, '192.168.10.2', 11812)]
+
+
+def test_local_addresses_hold_every_interfaces_address():
+    import psutil
+    import socket
+    here = station.local_addresses()
+    ifaces = {a.address.split('%')[0] for addrs in psutil.net_if_addrs().values() for a in addrs
+              if a.family in (socket.AF_INET, socket.AF_INET6)}
+    assert ifaces and ifaces <= here and '127.0.0.1' in here
 
 
 def test_programs_name_what_is_missing_and_pass_the_field(tmp_path):
