@@ -84,19 +84,30 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     m = desc.movement('mirrors')
     step = m.step or 0.0
     # every step reached within one motor step: the last status that still carries the
-    # step's setpoint. The driver commands one control period ahead (AxisTuning.lead, 1 /
-    # control_rate wall s: tens of simulated s at this speed), so a status shortly before the
-    # next planned step may already carry that step with the drive on its way (seen: 1.46 of
-    # 1.85 deg).
+    # step's setpoint, taken before the next step's command. The driver commands one control
+    # period ahead (AxisTuning.lead, 1 / control_rate wall s: 80 simulated s at this speed)
+    # while a status carries the setpoint of its own time: a status shortly before the next
+    # planned step may already carry that step with the drive on its way (seen: 1.46 of
+    # 1.85 deg), or still the old setpoint with the drive already at the next step (seen:
+    # 15.53 deg measured, 14.13 deg set, 1.40 deg before the step at 14.13 + 1.40), when a
+    # control tick woken early by an event saw the moving board before the step's time.
+    # So the statuses stamped within two leads of the next step are not judged here (a
+    # status's stamp is never before the tick its numbers come from).
     reached = 0
+    lead = 2.0 * speed / 20.0                   # [s sim] two control periods (control_rate 20 Hz)
     held = dict(zip(pt[jump].tolist(), pv[jump].tolist()))
     for a, b in zip(jumps[:-1], jumps[1:]):
-        k = np.flatnonzero((t > a) & (t < b) & (np.abs(setpoint - held[a]) <= step + 1e-6))
+        k = np.flatnonzero((t > a) & (t < b - lead) & (np.abs(setpoint - held[a]) <= step + 1e-6))
         if len(k):
             reached += 1
             assert abs(measured[k[-1]] - setpoint[k[-1]]) <= step + 1e-6, (a, math.degrees(measured[k[-1]]),
                                                                           math.degrees(setpoint[k[-1]]))
     assert reached >= 30, reached
+    late = []                       # statuses of the lead window off their setpoint (printed)
+    for a, b in zip(jumps[:-1], jumps[1:]):
+        k = np.flatnonzero((t >= b - lead) & (t < b) & (np.abs(setpoint - held[a]) <= step + 1e-6))
+        late += [(round(b - t[i]), round(math.degrees(measured[i] - setpoint[i]), 3)) for i in k
+                 if abs(measured[i] - setpoint[i]) > step + 1e-6]
     # held between the steps: the statuses of a motor at rest on a setpoint already held at
     # the status before (0.2 s wall earlier). Right after a step a status may carry the new
     # setpoint with the position polled before the move: at 1600x the step's wall-time
@@ -120,7 +131,8 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     # step-middle angle of the law (seen up to 3.0 % more at 1600x)
     assert achieved >= 0.97 * law and achieved <= ideal * 1.01, (achieved, law, ideal)
     print(f'seed 003 day on firmware: {len(jumps)} steps every {np.median(gaps):.0f} s, {reached} reached '
-          f'within one motor step ({math.degrees(step):.4f} deg); drive rate {math.degrees(rate):.2f} deg/h; largest '
+          f'within one motor step ({math.degrees(step):.4f} deg; within {lead:.0f} s before the next step '
+          f'{len(late)} statuses already off their setpoint: (s before it, deg) {late}); drive rate {math.degrees(rate):.2f} deg/h; largest '
           f'line inclination {math.degrees(np.max(np.abs(lines))):.2f} deg; |measured - setpoint| p90 '
           f'{math.degrees(np.percentile(err, 90)):.4f} deg ({math.degrees(np.percentile(still, 90)):.4f} deg at rest, '
           f'{len(still)} statuses); absorbed {achieved:.3f} kWh vs ideal {ideal:.3f} '
