@@ -1,11 +1,13 @@
 """System scenarios, liveness: ``--fault hang:NODE`` (SIGSTOP) on every process of the
 ``composed`` and ``separate`` layouts (config/nodeset.yaml ``layouts``).
 
-One simulated run per layout hangs every process of the layout once, in two steps
+One simulated run per layout hangs every process of the layout once, in steps
 (groups of processes hung at the same moment, each step given :func:`spacing` to show
-its reaction and recover): first every process but the recorder's and safety's (in
-``composed`` safety's process alone), then the rest, the recorder's process last since
-its own gap is the whole bag's. For every hung process:
+its reaction and recover): ``separate``: every process but the recorder's and safety's,
+then those two (the recorder's process last since its own gap is the whole bag's);
+``composed``: its two processes of several nodes at once. Safety's process is the same
+in both layouts (the safety node alone): it is hung in the ``separate`` run. For every
+hung process:
 
 - the supervisor SIGKILLs it within the bound (``defaults.watchdog_timeout`` of silence
   since its last beat, which came at most one beat period before the hang), with the
@@ -73,7 +75,7 @@ WATCHED = {'planner': 2, 'mirrors_driver': 2, 'mobile_structure_driver': 2, 'sec
 #: last in its run (its own gap is the whole bag's). Safety is never hung with a node it
 #: watches: its reaction to their silence is checked.
 RUNS = {
-    'composed': ('composed', [('safety',), ('mirrors_driver', 'planner')]),   # safety; hardware + operations
+    'composed': ('composed', [('mirrors_driver', 'planner')]),     # hardware + operations (safety: as in separate)
     'separate': ('separate', [('planner', 'mirrors_driver', 'mobile_structure_driver', 'secondary_reflector_driver',
                                'absorber_board', 'gps', 'irradiance', 'web'), ('safety', 'recorder')]),
 }
@@ -90,12 +92,20 @@ def _process_of(procs: dict, node: str) -> str:
 
 
 def test_the_runs_hang_every_process_of_both_layouts_once():
+    """Every process of each layout is hung once: in its layout's run, or, the same
+    process (the same nodes) in the other layout's run."""
     ns = nodeset.load()
-    for layout in ('composed', 'separate'):
-        procs = {p.name: [n.name for n in p.nodes] for p in ns.processes(layout)}
-        hung = [p for lay, groups in RUNS.values() if lay == layout
-                for g in groups for p in dict.fromkeys(_process_of(procs, n) for n in g)]
-        assert sorted(hung) == sorted(procs), (layout, hung)
+    procs = {layout: {p.name: [n.name for n in p.nodes] for p in ns.processes(layout)}
+             for layout in ('composed', 'separate')}
+    hung = {layout: [p for lay, groups in RUNS.values() if lay == layout
+                     for g in groups for p in dict.fromkeys(_process_of(procs[layout], n) for n in g)]
+            for layout in procs}
+    for layout, mine in procs.items():
+        assert len(hung[layout]) == len(set(hung[layout])), (layout, hung[layout])
+        elsewhere = {tuple(sorted(procs[o][p])) for o in procs if o != layout for p in hung[o]}
+        missing = [p for p, nodes in mine.items() if p not in hung[layout] and tuple(sorted(nodes)) not in elsewhere]
+        assert not missing, (layout, missing)
+    assert procs['composed']['safety'] == procs['separate']['safety'] == ['safety']
 
 
 def _config() -> str:

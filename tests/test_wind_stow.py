@@ -80,10 +80,17 @@ def test_a_gust_stows_within_2_s_to_the_wind_pose_and_the_release_waits_the_hold
     # published at wind_rate (1 Hz) of the 4 Hz samples, and at once on a new gust maximum
     def gap(a, b):
         return to_sec(b.header.stamp) - to_sec(a.header.stamp)
-    pairs = [(a, b) for (_, a), (_, b) in zip(box['wind'], box['wind'][1:])]
-    periodic = [gap(a, b) for a, b in pairs if b.gust <= a.gust]
-    assert periodic and min(periodic) >= 0.9, periodic
-    assert all(b.gust > a.gust for a, b in pairs if gap(a, b) < 0.9)
+
+    def pairs():
+        return [(a, b) for (_, a), (_, b) in zip(box['wind'], box['wind'][1:])]
+
+    def periodic():
+        return [gap(a, b) for a, b in pairs() if b.gust <= a.gust]
+    # in the first seconds the window's largest 3 s mean may rise at every publication (a
+    # CI run saw nine in a row): wait for three periodic ones
+    assert ros.spin_until(lambda: len(periodic()) >= 3, 30), [(m.gust, to_sec(m.header.stamp)) for _, m in box['wind']]
+    assert min(periodic()) >= 0.9, periodic()
+    assert all(b.gust > a.gust for a, b in pairs() if gap(a, b) < 0.9)
     t_fault = time.monotonic()
     _fault(sim, 'wind', True, value=20.0)
 
