@@ -123,9 +123,7 @@ if [ -f "$REQ_USED" ] && cmp -s "$REQ_USED" "$REQ_USED.new" && [ -f "$VENV/.sslf
 else
   say "installing Python dependencies into .venv/ (first time: about 2 minutes)"
   LOG="$VENV/.sslfr-pip.log"
-  # --no-compile: Python byte-compiles the modules it imports, on first import; pip would
-  # compile all ~7,000 files of the dependencies (22 s here, most of them never imported)
-  if ! "$VPY" -m pip install --disable-pip-version-check --no-compile -r "$REQ_USED.new" >"$LOG" 2>&1; then
+  if ! "$VPY" -m pip install --disable-pip-version-check -r "$REQ_USED.new" >"$LOG" 2>&1; then
     if grep -qiE 'Failed to establish a new connection|Temporary failure in name resolution|Network is unreachable|Could not fetch URL|ConnectionError|ProxyError|timed out' "$LOG"; then
       die "the package registry cannot be reached (pip could not connect; see $LOG). Check the network, a proxy, or PIP_INDEX_URL, then re-run make setup."
     fi

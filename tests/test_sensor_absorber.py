@@ -38,7 +38,9 @@ def test_temperatures_faults_switches_and_unplug(sim, launch, ros, tmp_path):
     switches = ros.collect(LimitSwitches, LIMIT_SWITCHES.name)
     diags = ros.collect(DiagnosticArray, DIAGNOSTICS.name)
     node = launch('sslfr_drivers', 'absorber_board', params={'port': str(tmp_path / 'abs0')})
-    assert ros.spin_until(lambda: len(outlet) >= 8 and switches, 15), node.output()
+    # the node's start-up: a few seconds; a fresh-clone run on a slow hour saw it print
+    # nothing for 15 s (the whole suite ran 17 % slower than usual)
+    assert ros.spin_until(lambda: len(outlet) >= 8 and switches, 45), node.output()
     # heating curve: focused mirrors at noon raise the outlet above ambient (25 degC)
     assert outlet[-1].temperature > outlet[0].temperature > 24.0
     assert outlet[-1].temperature > inlet[-1].temperature
