@@ -25,6 +25,7 @@ from fw_support import require
 
 from sslfr_bringup import nodeset
 from sslfr_common.drives import ActuatorLoop
+from sslfr_drivers.axis.params import PARAMS as AXIS_PARAMS
 from sslfr_drivers.link import messages as msgs
 from sslfr_planner import prototype
 from sslfr_planner.description import load
@@ -94,7 +95,7 @@ def test_seed003_day_on_its_switchless_stepper_firmware(ros_env, tmp_path):
     # So the statuses stamped within two leads of the next step are not judged here (a
     # status's stamp is never before the tick its numbers come from).
     reached = 0
-    lead = 2.0 * speed / 20.0                   # [s sim] two control periods (control_rate 20 Hz)
+    lead = 2.0 * speed / AXIS_PARAMS.defaults()['control_rate']    # [s sim] two control periods
     held = dict(zip(pt[jump].tolist(), pv[jump].tolist()))
     for a, b in zip(jumps[:-1], jumps[1:]):
         k = np.flatnonzero((t > a) & (t < b - lead) & (np.abs(setpoint - held[a]) <= step + 1e-6))

@@ -200,8 +200,6 @@ class SerialTransport(Transport):
             data = os.read(fd, READ_CHUNK)
         except BlockingIOError:
             return b''                       # ready, then taken by nobody else: nothing after all
-        except InterruptedError:
-            return b''
         except (OSError, ValueError) as exc:  # ValueError: the descriptor was closed meanwhile
             raise TransportError(f'read from {self.url} failed: {exc}') from None
         if not data:                         # readable but empty: the device is gone (as pyserial)
