@@ -30,7 +30,7 @@ the same description and applies it the same way:
   SIGKILLed by the watchdog and respawned by launch (``respawn=True``), the cause
   printed on the launch's output (the run directory is removed when the launch stops).
   A node process is respawned no sooner than its DDS
-  participant lease + 1 s after its death (``respawn_delay``; 4 s with the node set's
+  participant lease + 1 s after its death (``respawn_delay``; 8.5 s with the node set's
   Fast DDS profile, config/fastdds_profile.xml; :mod:`sslfr_bringup.dds_profile` says why).
 
 The supervisor of `./sslfr up` adds what launch does not do: restart with backoff and
