@@ -197,6 +197,8 @@ CUT_S = float(os.environ.get('SSLFR_FIELD_CUT_S', '30'))
 #: whole simulated collectors in the whole-collector test (SSLFR_FIELD_COLLECTORS; the issue's
 #: field: 4, ~85 s wall and ~90 s CPU on a loaded 2-core machine; 2: ~70 s, ~45 s CPU)
 N_WHOLE = int(os.environ.get('SSLFR_FIELD_COLLECTORS', '4'))
+#: [s] shortest cut the whole-collector test can check (the planner's restart lies within it)
+MIN_CUT_S = 20.0
 
 
 def _daylit_config(tmp_path) -> Path:
@@ -244,6 +246,9 @@ def test_whole_collectors_in_network_namespaces_with_the_station(netw, ros_env, 
     heard again after its restart, through the backup server. The cut starts once every collector is past its
     start-up (tracking with safety OK or WARN for 3 s at the page): the start-up's own
     safety STOW is not a stow of the cut."""
+    if CUT_S < MIN_CUT_S:
+        pytest.fail(f'SSLFR_FIELD_CUT_S={CUT_S:g}: at least {MIN_CUT_S:g} s, so that c1\'s planner killed at the '
+                    f'cut\'s start is restarted (8.5 s restart wait + start-up) and checked within the cut')
     import datetime as dt
     import json
     import urllib.request
