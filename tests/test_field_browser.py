@@ -14,12 +14,17 @@ it and the station's field recording holds every collector's statuses on the abs
 absorbed (the optical model on the collector's beam, sun and measured axes). Foxglove
 live at the station (``--set foxglove_bridge:...`` turns it on): a WebSocket client
 speaking the Foxglove protocol decodes a ``/c1/joint_states`` message of a collector
-through the station's one bridge. A screenshot is kept in
+through the station's one bridge. The station's SunSpec gateway, as a plant's SCADA sees
+it: pysunspec2's device reader finds each collector's unit (its id in the common model and
+the tracker), pymodbus reads each unit's mirrors position, equal to that collector's
+``joint_states`` within one motor step, and a control write is refused (read-only by
+default). A screenshot is kept in
 out/test-artifacts/field-page.png.
 """
 from __future__ import annotations
 
 import datetime as dt
+import math
 import os
 import re
 import time
@@ -99,6 +104,53 @@ def test_field_page_in_chromium_against_simulated_collectors(browser, field):  #
     payload = asyncio.run(asyncio.wait_for(_foxglove_one(f'ws://{m.group(1)}:{m.group(2)}', '/c1/joint_states'), 60))
     joints = deserialize_message(payload, JointState)
     assert joints.name and all(n in ('mirrors', 'mobile_structure', 'secondary_reflector') for n in joints.name)
+    # the plant's view: the station's SunSpec gateway, one unit per collector, read by a
+    # generic SunSpec reader and a Modbus client; each unit's mirrors position is its own
+    # collector's joint_states (heard through the Foxglove bridge just before and after)
+    g = _wait(lambda: re.search(r'SunSpec MODBUS TCP GATEWAY at (\S+):(\d+)', proc.output()), 60,
+              'the station\'s Modbus gateway address', lambda: proc.output()[-2000:])
+    host, port = g.group(1), int(g.group(2))
+    from pymodbus.client import ModbusTcpClient
+    from sunspec2.modbus.client import SunSpecModbusClientDeviceTCP
+
+    from sslfr_common.contract import STEP_ANGLE
+    from sslfr_gateway import sunspec
+
+    def mirrors_of(cid):                         # each axis driver publishes its own joint_states
+        js = deserialize_message(asyncio.run(asyncio.wait_for(_foxglove_one(
+            f'ws://{m.group(1)}:{m.group(2)}', f'/{cid}/joint_states',
+            lambda p: 'mirrors' in deserialize_message(p, JointState).name), 30)), JointState)
+        return js.position[list(js.name).index('mirrors')]
+
+    addrs = sunspec.point_addresses(1)
+    client = ModbusTcpClient(host, port=port, timeout=5)
+    assert client.connect()
+    try:
+        for k, cid in enumerate(ids, start=1):
+            d = SunSpecModbusClientDeviceTCP(slave_id=k, ipaddr=host, ipport=port, timeout=5)
+            try:
+                d.scan()
+                assert [x for x in d.models if isinstance(x, int)] == [1, 601, 302], d.models
+                assert d.common[0].SN.value == cid and d.tracker_controller[0].tracker[0].Id.value == cid
+            finally:
+                d.close()
+            diffs = []
+            for _ in range(5):                   # the mirrors may move between the reads: bracket the register
+                before = mirrors_of(cid)
+                r = client.read_holding_registers(addrs['601.tracker[0].ElPos'], count=2, device_id=k)
+                assert not r.isError(), r
+                el = math.radians(client.convert_from_registers(r.registers, client.DATATYPE.INT32) * 1e-3)
+                after = mirrors_of(cid)
+                diffs.append(min(abs(el - before), abs(el - after)))
+                if diffs[-1] <= STEP_ANGLE:
+                    break
+            assert diffs[-1] <= STEP_ANGLE, (cid, [math.degrees(x) for x in diffs])
+            r = client.write_register(addrs['601.tracker[0].Ctl'], 1, device_id=k)
+            assert r.isError() and r.exception_code == 1, r                 # read-only unless allowed
+    finally:
+        client.close()
+    print(f'SunSpec gateway at {host}:{port}: {len(ids)} units, each the mirrors position of its collector '
+          f'within one motor step; writes refused (read-only by default)')
     # each collector's own page, one click away: the link answers with the operator page
     for cid in ids:
         link = browser.execute_script(f"return document.querySelector('#collector-{cid} a').href")

@@ -142,7 +142,8 @@ def test_sunspec_positions_follow_joint_states_and_writes_obey_the_allow_list(co
     assert 'refused: not in write_allow' in ro.output()
 
 
-async def _foxglove_one(url: str, topic: str) -> bytes:
+async def _foxglove_one(url: str, topic: str, accept=lambda payload: True) -> bytes:
+    """The CDR payload of the first message on ``topic`` that ``accept`` takes."""
     import aiohttp
     async with aiohttp.ClientSession() as session:
         async with session.ws_connect(url, protocols=('foxglove.sdk.v1', 'foxglove.websocket.v1'),
@@ -161,7 +162,7 @@ async def _foxglove_one(url: str, topic: str) -> bytes:
                                     {'id': 7, 'channelId': ch['id']}]}))
                 elif msg.type == aiohttp.WSMsgType.BINARY and channel is not None:
                     opcode, sub_id, _stamp = struct.unpack_from('<BIQ', msg.data)
-                    if opcode == 1 and sub_id == 7:
+                    if opcode == 1 and sub_id == 7 and accept(bytes(msg.data[13:])):
                         return bytes(msg.data[13:])
                 elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
                     break
