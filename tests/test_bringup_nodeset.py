@@ -80,7 +80,10 @@ def test_overrides_port_precedence_sim_time_and_args(site):
     assert list(nodeset.overrides_document(ns, ns.node('planner'), {'a': 1})) == ['/planner']
     args = nodeset.ros_args(ns, ns.node('mirrors_driver'), site, overrides_file='/r/m.yaml', namespace='/sslfr1')
     assert args == ['--ros-args', '-r', '__node:=mirrors_driver', '-r', '__ns:=/sslfr1',
-                    '--params-file', str(site), '--params-file', '/r/m.yaml'], 'overrides file after the config'
+                    '--params-file', str(site), '--params-file', '/r/m.yaml',
+                    '-r', '/rosout:=/sslfr1/rosout'], 'overrides file after the config; log lines in the namespace'
+    root = nodeset.ros_args(ns, ns.node('mirrors_driver'), site)
+    assert not any('rosout' in a for a in root), 'the root namespace logs to /rosout'
 
 
 def test_overrides_file_beats_the_config_node_section_in_a_real_node(launch, ros, tmp_path):
@@ -155,6 +158,7 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
                                                           'accuracy.loss_table': table, 'port': '/dev/sslfr/mirrors'}]
     assert by['gps']['parameters'] == [moved]      # its port comes from the config's gps section
     assert all(e['namespace'] == '/sslfr1' for e in entries)
+    assert all(('/rosout', '/sslfr1/rosout') in e['remappings'] for e in entries)
     # the node sections reach the namespaced nodes (rcl: a bare `planner:` is the root's only)
     doc = nodeset.read_params(moved)
     assert nodeset.node_params(doc, 'planner', '/sslfr1')['collector.law'] == 'continuous'

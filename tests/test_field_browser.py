@@ -9,7 +9,8 @@ temperatures; each collector's name links to its own operator page, which answer
 commands are refused without login; after login "Stow all" stows every collector
 through its own ``planner/set_mode`` (each planner's phase becomes STOW), then one
 collector is set back to auto alone. After the run each collector's bag is named after
-it and the station's field recording holds every collector's statuses on the absolute
+it and holds its own nodes' log lines only (``/cK/rosout``); the station's field
+recording holds every collector's statuses on the absolute
 ``/diagnostics`` with ``hardware_id`` = its id. Each row shows the energy of the day
 absorbed (the optical model on the collector's beam, sun and measured axes). Foxglove
 live at the station (``--set foxglove_bridge:...`` turns it on): a WebSocket client
@@ -33,6 +34,7 @@ import urllib.request
 import pytest
 
 from conftest import ROOT, NodeProcess
+from sslfr_recording.bag import BagReader
 from sslfr_web import auth
 from test_web_browser import ARTIFACTS, _require_browser, browser  # noqa: F401 - the fixture
 
@@ -184,11 +186,20 @@ def test_field_page_in_chromium_against_simulated_collectors(browser, field):  #
     # after the run: each collector's bag names it; the station's field recording holds
     # every collector's statuses on the absolute /diagnostics, hardware_id = its id
     assert proc.stop(timeout=40) is not None
-    from sslfr_recording.bag import BagReader
     out = tmp / 'field'
     for cid in ids:
         bags = [b.name for b in (out / cid / 'bags').iterdir()]
         assert bags and all(b.startswith(f'{cid}_') for b in bags), bags
+        # ... and holds its own nodes' log lines only, on <namespace>/rosout (rcl's absolute
+        # /rosout would have made each collector's recorder subscribe to the whole field's)
+        loggers = set()
+        for bag in (out / cid / 'bags').iterdir():
+            if (bag / 'metadata.yaml').exists():
+                reader = BagReader(bag)
+                assert '/rosout' not in reader.topics, sorted(reader.topics)
+                for raw in reader.messages([f'/{cid}/rosout']):
+                    loggers.add(reader.decoder(raw.type)(raw.data).name)
+        assert loggers and all(n.startswith(f'{cid}.') for n in loggers), (cid, sorted(loggers))
     station_bags = sorted(b for b in (out / 'station' / 'bags').iterdir() if (b / 'metadata.yaml').exists())
     assert station_bags                      # one per UTC day: a run across midnight has two
     seen: dict[str, set] = {}

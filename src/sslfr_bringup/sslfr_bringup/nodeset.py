@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 from sslfr_common.files import user_path
-from sslfr_common.contract import MIRRORS
+from sslfr_common.contract import MIRRORS, namespace_remaps
 from sslfr_common.params import flatten as flatten_params
 
 from sslfr_bringup.dds_profile import with_profile
@@ -693,6 +693,12 @@ def overrides_document(ns: NodeSet, node: NodeSpec, overrides: Mapping[str, Any]
     return {fully_qualified_name(node, nsp): {'ros__parameters': dict(overrides)}}
 
 
+def remaps(node: NodeSpec, namespace: str) -> dict[str, str]:
+    """``node``'s remappings: the node set's, then those of a collector in ``namespace``
+    (:func:`sslfr_common.contract.namespace_remaps`)."""
+    return {**node.remaps, **namespace_remaps(namespace)}
+
+
 def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
              overrides_file: str | os.PathLike | None = None, namespace: str | None = None,
              log_level: str | None = None) -> list[str]:
@@ -705,7 +711,7 @@ def ros_args(ns: NodeSet, node: NodeSpec, config: str | os.PathLike, *,
     args += ['--params-file', str(config)]
     if overrides_file:
         args += ['--params-file', str(overrides_file)]
-    for src, dst in node.remaps.items():
+    for src, dst in remaps(node, nsp).items():
         args += ['-r', f'{src}:={dst}']
     if log_level:
         args += ['--log-level', log_level]
@@ -766,7 +772,7 @@ def launch_entries(ns: NodeSet, config: str | os.PathLike, *, namespace: str | N
         out.append({'package': node.package, 'executable': node.executable, 'name': node.name,
                     'process': node.name, 'nodes': [node.name], 'arguments': [],
                     'namespace': nsp, 'parameters': [str(config), overrides] if overrides else [str(config)],
-                    'remappings': list(node.remaps.items()), 'lifecycle': node.lifecycle,
+                    'remappings': list(remaps(node, nsp).items()), 'lifecycle': node.lifecycle,
                     'critical': node.critical})
     return out
 

@@ -772,7 +772,10 @@ class RosSide(threading.Thread):
         from sslfr_drivers.axis.lifecycle_ctl import ActiveWatch
 
         ctx = self._ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=self.domain_id, args=['sslfr_supervisor'])
+        from sslfr_common.contract import namespace_remaps
+        remap = [a for src, dst in namespace_remaps(self.namespace).items() for a in ('-r', f'{src}:={dst}')]
+        rclpy.init(context=ctx, domain_id=self.domain_id,
+                   args=['sslfr_supervisor', *(['--ros-args', *remap] if remap else [])])
         node = rclpy.create_node(self.node_name, namespace=self.namespace or None, context=ctx)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)

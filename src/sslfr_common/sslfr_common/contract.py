@@ -226,6 +226,18 @@ CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos.BE)
 #: rcl's log topic: every node's logger publishes it (rcl's QoS), the recorder keeps it.
 ROSOUT = Topic('/rosout', 'rcl_interfaces/msg/Log', Qos.LOG)
 
+
+def namespace_remaps(namespace: str) -> dict[str, str]:
+    """Remappings (``from -> to``) every node of a collector in ``namespace`` gets.
+
+    rcl's ``/rosout`` is absolute: in a field every collector's recorder would subscribe
+    to every other collector's log lines (their bags then mixed the field's lines, and
+    the links carried them). Under a namespace the nodes log to ``<namespace>/rosout``
+    instead, which their own recorder keeps. ``/diagnostics`` stays absolute (ROS's
+    aggregators read it there; collectors publish it and do not subscribe)."""
+    nsp = (namespace or '').strip('/')
+    return {ROSOUT.name: f'/{nsp}{ROSOUT.name}'} if nsp else {}
+
 TOPICS: tuple[Topic, ...] = (
     GPS_FIX, GPS_TIME_REFERENCE, TRACKER_SUN, TRACKER_PHASE, TRACKER_TRAJECTORY, JOINT_STATES,
     AXIS_STATUS, ABSORBER_TEMPERATURE, LIMIT_SWITCHES, WIND, ABSORBER_FLOW, THERMAL_POWER,

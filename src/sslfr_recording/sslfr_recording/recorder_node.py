@@ -9,7 +9,8 @@ transient local only if all are, as rosbag2 does) and the publishers' offered Qo
 profiles are stored in the bag. Log time = ROS time of reception (so
 ``use_sim_time`` days land in their day bag); publish time = the DDS source timestamp.
 
-``/rosout`` (every node's log lines) is recorded too; the lines a publisher keeps
+``/rosout`` (every node's log lines; a field's collector logs to ``<namespace>/rosout``,
+sslfr_common.contract.namespace_remaps) is recorded too; the lines a publisher keeps
 for late joiners (transient local) are recorded only when they are not older than the
 recorder (:func:`.bag.recorder_config.log_line_kept`).
 
@@ -145,7 +146,7 @@ class Recorder(LeanEvents, Node):
     def _make_callback(self, topic: str):
         clock = self.get_clock()
         session_ref = self
-        started = self._started_ns if topic == ROSOUT.name else None
+        started = self._started_ns if topic == self._resolve(ROSOUT.name) else None
         data_topic = int(started is None)
 
         def callback(data: bytes, info) -> None:
