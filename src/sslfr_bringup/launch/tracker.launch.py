@@ -63,11 +63,13 @@ def _liveness(write_dir: str) -> tuple[list[str], dict[str, str]]:
             {'NOTIFY_SOCKET': sock, 'WATCHDOG_USEC': str(int(ns.watchdog_timeout * 1e6))})
 
 
-def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
+def _environment(domain_id: str, discovery_range: str, namespace: str = '',
+                 write_dir: str | None = None) -> dict[str, str]:
     """ROS_DOMAIN_ID / ROS_AUTOMATIC_DISCOVERY_RANGE for the nodes: the launch arguments
     when given, else the environment's, else the node set's (as `sslfr up`); the Fast
     DDS profile (FASTRTPS_DEFAULT_PROFILES_FILE: the node set's unless the environment
-    names one)."""
+    names one; a collector of a field in ``namespace``: with its graph partition, written
+    to ``write_dir``, as nodeset.ros_environment says)."""
     import os
 
     from sslfr_bringup import dds_profile, nodeset
@@ -78,7 +80,7 @@ def _environment(domain_id: str, discovery_range: str) -> dict[str, str]:
         base['ROS_DOMAIN_ID'] = domain_id
     if discovery_range:
         base['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery_range
-    env = nodeset.ros_environment(ns, base={**os.environ, **base})
+    env = nodeset.ros_environment(ns, base={**os.environ, **base}, namespace=namespace, run_dir=write_dir)
     return {k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DISCOVERY_SERVER',
                                 dds_profile.PROFILE_ENV) if k in env}
 
@@ -109,7 +111,7 @@ def generate_launch_description():
         use_sim_time = arg('use_sim_time').lower() in ('true', '1', 'yes')
         import shutil
         write_dir = tempfile.mkdtemp(prefix='sslfr-launch-')    # moved config, composed nodes' overrides
-        env = _environment(arg('domain_id'), arg('discovery_range'))
+        env = _environment(arg('domain_id'), arg('discovery_range'), namespace, write_dir)
         # a collector of a field: its own discovery server first (sslfr_bringup.local_discovery)
         from sslfr_bringup import local_discovery
         server, servers, note = local_discovery.local_server({**os.environ, **env})

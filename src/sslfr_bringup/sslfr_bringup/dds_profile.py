@@ -94,3 +94,67 @@ def with_profile(env: dict[str, str], config_dir: Path) -> dict[str, str]:
     if not env.get(PROFILE_ENV):
         env[PROFILE_ENV] = str(config_dir / PROFILE_FILE)
     return env
+
+
+#: ROS 2's graph topic (rmw_fastrtps): every participant publishes and reads its nodes on it
+GRAPH_TOPIC = 'ros_discovery_info'
+#: the partition of the station's processes: every collector's (a Fast DDS wildcard)
+ALL_PARTITIONS = '*'
+#: file name of the profile :func:`with_graph_partition` writes into a run directory
+FIELD_PROFILE_FILE = 'fastdds_field_profile.xml'
+#: the graph partition in force (set with the profile by :func:`with_graph_partition`)
+PARTITION_ENV = 'SSLFR_GRAPH_PARTITION'
+
+
+def graph_partition_profile(base: str | os.PathLike | None, partition: str, out: str | os.PathLike) -> Path:
+    """Write to ``out`` the profile ``base`` (none: an empty one) with the graph topic's
+    writer and reader in ``partition``, and return ``out``.
+
+    In a field every participant reads :data:`GRAPH_TOPIC`, so without partitions each
+    collector learns every other collector's nodes through the discovery servers.
+    rmw_fastrtps takes a writer's and a reader's QoS from the profile named after the
+    topic; ROS's QoS settings leave the partition alone. A collector's processes share
+    its own partition; the station's use :data:`ALL_PARTITIONS` and see everyone.
+    Profiles of that name already in ``base`` are replaced."""
+    if base:
+        try:
+            tree = ET.parse(base)
+        except (OSError, ET.ParseError) as exc:
+            raise ProfileError(f'cannot read the Fast DDS profile {base}: {exc}') from None
+        root = tree.getroot()
+    else:
+        root = ET.Element(f'{_NS}profiles')
+        tree = ET.ElementTree(root)
+    holder = root if _local(root.tag) == 'profiles' else next(
+        (e for e in root.iter() if _local(e.tag) == 'profiles'), None)
+    if holder is None:
+        raise ProfileError(f'{base}: no <profiles> element')
+    ns = holder.tag[:-len('profiles')]          # the profiles' XML namespace, '' when none
+    for kind in ('data_writer', 'data_reader'):
+        for old in [e for e in holder if _local(e.tag) == kind and e.get('profile_name') == GRAPH_TOPIC]:
+            holder.remove(old)
+        prof = ET.SubElement(holder, f'{ns}{kind}', profile_name=GRAPH_TOPIC)
+        names = ET.SubElement(ET.SubElement(ET.SubElement(prof, f'{ns}qos'), f'{ns}partition'), f'{ns}names')
+        ET.SubElement(names, f'{ns}name').text = partition
+    ET.register_namespace('', _NS[1:-1])
+    tree.write(out, encoding='unicode', xml_declaration=True)
+    return Path(out)
+
+
+def with_graph_partition(env: dict[str, str], partition: str, run_dir: str | os.PathLike) -> dict[str, str]:
+    """``env`` whose profile (its own or none) puts the graph topic in ``partition``:
+    the combined profile is written to ``run_dir`` (:func:`graph_partition_profile`)."""
+    out = Path(run_dir) / FIELD_PROFILE_FILE
+    env[PROFILE_ENV] = str(graph_partition_profile(env.get(PROFILE_ENV) or None, partition, out))
+    env[PARTITION_ENV] = partition
+    return env
+
+
+def adopt_graph_partition(env: Mapping[str, str]) -> None:
+    """Give this process's own ROS participant (the supervisor's ROS side, which waits
+    for the nodes in the graph) the profile of ``env`` when that profile has a graph
+    partition: in another partition it would never see its own nodes. Call it before
+    the process's first participant (Fast DDS reads the profile then)."""
+    if env.get(PARTITION_ENV):
+        os.environ[PROFILE_ENV] = env[PROFILE_ENV]
+        os.environ[PARTITION_ENV] = env[PARTITION_ENV]

@@ -31,7 +31,7 @@ from sslfr_common.files import user_path
 from sslfr_common.contract import MIRRORS, namespace_remaps
 from sslfr_common.params import flatten as flatten_params
 
-from sslfr_bringup.dds_profile import with_profile
+from sslfr_bringup.dds_profile import with_graph_partition, with_profile
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
 #: Parameter that receives a board's serial port (pyserial URL or device path).
@@ -788,13 +788,18 @@ def sim_board_argv(board: BoardSpec, exe_path: str | os.PathLike, values: Mappin
 
 
 def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
-                    domain_id: int | None = None) -> dict[str, str]:
+                    domain_id: int | None = None, *, namespace: str = '',
+                    run_dir: str | os.PathLike | None = None) -> dict[str, str]:
     """Environment for the node processes: the node set's domain and discovery range
     unless the caller's environment (or ``domain_id``) sets them. With
     ``ROS_DISCOVERY_SERVER`` (a collector of a field, docs/field.md) no discovery range
     is added: the discovery servers decide who is found. The node set's Fast DDS
     profile (config/fastdds_profile.xml: a 7.5 s participant lease, see
-    :mod:`sslfr_bringup.dds_profile`) unless the environment names its own."""
+    :mod:`sslfr_bringup.dds_profile`) unless the environment names its own; for a
+    collector of a field (a discovery client in ``namespace``) that profile plus ROS's
+    graph topic in the collector's own partition, written to ``run_dir``
+    (:func:`sslfr_bringup.dds_profile.with_graph_partition`): the collectors do not
+    learn each other's nodes."""
     env = dict(os.environ if base is None else base)
     if domain_id is not None:
         env['ROS_DOMAIN_ID'] = str(domain_id)
@@ -804,4 +809,9 @@ def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
         env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', ns.discovery_range)
     env.setdefault('PYTHONUNBUFFERED', '1')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
-    return with_profile(env, config_dir())
+    env = with_profile(env, config_dir())
+    nsp = (namespace or '').strip('/')
+    field_client = env.get('ROS_DISCOVERY_SERVER') and env.get('ROS_SUPER_CLIENT', '').upper() not in ('TRUE', '1')
+    if nsp and field_client and run_dir is not None:
+        env = with_graph_partition(env, nsp, run_dir)
+    return env

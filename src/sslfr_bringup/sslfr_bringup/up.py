@@ -158,9 +158,11 @@ def _run(args, stop: StopSignals, run_dir: Path) -> int:
     except (nodeset_mod.NodeSetError, KeyError) as exc:
         print(f'sslfr up: {one_line(exc, keep_newlines=True)}', file=sys.stderr)
         return 2
-    env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     try:
+        env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id, run_dir=run_dir,
+                                          namespace=ns.namespace if args.namespace is None else args.namespace)
         restart_wait = dds_profile.restart_wait(env)
+        dds_profile.adopt_graph_partition(env)      # before this process's own ROS side starts
     except dds_profile.ProfileError as exc:
         print(f'sslfr up: {exc}', file=sys.stderr)
         return 2

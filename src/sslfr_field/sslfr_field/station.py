@@ -29,6 +29,7 @@ import sys
 from pathlib import Path
 from sslfr_common.files import user_path
 
+from sslfr_bringup import dds_profile
 from sslfr_common.contract import DIAGNOSTICS, SAFETY_STATE, TRACKER_PHASE
 from sslfr_field import field as field_mod
 
@@ -40,9 +41,12 @@ FOXGLOVE = ('sslfr_gateway', 'foxglove_bridge')
 RECORDED_PER_COLLECTOR = (TRACKER_PHASE.name, SAFETY_STATE.name)
 
 
-def station_environment(f: field_mod.Field, base: dict | None = None) -> dict:
+def station_environment(f: field_mod.Field, base: dict | None = None, run_dir: Path | None = None) -> dict:
     """Environment of the station's processes: the field's discovery servers, super
-    client (sees the whole field's graph); the caller's ROS_DOMAIN_ID is kept."""
+    client (sees the whole field's graph); the caller's ROS_DOMAIN_ID is kept. With
+    ``run_dir``: a Fast DDS profile (the caller's, if any, plus ROS's graph topic in
+    every partition, written there) so that the station names every collector's nodes
+    while each collector sees only its own (sslfr_bringup.dds_profile)."""
     import os
     env = dict(os.environ if base is None else base)
     env['ROS_DISCOVERY_SERVER'] = field_mod.discovery_servers(f.station)
@@ -50,6 +54,8 @@ def station_environment(f: field_mod.Field, base: dict | None = None) -> dict:
     env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)   # the servers decide who is found
     env.setdefault('PYTHONUNBUFFERED', '1')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    if run_dir is not None:
+        env = dds_profile.with_graph_partition(env, dds_profile.ALL_PARTITIONS, run_dir)
     return env
 
 
@@ -274,7 +280,13 @@ def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say
     out = Path(args.out or f'out/station-{f.id}').resolve()
     progs, missing = programs(f, role=args.role, run_dir=run_dir, out_dir=out,
                               params=getattr(args, 'params', None), foxglove=getattr(args, 'foxglove', False))
-    env = station_environment(f)
+    try:   # the profile in the output directory: the operator's ROS tools here use it too
+        if not args.print_only:
+            out.mkdir(parents=True, exist_ok=True)
+        env = station_environment(f, run_dir=None if args.print_only else out)
+    except (dds_profile.ProfileError, OSError) as exc:
+        say(f'sslfr station: {exc}')
+        return 2
     env['ROS_DOMAIN_ID'] = str(args.domain_id if args.domain_id is not None else os.environ.get('ROS_DOMAIN_ID', 42))
     for m in missing:
         say(f'sslfr station: MISSING {m}')
@@ -288,6 +300,9 @@ def run(f: field_mod.Field, args, stop, run_dir: Path, *, extra_programs=(), say
     logs.mkdir(parents=True, exist_ok=True)
     say(f'sslfr station: field {f.id}, {len(f.collectors)} collector(s), discovery '
         f'{env["ROS_DISCOVERY_SERVER"]}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, out {out}')
+    say(f'sslfr station: ROS tools on this machine: ROS_DISCOVERY_SERVER="{env["ROS_DISCOVERY_SERVER"]}" '
+        f'ROS_SUPER_CLIENT=TRUE ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]} '
+        f'{dds_profile.PROFILE_ENV}={env[dds_profile.PROFILE_ENV]}')
     sup = Supervisor([*progs, *extra_programs], env, log_dir=logs, stop_timeout=stop_timeout)
     why = sup.run(stop, until=(lambda: until(sup)) if until else None, tick=tick, period=0.1)
     if why == 'fatal':

@@ -10,12 +10,14 @@ addresses as they come up; stops everything on Ctrl-C or at ``--end``.
 """
 from __future__ import annotations
 
+import os
 import re
 import socket
 import sys
 import time
 from pathlib import Path
 
+from sslfr_bringup import dds_profile
 from sslfr_bringup import nodeset as nodeset_mod
 from sslfr_bringup.host import acquire_domain
 from sslfr_bringup.local_discovery import free_udp_ports
@@ -39,7 +41,11 @@ def free_tcp_port() -> int:
 
 def collector_argv(args, c: field_mod.Collector, f: field_mod.Field, domain: int, out: Path) -> list[str]:
     """The ``sslfr sim`` command of one simulated collector, a discovery client of ``f``'s servers."""
+    # the station's processes get the station's profile (sslfr_field.station.station_environment);
+    # a collector starts from the caller's own, as on its Pi
+    own = os.environ.get(dds_profile.PROFILE_ENV)
     env = ['env', '-u', 'ROS_SUPER_CLIENT', '-u', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+           *([f'{dds_profile.PROFILE_ENV}={own}'] if own else ['-u', dds_profile.PROFILE_ENV]),
            f'ROS_DISCOVERY_SERVER={field_mod.discovery_servers(f.station)}']
     argv = [*env, sys.executable, '-m', 'sslfr_bringup.cli', 'sim', '--wall-clock', '--namespace', c.namespace,
             '--layout', args.layout or 'composed', '--config', str(c.config), '--domain-id', str(domain),

@@ -397,9 +397,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         except RuntimeError as exc:
             print(f'sslfr sim: {exc}: pass --domain-id', file=sys.stderr)
             return 1
-    env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id)
     try:
+        env = nodeset_mod.ros_environment(ns, domain_id=args.domain_id, namespace=ns.namespace, run_dir=run)
         restart_wait = dds_profile.restart_wait(env)
+        dds_profile.adopt_graph_partition(env)      # before this process's own ROS side starts
     except dds_profile.ProfileError as exc:
         print(f'sslfr sim: {exc}', file=sys.stderr)
         return 2
