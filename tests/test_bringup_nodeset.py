@@ -178,7 +178,7 @@ def test_launch_file_compiles_and_reads_the_description(site, tmp_path):
     assert 'horizonn' in str(err.value) and 'publish_rate' in str(err.value), err.value
 
 
-def test_launch_environment_defaults_env_and_arguments(monkeypatch):
+def test_launch_environment_defaults_env_and_arguments(monkeypatch, tmp_path):
     mod = _launch_module()
     monkeypatch.delenv('ROS_DOMAIN_ID', raising=False)
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
@@ -194,6 +194,14 @@ def test_launch_environment_defaults_env_and_arguments(monkeypatch):
     assert mod._environment('', '')['ROS_DOMAIN_ID'] == '7'
     assert mod._environment('9', 'SUBNET') == {'ROS_DOMAIN_ID': '9', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
                                                dds_profile.PROFILE_ENV: profile}
+    # a collector of a field (namespace:= and the station's servers): its graph partition, the
+    # profile written to the launch's run directory, the lease kept
+    monkeypatch.setenv('ROS_DISCOVERY_SERVER', '10.0.0.2:11811;10.0.0.3:11811')
+    field = mod._environment('', '', '/c1', str(tmp_path))
+    assert field[dds_profile.PROFILE_ENV] == str(tmp_path / dds_profile.FIELD_PROFILE_FILE)
+    assert mod._respawn_delay(field) == 8.5
+    assert '<name>c1</name>' in (tmp_path / dds_profile.FIELD_PROFILE_FILE).read_text()
+    assert mod._environment('', '', '', str(tmp_path))[dds_profile.PROFILE_ENV] == profile
 
 
 PARAMS_KEYS = {          # every key form rcl knows, one parameter each
