@@ -35,13 +35,19 @@ DAYS = {'seed003': ('bucaramanga_single_axis.yaml', '11:45', '22:15'),
         'seed004': ('florianopolis_lepten.yaml', '10:00', '20:35')}
 
 
+def _log_tails(out, n: int = 800) -> str:
+    """The end of each node's log of a failed run (the run's directory goes with the test)."""
+    logs = sorted((out / 'logs').glob('*.log')) if (out / 'logs').is_dir() else []
+    return ''.join(f'\n--- {p.name}: ...{p.read_text(errors="replace")[-n:]}' for p in logs)
+
+
 def run_sim(config: str, start: str, end: str, out, speed: float = SPEED, timeout: float = 400.0):
     """`./sslfr sim` over [start, end] UTC on its own ROS domain: (output text, Day)."""
     env = {k: v for k, v in os.environ.items() if k != 'ROS_DOMAIN_ID'}   # sim takes a free domain
     proc = subprocess.run([str(ROOT / 'sslfr'), 'sim', '--config', str(config), '--date', DATE, '--start', start,
                            '--end', end, '--speed', f'{speed:g}', '--out', str(out)],
                           env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=timeout)
-    assert proc.returncode == 0, proc.stdout[-4000:]
+    assert proc.returncode == 0, proc.stdout[-4000:] + _log_tails(out)
     assert 'MISSING' not in proc.stdout and 'Traceback' not in proc.stdout, proc.stdout[-4000:]
     bags = sorted(p for p in (out / 'bags').iterdir() if (p / 'metadata.yaml').exists())
     return proc.stdout, read_day(bags[-1])

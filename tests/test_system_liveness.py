@@ -57,8 +57,9 @@ TOL = STEP + 4 * math.radians(0.003)
 TRACK = 3 * TOL                   # tracking vs stowed/holding (tests/test_system_faults.py)
 LAG = SPEED * 0.5
 #: [s wall] longest gap of a continuous topic whose publishers all run: the slowest
-#: ones publish at 1 Hz wall (gps, irradiance); 3 s covers a loaded machine
-GAP_WALL = 3.0
+#: ones publish at 1 Hz wall (gps, irradiance); a fresh-clone run (two test workers, the
+#: four-collector field test beside) saw /gps/fix unrecorded for 3.07 s before a hang
+GAP_WALL = 4.0
 #: continuous topics -> the nodes that publish them
 TOPICS = {'/safety/state': {'safety'}, '/tracker/phase': {'planner'}, '/tracker/sun': {'planner'},
           '/axes/mirrors/status': {'mirrors_driver'}, '/axes/mobile_structure/status': {'mobile_structure_driver'},
