@@ -19,12 +19,14 @@ def site_of(day) -> tuple[float, float]:
 def tracking(day):
     """(the mirrors' status series, mask): the statuses while TRACKING and on their
     setpoint (following it, holding it or waiting for its next motor step; moves and
-    stows excluded)."""
+    stows excluded), with a measured position and a setpoint (NaN: not known yet, as
+    in a driver's first status after its activation)."""
     s = day.axes['mirrors']
     phase_t, phase = np.asarray(day.phase.t), np.asarray(day.phase['phase'])
     k = np.searchsorted(phase_t, s.t, side='right') - 1
     on = (k >= 0) & (phase[np.clip(k, 0, None)] == Phase.TRACKING)
-    return s, on & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting'))
+    known = np.isfinite(np.asarray(s['measured'])) & np.isfinite(np.asarray(s['setpoint']))
+    return s, on & known & np.isin(np.asarray(s['state']), ('following', 'holding', 'waiting'))
 
 
 def planned_steps(day, t0: float, t1: float, joint: str = 'mirrors', least: float = math.radians(0.5)):
