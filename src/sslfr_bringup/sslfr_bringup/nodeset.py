@@ -32,6 +32,7 @@ from sslfr_common.contract import MIRRORS, namespace_remaps
 from sslfr_common.params import flatten as flatten_params
 
 from sslfr_bringup.dds_profile import with_graph_partition, with_profile
+from sslfr_bringup.local_discovery import field_client
 from sslfr_bringup.liveness import DEFAULT_STARTUP_TIMEOUT, DEFAULT_TIMEOUT, check_bounds
 
 #: Parameter that receives a board's serial port (pyserial URL or device path).
@@ -811,7 +812,6 @@ def ros_environment(ns: NodeSet, base: Mapping[str, str] | None = None,
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
     env = with_profile(env, config_dir())
     nsp = (namespace or '').strip('/')
-    field_client = env.get('ROS_DISCOVERY_SERVER') and env.get('ROS_SUPER_CLIENT', '').upper() not in ('TRUE', '1')
-    if nsp and field_client and run_dir is not None:
+    if nsp and field_client(env) and run_dir is not None:
         env = with_graph_partition(env, nsp, run_dir)
     return env
