@@ -291,7 +291,7 @@ def main(argv=None) -> int:
         h, m = (int(x) for x in args.start.split(':'))
         end = f'{(h + (m + minutes) // 60) % 24:02d}:{(m + minutes) % 60:02d}'
         cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', args.start, '--end', end,
-               '--no-report', '--anchor-margin', '3', '--out', str(out)]
+               '--no-report', '--out', str(out)]
     if args.layout:
         cmd += ['--layout', args.layout]
     if args.nodeset:

@@ -76,7 +76,7 @@ def main() -> int:
     dur = int(args.seconds * 2 + 120)
     end = time.strftime('%H:%M', time.gmtime(10 * 3600 + dur + 60))
     cmd = [str(ROOT / 'sslfr'), 'sim', '--speed', '1', '--start', '10:00', '--end', end, '--no-report',
-           '--anchor-margin', '4', '--out', str(out),
+           '--out', str(out),
            '--layout', 'separate']      # the web node in its own process: its CPU and memory alone
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT,
                             start_new_session=True)

@@ -34,7 +34,6 @@ from sslfr_sim import scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 DATE = '2026-06-21'
-ANCHOR_MARGIN = 25        # [s wall] the firmware boards start slower (tests/test_fw_system.py)
 #: prototype -> (site config, window UTC: sunrise to sunset with margins, simulated s per wall s)
 DAYS = {'seed003': ('bucaramanga_single_axis.yaml', '11:45', '22:15', 1600.0),
         'seed004': ('florianopolis_lepten.yaml', '10:00', '20:35', 600.0)}
@@ -54,8 +53,8 @@ def _day(name, env, out):
     config, start, end, speed = DAYS[name]
     path = nodeset.resolve_config(config)
     proc, summary, bag = scenario.run_sim(['--boards', 'firmware', '--date', DATE, '--config', str(path),
-                                           '--start', start, '--end', end, '--speed', f'{speed:g}',
-                                           '--anchor-margin', str(ANCHOR_MARGIN)], env, out, timeout=360.0)
+                                           '--start', start, '--end', end, '--speed', f'{speed:g}'],
+                                          env, out, timeout=360.0)
     text = proc.stdout + proc.stderr
     assert proc.returncode == 0 and 'MISSING' not in text and 'Traceback' not in text, text[-4000:]
     assert summary['boards'] == 'firmware' and bag is not None, text[-4000:]

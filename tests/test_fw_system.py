@@ -28,9 +28,6 @@ DATE = '2026-06-21'
 DAY0 = day_epoch(DATE)
 STEP = math.radians(0.006)
 TOL = STEP + 4 * math.radians(0.003)      # the tracking test's bound (tests/test_system_tracking.py)
-#: [s wall] the firmware boards start slower than the Python ones (the sensor worlds
-#: tabulate the sun, then the harness starts): the simulated clock waits for them
-ANCHOR_MARGIN = 25
 
 
 @pytest.fixture(scope='module', autouse=True)
@@ -48,7 +45,7 @@ def _config() -> str:
 
 def _run(env, out, args, timeout=400.0):
     proc, summary, bag = scenario.run_sim(['--boards', 'firmware', '--date', DATE, '--config', _config(),
-                                           '--no-report', '--anchor-margin', str(ANCHOR_MARGIN), *args],
+                                           '--no-report', *args],
                                           env, out, timeout=timeout)
     text = proc.stdout + proc.stderr
     assert proc.returncode == 0 and 'MISSING' not in text, text

@@ -34,7 +34,7 @@ def collector(ros_env, tmp_path):
     """A simulated collector at real speed around noon; stopped at teardown."""
     log = open(tmp_path / 'sim.log', 'wb')  # noqa: SIM115 - closed at teardown
     proc = subprocess.Popen([str(ROOT / 'sslfr'), 'sim', '--date', '2026-06-21', '--start', '11:00',
-                             '--end', '11:30', '--speed', '1', '--anchor-margin', '2', '--no-report',
+                             '--end', '11:30', '--speed', '1', '--no-report',
                              '--only', NODES, '--out', str(tmp_path / 'out')],
                             env=ros_env, stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True)

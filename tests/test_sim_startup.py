@@ -20,7 +20,7 @@ from sslfr_common.contract import CLOCK, TRACKER_SUN
 pytestmark = pytest.mark.timeout(240)
 
 SIM = ['sim', '--date', '2026-06-21', '--start', '12:00', '--end', '12:02', '--speed', '1',
-       '--anchor-margin', '2', '--no-report']
+       '--no-report']
 
 
 def _sslfr(args, ros_env, tmp_path, name='sslfr'):

@@ -69,7 +69,7 @@ def _config() -> str:
 
 def _sim(ros, env, out, args, timeout=150.0, watch=None):
     cmd = [str(ROOT / 'sslfr'), 'sim', '--date', DATE, '--config', _config(), '--no-report',
-           '--anchor-margin', '4', '--out', str(out), *args]
+           '--out', str(out), *args]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ros.spin_until(lambda: (watch() if watch else False) or proc.poll() is not None, timeout)

@@ -144,7 +144,7 @@ def _run(key, tmp_path_factory):
         live[axis] = ros.collect(AxisStatus, f'axes/{axis}/status')
     out = tmp / 'out'
     cmd = [str(ROOT / 'sslfr'), 'sim', '--date', DATE, '--config', _config(), '--no-report', '--layout', layout,
-           '--anchor-margin', '4', '--out', str(out), '--start', _hhmm(start), '--end', _hhmm(end),
+           '--out', str(out), '--start', _hhmm(start), '--end', _hhmm(end),
            '--speed', str(SPEED)]
     for at, group, _ in plan:
         for node in group:

@@ -35,7 +35,7 @@ def test_seed_003_flow_thermal_power_and_efficiency_published_recorded_reported(
     out = tmp_path / 'out'
     config = str(nodeset.resolve_config('bucaramanga_single_axis.yaml'))
     cmd = [str(ROOT / 'sslfr'), 'sim', '--config', config, '--date', DATE, '--start', '15:00', '--end', '15:10',
-           '--speed', '20', '--anchor-margin', '4', '--out', str(out)]
+           '--speed', '20', '--out', str(out)]
     proc = subprocess.Popen(cmd, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ros.spin_until(lambda: proc.poll() is not None, 200.0)

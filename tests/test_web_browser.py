@@ -70,7 +70,7 @@ def _sim(ros_env, tmp_path, *args: str):
     _require_browser()
     pw = auth.write_password_file(tmp_path / 'pw', PASSWORD)
     out = tmp_path / 'sim'
-    cmd = [str(ROOT / 'sslfr'), 'sim', *args, '--no-report', '--anchor-margin', '4', '--out', str(out),
+    cmd = [str(ROOT / 'sslfr'), 'sim', *args, '--no-report', '--out', str(out),
            '--set', f'web:password_file={pw}', '--set', f'web:audit_file={tmp_path / "audit.jsonl"}',
            '--set', f'web:report_dir={tmp_path / "reports"}']
     proc = NodeProcess(cmd, ros_env, tmp_path / 'sim.out')       # own session; SIGINT then SIGKILL at the end

@@ -26,8 +26,8 @@ PNG = b'\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR' + bytes(range(256))
 #: (subcommand argv with {placeholders}, text the one-line refusal must contain)
 CASES = [
     # -- sim / up / install-service arguments (values for generated files included) ------------
-    ('sim --anchor-margin nan', '--anchor-margin'),
-    ('sim --anchor-margin 1e9', '--anchor-margin'),
+    ('sim --flow nan', '--flow'),
+    ('sim --flow 1e9', '--flow'),
     ('sim --speed 0', '--speed'),
     ('sim --speed inf', '--speed'),
     ('sim --date 1000-06-21', '--date'),

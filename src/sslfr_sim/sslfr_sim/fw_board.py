@@ -292,6 +292,10 @@ class FirmwareSensor(FirmwareBoard):
         """A model command (sim.sensors fault kinds) for the shadow world."""
         return self.shadow.control(cmd)
 
+    def set_anchor(self, anchor: float) -> None:
+        """Start the shadow world's simulated clock (sim.sensors ``anchor=hold``)."""
+        self.shadow.set_anchor(anchor)
+
 
 class _DriveBoard(FirmwareBoard):
     """An axis board of any drive: the model's stall switch (control socket ``stall``)."""

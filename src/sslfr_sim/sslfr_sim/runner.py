@@ -25,6 +25,8 @@ of an XBee sim, default all)::
     stall on|off            steps are counted but the joint does not move
     reset                   power-cycle the board (position lost, BOOT sent)
     set_angle DEG           move the joint by hand (board not told) [deg]
+    anchor T                start a sensor board's held clock (``anchor=hold``): simulated
+                            UTC = start_utc at T [s of CLOCK_MONOTONIC] (sim.sensors)
     slip DEG SECONDS        the coupling slips: the joint turns DEG away from the motor
                             over SECONDS (wall) and stays there
     {"cmd": ...}            a JSON object: passed to the board model's control()
@@ -228,6 +230,13 @@ class Runner:
                 self.sel.unregister(self.endpoint.master)
             self.endpoint.unplug(float(args[0]), now)
             return {'ok': True}
+        if cmd == 'anchor':            # the sensor boards among the targets (an XBee sim mixes kinds)
+            clocked = [b for _, b, _ in targets if hasattr(b, 'set_anchor')]
+            if not clocked:
+                return {'ok': False, 'error': 'no board with a simulated clock to anchor'}
+            for board in clocked:
+                board.set_anchor(float(args[0]))
+            return {'ok': True, 'anchored': len(clocked)}
         for _, board, faults in targets:
             if cmd in ('drop', 'corrupt', 'corrupt_frames'):
                 setattr(faults, cmd, float(args[0]))

@@ -20,7 +20,10 @@ Time. The boards run on the runner's steady clock ``now`` [s] (CLOCK_MONOTONIC, 
 by every process). The simulated UTC is ``start_utc + speed * (now - anchor)``
 (options ``start_utc`` [s since epoch or ISO 8601 string], ``speed`` [-] and
 ``anchor`` [s of CLOCK_MONOTONIC], default: the board's first tick), the mapping
-``sslfr sim`` uses for ``/clock``; without ``start_utc`` it is the wall clock.
+``sslfr sim`` uses for ``/clock``; without ``start_utc`` it is the wall clock. With
+``anchor=hold`` the simulated UTC stays at ``start_utc`` until the runner's ``anchor T``
+command: ``sslfr sim`` anchors its sensor boards and ``/clock`` at the same instant,
+once the node set is up, however long the start-up took.
 
 World state (how the absorber sees the mirrors). The option ``world`` names a small
 JSON file (default: environment variable ``SSLFR_SIM_WORLD``; none = no file) that
@@ -165,7 +168,9 @@ class _SensorSim(SimBoard):
         self.start_utc = _utc_option(o.get('start_utc'))
         self.speed = float(o.get('speed', 1.0))
         anchor = o.get('anchor')
-        self.anchor = float(anchor) if anchor not in (None, '') else None
+        #: held: frozen at start_utc until :meth:`set_anchor`
+        self.held = anchor == 'hold'
+        self.anchor = float(anchor) if anchor not in (None, '', 'hold') else None
         self.world = o.get('world', os.environ.get('SSLFR_SIM_WORLD'))
         self.site = {k: float(o.get(k, v)) for k, v in DEFAULT_SITE.items()}
         self._t0: float | None = None
@@ -180,9 +185,18 @@ class _SensorSim(SimBoard):
         """Simulated UTC [s since epoch] at the board's current steady time."""
         if self.start_utc is None:
             return time.time()
+        if self.held:
+            return self.start_utc
         if self._t0 is None:
             self._t0 = self.anchor if self.anchor is not None else self.now
         return self.start_utc + self.speed * max(0.0, self.now - self._t0)
+
+    def set_anchor(self, anchor: float) -> None:
+        """Start the simulated clock: UTC = start_utc at ``anchor`` [s of CLOCK_MONOTONIC]."""
+        if not math.isfinite(anchor):
+            raise ValueError(f'anchor must be a finite CLOCK_MONOTONIC time, not {anchor!r}')
+        self.anchor = self._t0 = float(anchor)
+        self.held = False
 
     def busy(self) -> bool:
         """Sensor boards sample at <= 20 Hz: the runner's 20 ms idle tick is enough."""

@@ -10,9 +10,10 @@ day report (``sslfr report``). Times are UTC.
 Time. Simulated time is ``start + speed * max(0, t - anchor)`` with ``t`` the
 system-wide CLOCK_MONOTONIC (shared by every process); the simulated sensor boards
 get the same ``start``, ``speed`` and ``anchor`` (options ``start_utc``, ``speed``,
-``anchor``), so GPS time, sun and ``/clock`` agree. The anchor is set after the node
-set has started (see the start-up sequence in :func:`main`): nothing of the simulated
-window is lost to start-up, however loaded the machine. Axis boards run their
+``anchor``), so GPS time, sun and ``/clock`` agree. The anchor is the instant the node
+set is up (see the start-up sequence in :func:`main`); until then the sensor boards'
+clocks are held at ``start``: nothing of the simulated window is lost to start-up, and
+no board runs ahead of ``/clock``, however long the start-up took. Axis boards run their
 steppers on the steady clock: at ``--speed X`` a joint must move X times faster than
 in reality, so the drivers get a raised ``max_speed`` in simulation (nodeset.yaml
 ``sim.node_parameters``).
@@ -134,19 +135,12 @@ def fault_commands(f: faults_mod.Fault, what: str, speed: float) -> list[str]:
     return [json.dumps(cmd)]
 
 
-#: [s] wall time between starting the time-dependent simulators and their clock anchor.
-#: It must cover their own start-up (they tabulate the day's sun: 2-8 s on a loaded
-#: 2-core machine) and the nodes' reconnection (<= 2 s): a sensor simulator that runs
-#: ahead of /clock sees another sun than the mirrors (a 15 min lead defocuses the
-#: absorber). Override with nodeset.yaml sim.anchor_margin.
-ANCHOR_MARGIN = 10.0
+#: [s wall] between anchoring the sensor simulators (their held clock starts) and the
+#: anchor itself: room for the control commands to reach every board (a few ms each)
+ANCHOR_LEAD = 0.2
 #: [L/h] the flow through a simulated absorber with a flow meter (seed 003 section 3.2:
 #: the hydro-dynamic tests pump the water at a constant 150 L/h)
 FLOW_LPH = 150.0
-#: [s] the same with --boards firmware: the firmware boards start in 15-30 s on a loaded
-#: 2-core machine (each sensor world tabulates the sun, then its harness starts)
-FIRMWARE_ANCHOR_MARGIN = 25.0
-
 
 def parse_set(text: str, nodes) -> tuple[str, str, object]:
     """``NODE:KEY=VALUE`` -> (node, key, value parsed as YAML); ValueError if malformed."""
@@ -228,10 +222,6 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--boards', choices=('sim', 'firmware'), default='sim',
                    help="'sim': the Python board simulators (fast); 'firmware': the boards' real firmware "
                         "in simavr (fw_board, docs/firmware.md; the AVRs run in real time)")
-    p.add_argument('--anchor-margin', type=ranged_float(0.0, 120.0, unit='s'), default=None, metavar='S',
-                   help=f'wall seconds the sensor simulators get to start before the simulated clock '
-                        f'runs (default {ANCHOR_MARGIN:g}; smaller starts sooner but may let them run '
-                        f'ahead of /clock, see sim.json sensor_lead_s)')
     p.add_argument('--flow', type=ranged_float(0.0, 1.0e5, unit='L/h'), default=FLOW_LPH, metavar='LPH',
                    help=f'water pumped through the absorber [L/h] when the site config counts a flow meter '
                         f'(absorber_board flow_meter_pin; default {FLOW_LPH:g}: seed 003 section 3.2; 0: pump stopped)')
@@ -498,10 +488,10 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         census = MemoryCensus(sup)
 
         # Start-up (nothing of the simulated day is lost to it, however loaded the machine):
-        # 1. the time-dependent boards (sensors) with their clock anchored `anchor_margin` s
-        # ahead (frozen at --start until then) and the axis boards, 2. the nodes, 3. /clock
-        # starts (nothing is published before) when every node is in the ROS graph, the axes
-        # are active, the sensor topics flow and the anchor is reached.
+        # 1. the time-dependent boards (sensors) with their clock held at --start
+        # (sim.sensors anchor=hold) and the axis boards, 2. the nodes, 3. when every node is
+        # in the ROS graph, the axes are active and the sensor topics flow, the sensor
+        # boards and /clock (nothing is published before) are anchored at one instant.
         timed = {b for b, p in board_progs.items() if any('{anchor}' in a for a in p.argv)}
 
         def wait_until(pred, timeout, what):
@@ -524,18 +514,14 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                 sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
             return _wait_links({b: links[b] for b in names}, {b: board_progs[b] for b in names}, 30.0, stop)
 
-        anchor = None
-        margin = float(args.anchor_margin if args.anchor_margin is not None
-                       else simcfg.get('anchor_margin', ANCHOR_MARGIN))
-        if args.boards == 'firmware' and args.anchor_margin is None:
-            margin = max(margin, FIRMWARE_ANCHOR_MARGIN)
+        from sslfr_sim.runner import SimControl   # imported now, not at the anchor or the first fault (~1 s loaded)
         try:
             # the sensor simulators start slowly (they tabulate the day's sun): first, in parallel
-            anchor = mono0 if args.wall_clock else time.monotonic() + margin
+            held = f'{mono0:.6f}' if args.wall_clock else 'hold'
             for p in service_progs:
                 sup._spawn(p)   # noqa: SLF001 - before every participant
             for b in sorted(timed):
-                board_progs[b].argv = [a.replace('{anchor}', f'{anchor:.6f}') for a in board_progs[b].argv]
+                board_progs[b].argv = [a.replace('{anchor}', held) for a in board_progs[b].argv]
                 sup._spawn(board_progs[b])   # noqa: SLF001 - same supervisor, boards first
             start_boards([b for b in board_progs if b not in timed])
             for p in node_progs:
@@ -549,27 +535,29 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                        lambda: 'nodes in the ROS graph: ' + ', '.join(sorted(names - ros.graph_nodes)))
             lifecycle = [p for p in node_progs if p.lifecycle]
             wait_until(lambda: all(p.lifecycle_state == 'active' for p in lifecycle)
-                       and all(ros.seen.get(t) for t in watch) and time.monotonic() >= anchor, 60.0,
+                       and all(ros.seen.get(t) for t in watch), 60.0,
                        lambda: 'axes active ({}) / sensor topics ({})'.format(
                            ', '.join(p.name for p in lifecycle if p.lifecycle_state != 'active') or 'all',
                            ', '.join(t for t in watch if not ros.seen.get(t)) or 'all'))
             sup.say(f'nodes in the graph, axes active, sensors flowing at +{time.monotonic() - t_wall0:.1f} s')
             operator_references(ns, ros, say)
+            if not args.wall_clock:
+                anchor = time.monotonic() + ANCHOR_LEAD
+                for b in sorted(timed):
+                    try:
+                        SimControl(controls[b], timeout=5.0).cmd(f'anchor {anchor:.6f}')
+                    except (OSError, ValueError, RuntimeError) as exc:
+                        raise RuntimeError(f'sensor simulator {b} could not be anchored: {exc}') from exc
+                clock.set_anchor(anchor)
         except RuntimeError as exc:
             print(f'sslfr sim: start-up failed: {exc}', file=sys.stderr)
             return 1
-        if not args.wall_clock:
-            clock.set_anchor(max(anchor, time.monotonic()))
         url = _page_url(logs)
         if url:
             say(f'sslfr sim: operator page at {url} (docs/operator.md)')
-        if clock.anchor - anchor > 0.05:
-            say(f'sslfr sim: sensor simulators run {speed * (clock.anchor - anchor):.0f} s (sim) ahead of /clock '
-                f'(the node set took {clock.anchor - anchor:.1f} s longer than the anchor margin)')
         t_nodes = time.monotonic()
         state['last_tick'] = t_nodes
 
-        from sslfr_sim.runner import SimControl   # imported now, not at the first fault (~1 s loaded)
 
         def tick():
             now_sim = clock.now()
@@ -615,7 +603,7 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
         summary = {'date': date, 'start_utc': clock.start, 'end_utc': end_epoch, 'speed': speed, 'boards': args.boards,
                    'config': str(config), 'wall_time_s': round(wall, 2), 'stop_s': round(took, 2),
                    'startup_s': round(t_nodes - t_wall0, 2),
-                   'sensor_lead_s': round(speed * max(0.0, clock.anchor - anchor), 1), 'faults': fired, 'missing': missing,
+                   'faults': fired, 'missing': missing,
                    'stop_reason': stop_reason, 'bags': str(bag_root), 'logs': str(logs),
                    'restarts': {p.name: p.restarts for p in sup.programs.values() if p.restarts},
                    # the supervisor's process events [wall s since the command's start, program,

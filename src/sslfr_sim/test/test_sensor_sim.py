@@ -270,3 +270,38 @@ def test_simulated_gusty_wind_has_the_mean_and_a_usual_gust_factor():
         last = int(count)
     assert r.mean == pytest.approx(12.0, rel=0.15)
     assert 1.2 < r.gust / r.mean < 2.0
+
+
+def test_a_held_clock_starts_at_the_anchor_the_control_socket_gives():
+    """``anchor=hold``: the simulated UTC stays at start_utc until the runner's
+    ``anchor T``, then runs as ``sslfr sim``'s /clock: start_utc + speed (now - T). The
+    command reaches the boards that have a clock and refuses when none has."""
+    from sslfr_sim.axis import AxisSim
+    from sslfr_sim.base import FaultInjector
+    from sslfr_sim.runner import PlainHost, Runner
+    from sslfr_drivers.link.endpoint import PtyEndpoint
+    b = GpsSim({'start_utc': NOON, 'speed': 60.0, 'anchor': 'hold', 'ttff': 0.0})
+    b.now = 1000.0
+    assert b.utc() == NOON
+    b.now = 1500.0
+    assert b.utc() == NOON                                # still held, however long
+    runner = Runner(PtyEndpoint(None), PlainHost(b, FaultInjector()))
+    try:
+        assert runner.command('anchor 1600.5') == {'ok': True, 'anchored': 1}
+        b.now = 1600.0
+        assert b.utc() == NOON                            # before the anchor: start_utc
+        b.now = 1610.5
+        assert b.utc() == pytest.approx(NOON + 60.0 * 10.0)
+        with pytest.raises(ValueError, match='finite'):   # the socket answers it as an error
+            runner.command('anchor nan')
+    finally:
+        runner.close()
+    axis = Runner(PtyEndpoint(None), PlainHost(AxisSim(), FaultInjector()))
+    try:
+        reply = axis.command('anchor 1.0')
+        assert not reply['ok'] and 'no board with a simulated clock' in reply['error']
+    finally:
+        axis.close()
+    fixed = GpsSim({'start_utc': NOON, 'speed': 2.0, 'anchor': '100'})
+    fixed.now = 110.0
+    assert fixed.utc() == NOON + 20.0                     # a numeric anchor: as before
