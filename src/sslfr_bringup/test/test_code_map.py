@@ -33,6 +33,8 @@ SIM_COMMAND = ('sim', 'sslfr_sim.sim_cli')
 #: the test harness and the shared test helpers (tests/*.py, conftest.py)
 TEST_MODULES = {p.stem for p in (SRC.parent / 'tests').glob('*.py')} | {'conftest'}
 NODE_FILE_MAX_LINES = 300
+#: the board link and the axis core: one class per job (issue 33)
+CLASS_MAX_LINES = 300
 
 
 def _modules() -> dict[str, Path]:
@@ -176,6 +178,17 @@ def test_product_code_never_imports_the_test_harness():
 def test_node_files_are_thin():
     fat = {str(p.relative_to(SRC)): n for p in SRC.glob('*/*/**/*_node.py')
            if (n := len(p.read_text().splitlines())) >= NODE_FILE_MAX_LINES}      # under 300
+    assert fat == {}
+
+
+def test_the_board_link_and_axis_core_classes_are_each_under_300_lines():
+    """The board link and the axis driver's core, split by job (one class each)."""
+    import ast
+    fat = {}
+    for path in (*SRC.glob('sslfr_drivers/sslfr_drivers/link/*.py'), *SRC.glob('sslfr_drivers/sslfr_drivers/axis/*.py')):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 >= CLASS_MAX_LINES:
+                fat[f'{path.name}:{node.name}'] = node.end_lineno - node.lineno + 1
     assert fat == {}
 
 

@@ -109,7 +109,6 @@ class AxisSupervisor:
     Inputs kept here: the trajectory store, the safety watchdog, the operator mode
     (from tracker/phase), a jog target, a latched driver fault. :meth:`tick` is
     called at the control rate with ROS time (trajectory) and steady time (watchdogs).
-
     It also books the board's answers and decides the operator's requests.
 
     Priority (first match wins): inactive -> stop if moving; latched fault -> stop;
