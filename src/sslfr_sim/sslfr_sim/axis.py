@@ -344,8 +344,13 @@ class AxisSim(SimBoard):
             d = math.copysign(min(abs(self.slip_left), self.slip_rate * dt), self.slip_left)
             self.slip_left -= d
             self.angle = min(max(self.angle + d, c.lo - c.overtravel), c.hi + c.overtravel)
-        # integrate in sub-steps of <= 2 ms so switches are not jumped over
-        n = max(1, int(math.ceil(dt / 0.002)))
+        # integrate in sub-steps of <= 2 ms and of at most half the SLEEP switch's closed
+        # band, so no switch is jumped over at any speed (the firmware samples its
+        # switches at every step): at 20000 steps/s a 2 ms sub-step is 0.24 deg, more than
+        # the 0.2 deg band, and a stow seeking the switch then ran into the end switch
+        vmax = max(abs(self.speed), self.cmd_speed or c.max_speed)
+        band = c.switch_width / 2 if c.switch_width > 0 else math.inf
+        n = max(1, int(math.ceil(dt / 0.002)), int(math.ceil(vmax * dt * c.step_rad / band)))
         h = dt / n
         for _ in range(n):
             err = self.target - self.counter

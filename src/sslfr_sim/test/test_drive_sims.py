@@ -159,3 +159,25 @@ def test_protocol_session_with_the_new_boards(kind, opts, board_kind):
     finally:
         link.stop()
         sim.stop()
+
+
+@pytest.mark.parametrize('dt', [0.002, 0.005, 0.0137, 0.02, 0.05])
+def test_a_move_seeking_the_sleep_switch_stops_there_at_any_speed_and_tick(dt):
+    """The stepper board seeking its SLEEP switch (a host-loss stow, a HOME) stops on it,
+    never on the end switch beside it: the simulator moves at most half the switch's
+    0.2 deg band between two samples of the switches, as the firmware samples them at
+    every step. At 20000 steps/s a 2 ms sub-step was 0.24 deg: from some start
+    positions the band was jumped over (fault LIMIT at the HIGH switch)."""
+    from sslfr_sim.axis import AxisSim
+    for start in range(4000, 4040, 3):                 # the switch met at every phase of a sub-step
+        sim = AxisSim.from_options({'axis': 'mirrors', 'max_speed': '20000', 'accel': '200000'}, random.Random(1))
+        sim.counter = sim.target = float(start)
+        sim.angle = start * sim.cfg.step_rad
+        sim.seek, sim.target, sim.cmd_speed = m.Switch.SLEEP, start + 1e9, 20000.0
+        for _ in range(int(2.0 / dt)):
+            sim.update(dt)
+            if sim.seek is None:
+                break
+        assert sim.seek is None and sim.speed == 0.0, (start, math.degrees(sim.angle))
+        assert sim.limit_bits() & m.LimitBits.SLEEP and not sim.faults & m.FaultBits.LIMIT, \
+            (start, dt, math.degrees(sim.angle), sim.faults)
