@@ -51,6 +51,20 @@ def ros_env(ros_domain, tmp_path):
     return env
 
 
+#: the firmware-in-the-loop files that run a whole node set on several firmware boards
+#: (about one core each): one after another on one worker, beside the single-board files
+FIRMWARE_NODE_SETS = ('test_fw_system.py', 'test_fw_prototypes.py')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Groups for ``--dist loadgroup`` (make test's firmware part, scripts/test.sh): a
+    test file is a group, the firmware node-set files one group between them. Other
+    distributions ignore them."""
+    for item in items:
+        name = item.path.name
+        item.add_marker(pytest.mark.xdist_group('firmware-node-sets' if name in FIRMWARE_NODE_SETS else name))
+
+
 _LAUNCHED = pytest.StashKey[list]()
 _LOG_TAIL = 3000          # characters of each node's output put in a failed test's report
 

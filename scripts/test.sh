@@ -9,8 +9,11 @@
 #     side; most topic-level tests wait on simulated time at a fixed speed, not on CPU
 #     (load average ~2-2.6 on this 2-core machine). `make soak` runs the topic-level
 #     tests the same way (and with one core busy: BUSY=1);
-#  2. then, alone, the firmware-in-the-loop tests (tests/test_fw_*: the real firmware in
-#     simavr uses both cores).
+#  2. then, apart from them, the firmware-in-the-loop tests (tests/test_fw_*: the real
+#     firmware in simavr, paced at real time) on two workers: the files that run a whole
+#     node set on firmware boards (about a core each) one after another on one worker
+#     (conftest.py FIRMWARE_NODE_SETS), the single-board files (little CPU, waiting on
+#     the AVRs' real time) on the other.
 #
 # Arguments (make test PYTEST_ARGS=...) are passed to every part. When they name a test
 # path (a file, a directory, file::test), that selection runs as one plain pytest instead.
@@ -40,8 +43,8 @@ host_rc=$?
 t_host=$((SECONDS - t0))
 
 echo
-echo "== make test: firmware-in-the-loop tests (tests/test_fw_*), alone"
-python -m pytest --durations=10 "${FIRMWARE[@]}" "$@"
+echo "== make test: firmware-in-the-loop tests (tests/test_fw_*), $WORKERS workers (node sets on one)"
+python -m pytest -n "$WORKERS" --dist loadgroup --durations=10 "${FIRMWARE[@]}" "$@"
 fw_rc=$?
 t_fw=$((SECONDS - t0 - t_host))
 
