@@ -1,6 +1,6 @@
 """The field page in a real browser (Debian's headless chromium via selenium, as
 tests/test_web_browser.py) against ``./sslfr sim --collectors N`` (N = SSLFR_FIELD_N,
-default 2 on this shared 2-core machine; 4 is the issue's target): N simulated
+default 4): N simulated
 collectors, each its own namespace, boards and composed node set on the system clock,
 discovery clients of the station's two Fast DDS discovery servers, and the station.
 
@@ -39,7 +39,7 @@ from sslfr_web import auth
 from test_web_browser import ARTIFACTS, _require_browser, browser  # noqa: F401 - the fixture
 
 PASSWORD = 'field-browser-pass'
-N = int(os.environ.get('SSLFR_FIELD_N', '2'))
+N = int(os.environ.get('SSLFR_FIELD_N', '4'))
 pytestmark = pytest.mark.slow
 
 
