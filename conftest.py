@@ -56,13 +56,36 @@ def ros_env(ros_domain, tmp_path):
 FIRMWARE_NODE_SETS = ('test_fw_system.py', 'test_fw_prototypes.py')
 
 
-def pytest_collection_modifyitems(config, items):
-    """Groups for ``--dist loadgroup`` (make test's firmware part, scripts/test.sh): a
-    test file is a group, the firmware node-set files one group between them. Other
-    distributions ignore them."""
-    for item in items:
-        name = item.path.name
-        item.add_marker(pytest.mark.xdist_group('firmware-node-sets' if name in FIRMWARE_NODE_SETS else name))
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` (make test, scripts/test.sh): one test file per worker at a time,
+    as xdist's own, but the firmware node-set files are one unit (one after another on
+    one worker). xdist's ``loadgroup`` would do it with marks but does not group on
+    pytest 9.2 (pytest-dev/pytest-xdist#1386)."""
+    if config.getvalue('dist') != 'loadfile':
+        return None
+    from collections import OrderedDict
+
+    from xdist.scheduler import LoadFileScheduling
+    node_sets = 'firmware-node-sets'
+
+    class NodeSetsFirst(OrderedDict):
+        """The work queue: the node-set unit first (xdist orders units by their number of
+        tests; its four long tests would start last, the other worker then idle)."""
+        def __setitem__(self, key, value):
+            super().__setitem__(key, value)
+            if key == node_sets:
+                self.move_to_end(key, last=False)
+
+    class FileScheduling(LoadFileScheduling):
+        def __init__(self, config, log=None):
+            super().__init__(config, log)
+            self.workqueue = NodeSetsFirst()
+
+        def _split_scope(self, nodeid: str) -> str:
+            if Path(nodeid.split('::', 1)[0]).name in FIRMWARE_NODE_SETS:
+                return node_sets
+            return super()._split_scope(nodeid)
+    return FileScheduling(config, log)
 
 
 _LAUNCHED = pytest.StashKey[list]()

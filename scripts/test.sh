@@ -12,7 +12,8 @@
 #  2. then, apart from them, the firmware-in-the-loop tests (tests/test_fw_*: the real
 #     firmware in simavr, paced at real time) on two workers: the files that run a whole
 #     node set on firmware boards (about a core each) one after another on one worker
-#     (conftest.py FIRMWARE_NODE_SETS), the single-board files (little CPU, waiting on
+#     (conftest.py FIRMWARE_NODE_SETS, its xdist scheduler), the single-board files
+#     (little CPU, waiting on
 #     the AVRs' real time) on the other.
 #
 # Arguments (make test PYTEST_ARGS=...) are passed to every part. When they name a test
@@ -44,7 +45,7 @@ t_host=$((SECONDS - t0))
 
 echo
 echo "== make test: firmware-in-the-loop tests (tests/test_fw_*), $WORKERS workers (node sets on one)"
-python -m pytest -n "$WORKERS" --dist loadgroup --durations=10 "${FIRMWARE[@]}" "$@"
+python -m pytest -n "$WORKERS" --dist loadfile --durations=10 "${FIRMWARE[@]}" "$@"
 fw_rc=$?
 t_fw=$((SECONDS - t0 - t_host))
 
