@@ -684,10 +684,15 @@ class RosSide(threading.Thread):
         self.clock_published = 0
         self.watch = dict(watch or {})          # topic -> message type: count arrivals
         self.seen: dict[str, int] = {}
+        self.last: dict[str, object] = {}      # topic -> its last message
         self.graph_nodes: set[str] = set()      # node names in the ROS graph (refreshed ~2 Hz)
         self._ctx = None
 
     # called from the supervisor thread
+    def _heard(self, topic: str, msg) -> None:
+        self.seen[topic] = self.seen.get(topic, 0) + 1
+        self.last[topic] = msg
+
     def wait_ready(self, stop: StopSignals, tick: Callable[[], None] | None = None) -> str | None:
         """Wait (started thread) until the ROS side is ready: None, or why it failed.
         ``tick()`` is called every 0.05 s meanwhile (the supervisor's own beat)."""
@@ -823,8 +828,7 @@ class RosSide(threading.Thread):
             self.graph_nodes = set(node.get_node_names())
         node.create_timer(0.5, refresh_graph, clock=steady)
         for topic, msg_type in self.watch.items():
-            node.create_subscription(msg_type, topic,
-                                     lambda _m, t=topic: self.seen.__setitem__(t, self.seen.get(t, 0) + 1), 10)
+            node.create_subscription(msg_type, topic, lambda m, t=topic: self._heard(t, m), 10)
         if self.clock_fn is not None:
             from rosgraph_msgs.msg import Clock as ClockMsg
             from sslfr_common.timeconv import stamp
