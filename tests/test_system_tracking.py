@@ -122,14 +122,12 @@ def _gps_lead(bag) -> np.ndarray:
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import TimeReference
     from sslfr_common.contract import GPS_TIME_REFERENCE
+    from sslfr_common.timeconv import to_sec
     from sslfr_recording.bag.reader import BagReader
-
-    def sec(t):
-        return t.sec + t.nanosec * 1e-9
     out = []
     for m in BagReader(bag).messages(topics=['/' + GPS_TIME_REFERENCE.name]):
         msg = deserialize_message(m.data, TimeReference)
-        out.append(sec(msg.time_ref) - sec(msg.header.stamp))
+        out.append(to_sec(msg.time_ref) - to_sec(msg.header.stamp))
     return np.asarray(out)
 
 

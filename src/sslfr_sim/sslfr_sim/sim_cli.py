@@ -558,11 +558,8 @@ def _main(args, stop: StopSignals, run: Path) -> int:  # noqa: C901 - the sequen
                 def homed():
                     return all(getattr(ros.last.get(t), 'homed', False) for t in axes)
                 deadline = time.monotonic() + SETTLE_S
-                while not homed() and time.monotonic() < deadline and not stop.requested.is_set():
-                    sup.step()
-                    if sup.fatal:
-                        raise RuntimeError(sup.fatal)
-                    stop.wait(0.02)
+                wait_until(lambda: homed() or time.monotonic() >= deadline or stop.requested.is_set(),
+                           SETTLE_S + 5.0, lambda: 'axes referenced')
                 sup.say(f'axes referenced at +{time.monotonic() - t_wall0:.1f} s' if homed() else
                         f'axes not all referenced after {SETTLE_S:.0f} s more, starting anyway: '
                         + ', '.join(t for t in axes if not getattr(ros.last.get(t), 'homed', False)))
